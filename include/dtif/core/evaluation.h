@@ -1,0 +1,84 @@
+// Evaluation protocol of DATASET.md: sequential loop detection over a dataset, overlap ground
+// truth, pose errors (paper Eq. 4.4 and ZYX Euler residuals), precision/recall, times.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <string>
+#include <unordered_set>
+#include <vector>
+
+#include "dtif/core/config.h"
+#include "dtif/core/dataset.h"
+
+namespace dtif {
+
+struct EvalParams {
+  double true_loop_overlap = 0.3;  ///< overlap that makes a pair a true loop
+  double max_rot_err_deg = 2.0;    ///< a true positive's rotation error at most [deg]
+  double max_trans_err_m = 0.5;    ///< a true positive's translation error at most [m]
+};
+
+/// Errors of an estimate against ground truth.
+struct PoseError {
+  double roll_deg = 0, pitch_deg = 0, yaw_deg = 0, rot_deg = 0;  ///< absolute values [deg]
+  double x_m = 0, y_m = 0, z_m = 0, trans_m = 0;                 ///< absolute values [m]
+};
+
+/// e_R of Eq. (4.4); roll/pitch/yaw from the ZYX decomposition of R_gt^T R_est; translation
+/// residual t_est - t_gt.
+PoseError poseError(const Pose& T_gt, const Pose& T_est);
+
+/// Occupied 1 m x 1 m cells in W of a submap's points 0.3-3.0 m above its local ground
+/// (DATASET.md). Cell keys pack (ix, iy).
+std::unordered_set<int64_t> overlapCells(const Cloud& cloud_S, const Pose& T_W_S);
+
+/// |A cap B| / min(|A|, |B|); 0 when either is empty.
+double cellOverlap(const std::unordered_set<int64_t>& a, const std::unordered_set<int64_t>& b);
+
+/// One row of results.csv.
+struct EvalRow {
+  int64_t query = -1;
+  std::optional<int64_t> candidate;  ///< accepted candidate
+  bool accepted = false;
+  bool true_loop = false;  ///< accepted pair is a true loop (overlap >= threshold)
+  bool has_loop = false;   ///< some eligible entry forms a true loop with the query
+  double overlap = 0.0;    ///< of the accepted pair (0 if none)
+  std::optional<PoseError> err;
+  int inliers = 0;
+  double score = 0.0;
+  double t_desc_ms = 0.0, t_loop_ms = 0.0, t_solver_ms = 0.0;
+  std::optional<Pose> T_c_q_est;
+  bool true_positive = false;
+  size_t trunks = 0;           ///< trunks extracted (extra, not in results.csv)
+  std::string invalid_reason;  ///< why the descriptor was excluded (extra)
+};
+
+struct EvalSummary {
+  std::string dataset;
+  size_t submaps = 0, queries_with_loop = 0, accepted = 0, true_positives = 0, false_positives = 0;
+  std::optional<double> precision, recall;
+  std::optional<PoseError> mean_err_all, mean_err_tp;
+  std::optional<double> rmse_rot_deg, rmse_trans_m;
+  double t_desc_ms = 0, t_loop_ms = 0, t_solver_ms = 0, t_total_ms = 0;
+  double descriptor_bytes_mean = 0;
+};
+
+struct EvalResult {
+  std::vector<EvalRow> rows;
+  EvalSummary summary;
+};
+
+/// Runs the protocol. progress(i, n) is called after each submap. Throws DatasetError when
+/// ground truth is missing or a cloud cannot be read.
+EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const EvalParams& eval,
+                         const std::function<void(size_t, size_t)>& progress = {});
+
+/// results.csv and summary.json (exact columns/keys of DATASET.md). Throws DatasetError.
+void writeResultsCsv(const std::string& path, const std::vector<EvalRow>& rows);
+void writeSummaryJson(const std::string& path, const EvalSummary& s);
+/// The paper's Table 1 layout, plus precision/recall, as plain text.
+std::string formatTable(const EvalSummary& s, const std::string& method = "dtif");
+
+}  // namespace dtif

@@ -1,0 +1,112 @@
+// Descriptor database of all robots and sequential loop detection: screening, correspondences,
+// decoupled pose and verification (paper Alg. 1 and Sec. 3.D, plus dtif's false-loop checks).
+#pragma once
+
+#include <Eigen/Core>
+#include <memory>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "dtif/core/descriptor.h"
+#include "dtif/core/matcher.h"
+#include "dtif/core/pose_estimator.h"
+
+namespace dtif {
+
+/// Acceptance of a loop. False loops corrupt merged maps, so these err on rejecting.
+struct VerifierParams {
+  int min_inliers = 6;               ///< |I_T| at least
+  double min_inlier_weight = 8.0;    ///< sum of omega_k over I_T at least
+  double max_rms_xy_m = 0.2;         ///< RMS horizontal residual of I_T at most [m]
+  double match_radius_m = 0.4;       ///< trunks this close after alignment co-locate [m]
+  double min_covisible_ratio = 0.5;  ///< co-located share of trunks in the common area [0..1]
+
+  std::string validate() const;
+
+  template <class V>
+  void visit(V& v) {
+    v("min_inliers", min_inliers);
+    v("min_inlier_weight", min_inlier_weight);
+    v("max_rms_xy_m", max_rms_xy_m);
+    v("match_radius_m", match_radius_m);
+    v("min_covisible_ratio", min_covisible_ratio);
+  }
+};
+
+struct DatabaseParams {
+  double exclude_recent_s = 30.0;  ///< same-robot submaps closer in time are not loops [s]
+  int max_candidates = 25;         ///< screened candidates passed to matching, best first
+
+  std::string validate() const;
+
+  template <class V>
+  void visit(V& v) {
+    v("exclude_recent_s", exclude_recent_s);
+    v("max_candidates", max_candidates);
+  }
+};
+
+struct LoopDetectorParams {
+  MatcherParams matcher;
+  PoseEstimatorParams pose;
+  VerifierParams verification;
+  DatabaseParams database;
+  std::string validate() const;
+};
+
+/// An accepted loop (q, c, T_c_q).
+struct LoopClosure {
+  std::string query_robot;
+  int64_t query_id = -1;
+  std::string candidate_robot;
+  int64_t candidate_id = -1;
+  Pose T_c_q = Pose::Identity();
+  /// Covariance of (x, y, z, roll, pitch, yaw) [m^2, rad^2], ROS PoseWithCovariance order.
+  Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Identity();
+  int inliers = 0;     ///< |I_T|
+  double score = 0.0;  ///< verification score (co-visible ratio x inlier weight share) [0..1]
+  std::vector<std::pair<int, int>> inlier_pairs;  ///< (query trunk, candidate trunk) of I_T
+  std::vector<std::pair<int, int>> all_pairs;     ///< every correspondence that was solved
+};
+
+/// Per-query timings and counts.
+struct QueryStats {
+  double screen_ms = 0.0;  ///< histogram screening
+  double match_ms = 0.0;   ///< correspondence construction
+  double solver_ms = 0.0;  ///< pose estimation only
+  double verify_ms = 0.0;  ///< verification
+  size_t eligible = 0;     ///< database entries after recent-submap exclusion
+  size_t screened_in = 0;  ///< entries passing histogram screening
+  size_t matched = 0;      ///< candidates that reached pose estimation
+};
+
+/// Sequential loop detector. Not thread-safe: callers serialise access. Descriptors are held
+/// by shared_ptr to const and may be shared with other owners.
+class LoopDetector {
+ public:
+  explicit LoopDetector(const LoopDetectorParams& params);
+
+  /// Best verified loop of q against the database (same-robot recent entries excluded).
+  std::optional<LoopClosure> query(const Descriptor& q, QueryStats* stats = nullptr) const;
+
+  /// Inserts q; invalid descriptors are ignored (returns false).
+  bool insert(std::shared_ptr<const Descriptor> d);
+
+  size_t size() const { return entries_.size(); }
+  const std::vector<std::shared_ptr<const Descriptor>>& entries() const { return entries_; }
+  const LoopDetectorParams& params() const { return params_; }
+
+  /// Writes the database to path atomically (temporary file, then rename). Throws on failure.
+  void save(const std::string& path) const;
+  /// Replaces the database by the file's content. Throws std::runtime_error (naming the file
+  /// and the problem) on a missing, corrupt or version-mismatched file; then nothing changes.
+  void load(const std::string& path);
+
+ private:
+  LoopDetectorParams params_;
+  std::vector<std::shared_ptr<const Descriptor>> entries_;
+};
+
+}  // namespace dtif

@@ -1,0 +1,71 @@
+// Hierarchical vertex correspondence construction (paper Sec. 3.C, Algorithm 1): histogram
+// screening, edge-radius consistency (Eq. 3.4), strong/weak vertex support (Eqs. 3.5-3.8),
+// reliability weights (Eq. 3.9), weighted correspondences (Eq. 3.10).
+#pragma once
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "dtif/core/descriptor.h"
+
+namespace dtif {
+
+struct MatcherParams {
+  double min_edge_hist_sim = 0.55;   ///< tau_s^e: histogram intersection of h^e [0..1]
+  double min_radius_hist_sim = 0.4;  ///< tau_s^r: histogram intersection of h^r [0..1]
+  double edge_rel_tol = 0.04;        ///< Cons_l: |l_q - l_c| <= tol * max(l_q, l_c) [-]
+  double edge_abs_tol_m = 0.15;      ///< Cons_l also passes within this absolute gap [m]
+  double radius_rel_tol = 0.3;       ///< Cons_r: |r_q - r_c| <= tol * max(r_q, r_c) [-]
+  double radius_abs_tol_m = 0.03;    ///< Cons_r also passes within this absolute gap [m]
+  int weak_support_min = 2;          ///< tau_w: weak support must exceed this (Eq. 3.8)
+  double alpha_s = 1.0;              ///< alpha_s of Eq. (3.9)
+  double alpha_w = 0.25;             ///< alpha_w of Eq. (3.9); alpha_s > alpha_w
+  int max_correspondences = 400;     ///< keep the heaviest K pairs at most
+
+  std::string validate() const;
+
+  template <class V>
+  void visit(V& v) {
+    v("min_edge_hist_sim", min_edge_hist_sim);
+    v("min_radius_hist_sim", min_radius_hist_sim);
+    v("edge_rel_tol", edge_rel_tol);
+    v("edge_abs_tol_m", edge_abs_tol_m);
+    v("radius_rel_tol", radius_rel_tol);
+    v("radius_abs_tol_m", radius_abs_tol_m);
+    v("weak_support_min", weak_support_min);
+    v("alpha_s", alpha_s);
+    v("alpha_w", alpha_w);
+    v("max_correspondences", max_correspondences);
+  }
+};
+
+/// One weighted vertex correspondence (p_k^q, p_k^c, omega_k) of Eq. (3.10).
+struct Correspondence {
+  int iq = -1;  ///< query trunk index m
+  int ic = -1;  ///< candidate trunk index n
+  Eigen::Vector3d pq = Eigen::Vector3d::Zero();
+  Eigen::Vector3d pc = Eigen::Vector3d::Zero();
+  double w = 1.0;  ///< omega_mn, Eq. (3.9)
+  int strong = 0;  ///< E^s_mn
+  int weak = 0;    ///< E^w_mn
+};
+
+struct MatchStats {
+  double edge_hist_sim = 0.0;    ///< s_e
+  double radius_hist_sim = 0.0;  ///< s_r
+  bool screened_out = false;     ///< rejected by Alg. 1 lines 4-7
+  size_t triangle_pairs = 0;     ///< triangle pairs visited (after the length index)
+};
+
+/// Histogram intersection S_cap(a, b) = sum_i min(a_i, b_i) of two normalised histograms.
+double histogramIntersection(const std::vector<float>& a, const std::vector<float>& b);
+
+/// Algorithm 1. Returns the weighted correspondences, heaviest first; empty when screened out.
+/// Pure; thread-safe.
+std::vector<Correspondence> buildCorrespondences(const Descriptor& query,
+                                                 const Descriptor& candidate,
+                                                 const MatcherParams& params,
+                                                 MatchStats* stats = nullptr);
+
+}  // namespace dtif

@@ -1,0 +1,95 @@
+// Trunk landmark extraction from a gravity-aligned submap (paper Sec. 3.B, after Zhang et al.):
+// vertical-continuity voxel columns at low height above the local ground, merged into trunk
+// candidates, robust circle fit at breast height, stem-base elevation from the local ground.
+#pragma once
+
+#include <pcl/point_cloud.h>
+#include <pcl/point_types.h>
+
+#include <string>
+
+#include "dtif/core/types.h"
+
+namespace dtif {
+
+using Cloud = pcl::PointCloud<pcl::PointXYZ>;
+
+/// Parameters of trunk extraction. Heights are above the local ground unless stated.
+struct TrunkExtractorParams {
+  double ground_cell_m = 1.0;           ///< cell of the local ground grid [m]
+  double ground_window_m = 5.0;         ///< window of the ground percentile around a cell [m]
+  double ground_percentile = 0.05;      ///< low percentile of z taken as ground [0..1]
+  double slab_min_h_m = 0.4;            ///< lowest height of the trunk slab [m]
+  double slab_max_h_m = 3.0;            ///< highest height of the trunk slab [m]
+  double column_cell_m = 0.15;          ///< horizontal size of a voxel column [m]
+  double layer_h_m = 0.2;               ///< vertical size of a voxel inside a column [m]
+  int min_column_points = 6;            ///< points a column needs in the slab
+  double min_continuity = 0.5;          ///< fraction of slab layers a column must occupy [0..1]
+  double cluster_gap_m = 0.25;          ///< columns closer than this merge into one candidate [m]
+  double fit_min_h_m = 0.9;             ///< lower edge of the circle-fit band [m]
+  double fit_max_h_m = 1.7;             ///< upper edge of the circle-fit band [m]
+  int min_fit_points = 12;              ///< points needed in the fit band
+  double min_radius_m = 0.04;           ///< smallest accepted trunk radius [m]
+  double max_radius_m = 0.6;            ///< largest accepted trunk radius [m]
+  int ransac_iterations = 150;          ///< circle RANSAC iterations (fixed seed)
+  double ransac_inlier_m = 0.03;        ///< circle RANSAC inlier distance [m]
+  double min_inlier_ratio = 0.5;        ///< inlier fraction of the fit band [0..1]
+  double min_arc_deg = 100.0;           ///< angular coverage of inliers around the centre [deg]
+  double max_lean_deg = 15.0;           ///< largest stem lean between two fit heights [deg]
+  double base_ring_inner_m = 0.2;       ///< ground ring around the stem, gap to the bark [m]
+  double base_ring_outer_m = 1.5;       ///< ground ring around the stem, outer radius [m]
+  double min_trunk_separation_m = 0.3;  ///< closer trunks are duplicates; the larger fit wins [m]
+
+  /// Returns an empty string when the values are usable, else what is wrong.
+  std::string validate() const;
+
+  template <class V>
+  void visit(V& v) {
+    v("ground_cell_m", ground_cell_m);
+    v("ground_window_m", ground_window_m);
+    v("ground_percentile", ground_percentile);
+    v("slab_min_h_m", slab_min_h_m);
+    v("slab_max_h_m", slab_max_h_m);
+    v("column_cell_m", column_cell_m);
+    v("layer_h_m", layer_h_m);
+    v("min_column_points", min_column_points);
+    v("min_continuity", min_continuity);
+    v("cluster_gap_m", cluster_gap_m);
+    v("fit_min_h_m", fit_min_h_m);
+    v("fit_max_h_m", fit_max_h_m);
+    v("min_fit_points", min_fit_points);
+    v("min_radius_m", min_radius_m);
+    v("max_radius_m", max_radius_m);
+    v("ransac_iterations", ransac_iterations);
+    v("ransac_inlier_m", ransac_inlier_m);
+    v("min_inlier_ratio", min_inlier_ratio);
+    v("min_arc_deg", min_arc_deg);
+    v("max_lean_deg", max_lean_deg);
+    v("base_ring_inner_m", base_ring_inner_m);
+    v("base_ring_outer_m", base_ring_outer_m);
+    v("min_trunk_separation_m", min_trunk_separation_m);
+  }
+};
+
+/// What happened during one extraction; for logs and benchmarks.
+struct TrunkExtractionStats {
+  size_t input_points = 0;       ///< points given
+  size_t finite_points = 0;      ///< points left after dropping NaN/inf
+  size_t candidate_columns = 0;  ///< voxel columns that passed density and continuity
+  size_t candidates = 0;         ///< merged trunk candidates
+  size_t rejected_fit = 0;       ///< candidates whose circle fit failed or was implausible
+  size_t rejected_lean = 0;      ///< candidates rejected as leaning clutter
+  size_t duplicates = 0;         ///< trunks dropped as duplicates
+};
+
+struct TrunkExtractionResult {
+  Trunks trunks;
+  TrunkExtractionStats stats;
+};
+
+/// Extracts trunk landmarks from a gravity-aligned cloud in the submap frame.
+/// Pure function: thread-safe, deterministic. Non-finite points are ignored; an empty or
+/// degenerate cloud yields an empty result, never an exception.
+TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorParams& params);
+
+}  // namespace dtif

@@ -1,0 +1,40 @@
+// dtif: the offline command-line tool (simulate, extract, register, eval).
+#include <cstring>
+#include <exception>
+#include <iostream>
+
+#include "commands.h"
+
+namespace {
+
+constexpr const char* kUsage =
+    "usage: dtif <command> [options]\n"
+    "  simulate <scene.yaml> --out <dataset_dir> [--seed N] [--bag <file.bag>] [--png <file>]\n"
+    "  extract  <cloud.pcd> [--out <trunks.csv>] [--config <params.yaml>]\n"
+    "  register <query> <candidate> [--config <params.yaml>]  (PCD submaps or x,y,z,r CSVs)\n"
+    "  eval     <dataset_dir> --out <dir> [--config <params.yaml>] [--unit-weights]\n";
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 2 || !std::strcmp(argv[1], "-h") || !std::strcmp(argv[1], "--help")) {
+    std::cout << kUsage;
+    return argc < 2 ? 2 : 0;
+  }
+  const std::string cmd = argv[1];
+  const dtif::tool::Args args(argv + 2, argv + argc);
+  try {
+    if (cmd == "simulate") return dtif::tool::runSimulate(args);
+    if (cmd == "extract") return dtif::tool::runExtract(args);
+    if (cmd == "register") return dtif::tool::runRegister(args);
+    if (cmd == "eval") return dtif::tool::runEval(args);
+    std::cerr << "dtif: unknown command '" << cmd << "'\n" << kUsage;
+    return 2;
+  } catch (const dtif::tool::UsageError& e) {
+    std::cerr << "dtif " << cmd << ": " << e.message << "\n" << kUsage;
+    return 2;
+  } catch (const std::exception& e) {
+    std::cerr << "dtif " << cmd << ": " << e.what() << "\n";
+    return 1;
+  }
+}
