@@ -21,6 +21,9 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 constexpr int kArcBins = 72;  // 5 degree bins for the arc coverage
 
+// std::hypot is exact but slow; the coordinates here are small and well scaled.
+inline double dist(double dx, double dy) { return std::sqrt(dx * dx + dy * dy); }
+
 // Tukey biweight: 0 beyond c.
 inline double tukey(double r, double c) {
   if (std::abs(r) >= c) return 0.0;
@@ -137,13 +140,17 @@ Plane fitGroundPlane(const double* x, const double* y, const double* z, const do
     Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
     Eigen::Vector3d rhs = Eigen::Vector3d::Zero();
     double sw = 0.0;
+    double sx = 0, sy = 0, sxx = 0, sxy = 0, syy = 0, sz = 0, sxz = 0, syz = 0;
     for (size_t i = 0; i < n; ++i) {
-      if (w[i] <= 0.0) continue;
-      const Eigen::Vector3d row(1.0, x[i] - x0, y[i] - y0);
-      A += w[i] * row * row.transpose();
-      rhs += w[i] * z[i] * row;
-      sw += w[i];
+      const double wi = w[i];
+      if (wi <= 0.0) continue;
+      const double dx = x[i] - x0, dy = y[i] - y0;
+      sw += wi, sx += wi * dx, sy += wi * dy;
+      sxx += wi * dx * dx, sxy += wi * dx * dy, syy += wi * dy * dy;
+      sz += wi * z[i], sxz += wi * dx * z[i], syz += wi * dy * z[i];
     }
+    A << sw, sx, sy, sx, sxx, sxy, sy, sxy, syy;
+    rhs << sz, sxz, syz;
     if (sw <= 0.0) break;
     A(1, 1) += 1e-3 * sw;
     A(2, 2) += 1e-3 * sw;
@@ -254,6 +261,7 @@ std::string TrunkExtractorParams::validate() const {
   if (ransac_iterations < 1) err << "ransac_iterations must be >= 1; ";
   positive("ransac_inlier_m", ransac_inlier_m);
   unit("min_inlier_ratio", min_inlier_ratio);
+  unit("min_shell_ratio", min_shell_ratio);
   if (!(min_arc_deg >= 0.0 && min_arc_deg <= 360.0)) err << "min_arc_deg must be in [0, 360]; ";
   if (!(max_lean_deg > 0.0 && max_lean_deg < 90.0)) err << "max_lean_deg must be in (0, 90); ";
   if (!(base_ring_inner_m >= 0.0)) err << "base_ring_inner_m must be >= 0; ";
@@ -284,24 +292,38 @@ CircleFit fitCircleRobust(const std::vector<Eigen::Vector2d>& xy, const CircleFi
   const double tol = params.inlier_m;
   double best_cx = 0, best_cy = 0, best_r = 0;
   long best_score = -1;
-  for (int it = 0; it < params.iterations; ++it) {
+  // Adaptive stop (99 % confidence of one all-inlier sample), at least kMinIterations so
+  // an early lucky sample on a branch does not end the search.
+  constexpr int kMinIterations = 25;
+  size_t scored = 0;
+  for (size_t m = 0; m < n; m += stride) ++scored;
+  int needed = params.iterations;
+  for (int it = 0; it < std::min(needed, params.iterations); ++it) {
     const size_t i = pick(rng), j = pick(rng), k = pick(rng);
     if (i == j || j == k || i == k) continue;
     double cx, cy, r;
     if (!circleFrom3(xy[i], xy[j], xy[k], &cx, &cy, &r)) continue;
     if (r < params.min_radius_m || r > params.max_radius_m) continue;
     // Score: inliers minus points well inside the circle (a stem is opaque).
+    // Squared distances: no square root in the hot loop.
+    const double in_lo = r > tol ? (r - tol) * (r - tol) : 0.0, in_hi = (r + tol) * (r + tol);
+    const double inside = r > 2.0 * tol ? (r - 2.0 * tol) * (r - 2.0 * tol) : -1.0;
     long score = 0;
     for (size_t m = 0; m < n; m += stride) {
-      const double d = std::hypot(xy[m].x() - cx, xy[m].y() - cy);
-      if (std::abs(d - r) < tol)
+      const double dx = xy[m].x() - cx, dy = xy[m].y() - cy;
+      const double d2 = dx * dx + dy * dy;
+      if (d2 > in_lo && d2 < in_hi)
         ++score;
-      else if (d < r - 2.0 * tol)
+      else if (d2 < inside)
         --score;
     }
     if (score > best_score) {
       best_score = score;
       best_cx = cx, best_cy = cy, best_r = r;
+      const double w = std::min(0.999, static_cast<double>(score) / static_cast<double>(scored));
+      if (w > 0.0)
+        needed = std::max(kMinIterations,
+                          static_cast<int>(std::ceil(std::log(0.01) / std::log(1.0 - w * w * w))));
     }
   }
   if (best_score <= 0) return fit;
@@ -309,11 +331,11 @@ CircleFit fitCircleRobust(const std::vector<Eigen::Vector2d>& xy, const CircleFi
   // Kasa on the RANSAC inliers, then Tukey-weighted geometric refinement (Gauss-Newton).
   std::vector<char> use(n, 0);
   for (size_t m = 0; m < n; ++m)
-    use[m] = std::abs(std::hypot(xy[m].x() - best_cx, xy[m].y() - best_cy) - best_r) < tol;
+    use[m] = std::abs(dist(xy[m].x() - best_cx, xy[m].y() - best_cy) - best_r) < tol;
   double cx = best_cx, cy = best_cy, r = best_r;
   double kx, ky, kr;
   if (kasaFit(xy, use, &kx, &ky, &kr) && kr >= 0.5 * params.min_radius_m &&
-      kr <= 2.0 * params.max_radius_m && std::hypot(kx - cx, ky - cy) < std::max(r, 0.05)) {
+      kr <= 2.0 * params.max_radius_m && dist(kx - cx, ky - cy) < std::max(r, 0.05)) {
     cx = kx, cy = ky, r = kr;
   }
   const double c_tukey = 2.0 * tol;
@@ -322,7 +344,7 @@ CircleFit fitCircleRobust(const std::vector<Eigen::Vector2d>& xy, const CircleFi
     Eigen::Vector3d g = Eigen::Vector3d::Zero();
     for (size_t m = 0; m < n; ++m) {
       const double dx = xy[m].x() - cx, dy = xy[m].y() - cy;
-      const double d = std::hypot(dx, dy);
+      const double d = dist(dx, dy);
       if (d < 1e-9) continue;
       const double e = d - r;
       const double w = tukey(e, c_tukey);
@@ -342,20 +364,22 @@ CircleFit fitCircleRobust(const std::vector<Eigen::Vector2d>& xy, const CircleFi
       r > params.max_radius_m)
     return fit;
 
-  size_t inliers = 0, near = 0;
+  size_t inliers = 0, inside = 0, shell = 0;
   double sq = 0.0;
   for (size_t m = 0; m < n; ++m) {
-    const double e = std::hypot(xy[m].x() - cx, xy[m].y() - cy) - r;
+    const double e = dist(xy[m].x() - cx, xy[m].y() - cy) - r;
     const bool in = std::abs(e) < tol;
     fit.is_inlier[m] = in;
     if (in) ++inliers, sq += e * e;
-    if (e < tol) ++near;  // inside the circle or on it
+    if (e <= -tol) ++inside;
+    if (std::abs(e) < 3.0 * tol) ++shell;
   }
   if (inliers < 3) return fit;
   fit.ok = true;
   fit.cx = cx, fit.cy = cy, fit.r = r;
   fit.inliers = inliers;
-  fit.inlier_ratio = static_cast<double>(inliers) / static_cast<double>(near);
+  fit.inlier_ratio = static_cast<double>(inliers) / static_cast<double>(inliers + inside);
+  fit.shell_ratio = static_cast<double>(inliers) / static_cast<double>(shell);
   fit.rms_m = std::sqrt(sq / static_cast<double>(inliers));
   // Gap threshold: 20 deg, or the angle of 10 cm of bark on thin stems (sparse points).
   const double max_gap = std::max(20.0, 0.1 / r * 180.0 / kPi);
@@ -623,9 +647,17 @@ TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorPara
           if (!fit.is_inlier[m]) band[w] = band[m], band_idx[w] = band_idx[m], ++w;
         band.resize(w), band_idx.resize(w);
       };
-      // Plausibility: enough of the nearby points on the circle (not a shrub blob), a smooth
-      // surface, and enough arc that the radius is determined (partial arcs give absurd radii).
-      if (fit.inlier_ratio < p.min_inlier_ratio || fit.rms_m > p.max_fit_rms_m) {
+      // Plausibility: bark is an opaque thin surface, so few points inside the circle and few
+      // in a thin shell around it (foliage and shrubs fill both), a smooth surface, and enough
+      // arc that the radius is determined (partial arcs give absurd radii).
+#ifdef DTIF_EXTRACT_DEBUG
+      fprintf(stderr, "FIT %.2f %.2f r %.3f inl %zu ratio %.2f arc %.0f rms %.4f band %zu\n",
+              fit.cx + ox, fit.cy + oy, fit.r, fit.inliers, fit.inlier_ratio, fit.arc_deg,
+              fit.rms_m, band.size());
+      fprintf(stderr, "  shell %.2f\n", fit.shell_ratio);
+#endif
+      if (fit.inlier_ratio < p.min_inlier_ratio || fit.shell_ratio < p.min_shell_ratio ||
+          fit.rms_m > p.max_fit_rms_m) {
         ++st.rejected_fit;
         removeInliers();
         continue;
@@ -644,7 +676,7 @@ TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorPara
         std::vector<Eigen::Vector2d> lo, hi;
         double h_lo = 0.0, h_hi = 0.0;
         for (size_t m = 0; m < band.size(); ++m) {
-          if (std::hypot(band[m].x() - fit.cx, band[m].y() - fit.cy) > fit.r + 0.15) continue;
+          if (dist(band[m].x() - fit.cx, band[m].y() - fit.cy) > fit.r + 0.15) continue;
           const double h = H[band_idx[m]];
           if (h < h_mid)
             lo.push_back(band[m]), h_lo += h;
@@ -681,8 +713,9 @@ TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorPara
           for (uint32_t k = gstart[c]; k < gstart[c + 1]; ++k) {
             const uint32_t i = gorder[k];
             if (std::abs(H[i]) > p.base_max_dh_m) continue;
-            const double d = std::hypot(X[i] - fit.cx, Y[i] - fit.cy);
-            if (d < r_in || d > r_out) continue;
+            const double dx = X[i] - fit.cx, dy = Y[i] - fit.cy;
+            const double d2 = dx * dx + dy * dy;
+            if (d2 < r_in * r_in || d2 > r_out * r_out) continue;
             bx.push_back(X[i]), by.push_back(Y[i]), bz.push_back(Z[i]);
           }
         }
@@ -698,6 +731,11 @@ TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorPara
         z_base = groundAt(fit.cx, fit.cy);
         ++st.ground_fallbacks;
       }
+#ifdef DTIF_EXTRACT_DEBUG
+      fprintf(stderr, "ACC %.2f %.2f r %.3f inl %zu ratio %.2f arc %.0f rms %.4f band %zu\n",
+              fit.cx + ox, fit.cy + oy, fit.r, fit.inliers, fit.inlier_ratio, fit.arc_deg,
+              fit.rms_m, band.size());
+#endif
       Found f;
       f.t.x = fit.cx + ox;
       f.t.y = fit.cy + oy;
@@ -715,7 +753,7 @@ TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorPara
   for (const Found& f : found) {
     bool dup = false;
     for (const Trunk& k : result.trunks) {
-      const double d = std::hypot(f.t.x - k.x, f.t.y - k.y);
+      const double d = dist(f.t.x - k.x, f.t.y - k.y);
       if (d < p.min_trunk_separation_m || d < f.t.r + k.r) {
         dup = true;
         break;

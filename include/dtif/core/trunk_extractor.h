@@ -35,8 +35,9 @@ struct TrunkExtractorParams {
   double max_radius_m = 0.6;            ///< largest accepted trunk radius [m]
   int ransac_iterations = 150;          ///< circle RANSAC iterations (fixed seed)
   double ransac_inlier_m = 0.03;        ///< circle RANSAC inlier distance [m]
-  double min_inlier_ratio = 0.5;        ///< inlier fraction of the fit band [0..1]
-  double min_arc_deg = 100.0;           ///< angular coverage of inliers around the centre [deg]
+  double min_inlier_ratio = 0.85;       ///< inliers / (inliers + points inside the circle) [0..1]
+  double min_shell_ratio = 0.75;        ///< inliers / points within 3 ransac_inlier_m [0..1]
+  double min_arc_deg = 80.0;            ///< angular coverage of inliers around the centre [deg]
   double max_lean_deg = 15.0;           ///< largest stem lean across the fit band [deg]
   double base_ring_inner_m = 0.2;       ///< ground ring around the stem, gap to the bark [m]
   double base_ring_outer_m = 1.5;       ///< ground ring around the stem, outer radius [m]
@@ -71,6 +72,7 @@ struct TrunkExtractorParams {
     v("ransac_iterations", ransac_iterations);
     v("ransac_inlier_m", ransac_inlier_m);
     v("min_inlier_ratio", min_inlier_ratio);
+    v("min_shell_ratio", min_shell_ratio);
     v("min_arc_deg", min_arc_deg);
     v("max_lean_deg", max_lean_deg);
     v("base_ring_inner_m", base_ring_inner_m);
@@ -117,8 +119,10 @@ struct CircleFit {
   double cy = 0.0;              ///< centre [m]
   double r = 0.0;               ///< radius [m]
   size_t inliers = 0;           ///< points within inlier_m of the circle
-  double inlier_ratio = 0.0;    ///< inliers / points inside or near the circle (a stem is
-                                ///< opaque: points inside it speak against it) [0..1]
+  double inlier_ratio = 0.0;    ///< inliers / (inliers + points inside the circle); a stem
+                                ///< is opaque, points inside it speak against it [0..1]
+  double shell_ratio = 0.0;     ///< inliers / points within 3 inlier_m of the circle; bark is
+                                ///< a thin surface, foliage fills the shell [0..1]
   double arc_deg = 0.0;         ///< angular coverage of the inliers around the centre [deg]
   double rms_m = 0.0;           ///< RMS distance of the inliers to the circle [m]
   std::vector<char> is_inlier;  ///< per input point
