@@ -6,7 +6,9 @@
 #include <pcl/point_cloud.h>
 #include <pcl/point_types.h>
 
+#include <cstdint>
 #include <string>
+#include <vector>
 
 #include "dtif/core/types.h"
 
@@ -33,12 +35,19 @@ struct TrunkExtractorParams {
   double max_radius_m = 0.6;            ///< largest accepted trunk radius [m]
   int ransac_iterations = 150;          ///< circle RANSAC iterations (fixed seed)
   double ransac_inlier_m = 0.03;        ///< circle RANSAC inlier distance [m]
-  double min_inlier_ratio = 0.5;        ///< inlier fraction of the fit band [0..1]
-  double min_arc_deg = 100.0;           ///< angular coverage of inliers around the centre [deg]
-  double max_lean_deg = 15.0;           ///< largest stem lean between two fit heights [deg]
+  double min_inlier_ratio = 0.85;       ///< inliers / (inliers + points inside the circle) [0..1]
+  double min_shell_ratio = 0.75;        ///< inliers / points within 3 ransac_inlier_m [0..1]
+  double min_arc_deg = 80.0;            ///< angular coverage of inliers around the centre [deg]
+  double max_lean_deg = 15.0;           ///< largest stem lean across the fit band [deg]
   double base_ring_inner_m = 0.2;       ///< ground ring around the stem, gap to the bark [m]
   double base_ring_outer_m = 1.5;       ///< ground ring around the stem, outer radius [m]
   double min_trunk_separation_m = 0.3;  ///< closer trunks are duplicates; the larger fit wins [m]
+  double max_fit_rms_m = 0.02;          ///< largest RMS of the inliers about the circle [m]
+  double base_max_dh_m = 0.4;           ///< ring points farther from the local ground are not
+                                        ///< ground (shrubs, logs, noise) [m]
+  int min_base_points = 8;              ///< ring points needed, else the grid ground is used
+  int max_fits_per_candidate = 3;       ///< circles tried per candidate (trunks merged by
+                                        ///< close spacing or undergrowth)
 
   /// Returns an empty string when the values are usable, else what is wrong.
   std::string validate() const;
@@ -63,11 +72,16 @@ struct TrunkExtractorParams {
     v("ransac_iterations", ransac_iterations);
     v("ransac_inlier_m", ransac_inlier_m);
     v("min_inlier_ratio", min_inlier_ratio);
+    v("min_shell_ratio", min_shell_ratio);
     v("min_arc_deg", min_arc_deg);
     v("max_lean_deg", max_lean_deg);
     v("base_ring_inner_m", base_ring_inner_m);
     v("base_ring_outer_m", base_ring_outer_m);
     v("min_trunk_separation_m", min_trunk_separation_m);
+    v("max_fit_rms_m", max_fit_rms_m);
+    v("base_max_dh_m", base_max_dh_m);
+    v("min_base_points", min_base_points);
+    v("max_fits_per_candidate", max_fits_per_candidate);
   }
 };
 
@@ -79,13 +93,46 @@ struct TrunkExtractionStats {
   size_t candidates = 0;         ///< merged trunk candidates
   size_t rejected_fit = 0;       ///< candidates whose circle fit failed or was implausible
   size_t rejected_lean = 0;      ///< candidates rejected as leaning clutter
-  size_t duplicates = 0;         ///< trunks dropped as duplicates
+  size_t rejected_arc = 0;      ///< fits dropped for too little arc coverage (part of rejected_fit)
+  size_t duplicates = 0;        ///< trunks dropped as duplicates
+  size_t ground_fallbacks = 0;  ///< trunks whose base came from the grid, not the ring
 };
 
 struct TrunkExtractionResult {
   Trunks trunks;
   TrunkExtractionStats stats;
 };
+
+/// Settings of the robust circle fit.
+struct CircleFitParams {
+  int iterations = 150;        ///< RANSAC iterations
+  double inlier_m = 0.03;      ///< inlier distance to the circle [m]
+  double min_radius_m = 0.04;  ///< smallest radius a hypothesis may have [m]
+  double max_radius_m = 0.6;   ///< largest radius a hypothesis may have [m]
+  uint32_t seed = 1;           ///< RANSAC seed (fixed: results are reproducible)
+};
+
+/// A fitted circle and the evidence for it.
+struct CircleFit {
+  bool ok = false;              ///< false when there were too few points or no hypothesis
+  double cx = 0.0;              ///< centre [m]
+  double cy = 0.0;              ///< centre [m]
+  double r = 0.0;               ///< radius [m]
+  size_t inliers = 0;           ///< points within inlier_m of the circle
+  double inlier_ratio = 0.0;    ///< inliers / (inliers + points inside the circle); a stem
+                                ///< is opaque, points inside it speak against it [0..1]
+  double shell_ratio = 0.0;     ///< inliers / points within 3 inlier_m of the circle; bark is
+                                ///< a thin surface, foliage fills the shell [0..1]
+  double arc_deg = 0.0;         ///< angular coverage of the inliers around the centre [deg]
+  double rms_m = 0.0;           ///< RMS distance of the inliers to the circle [m]
+  std::vector<char> is_inlier;  ///< per input point
+};
+
+/// Robust circle fit to horizontal points (paper Sec. 3.B, "circle fitting"): RANSAC over
+/// 3-point circles (fixed seed), then an algebraic Kasa fit of the inliers, then a
+/// Tukey-weighted geometric Gauss-Newton refinement, which removes the Kasa bias on partial
+/// arcs. Deterministic; never throws.
+CircleFit fitCircleRobust(const std::vector<Eigen::Vector2d>& xy, const CircleFitParams& params);
 
 /// Extracts trunk landmarks from a gravity-aligned cloud in the submap frame.
 /// Pure function: thread-safe, deterministic. Non-finite points are ignored; an empty or
