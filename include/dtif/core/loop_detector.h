@@ -22,6 +22,10 @@ struct VerifierParams {
   double max_rms_xy_m = 0.2;         ///< RMS horizontal residual of I_T at most [m]
   double match_radius_m = 0.4;       ///< trunks this close after alignment co-locate [m]
   double min_covisible_ratio = 0.5;  ///< co-located share of trunks in the common area [0..1]
+  int min_covisible = 6;             ///< co-located trunks (both directions summed) at least
+  /// Runner-up hypothesis (another yaw > 10 deg away, or another translation mode) with more
+  /// than this share of the best one's support: ambiguous (repetitive stand), rejected [0..1].
+  double max_ambiguity = 0.5;
 
   std::string validate() const;
 
@@ -32,6 +36,8 @@ struct VerifierParams {
     v("max_rms_xy_m", max_rms_xy_m);
     v("match_radius_m", match_radius_m);
     v("min_covisible_ratio", min_covisible_ratio);
+    v("min_covisible", min_covisible);
+    v("max_ambiguity", max_ambiguity);
   }
 };
 
@@ -80,7 +86,29 @@ struct QueryStats {
   size_t eligible = 0;     ///< database entries after recent-submap exclusion
   size_t screened_in = 0;  ///< entries passing histogram screening
   size_t matched = 0;      ///< candidates that reached pose estimation
+  size_t verified = 0;     ///< candidates that passed verification
 };
+
+/// Outcome of verifying one pose hypothesis (exposed for tests and diagnostics).
+struct Verification {
+  bool accepted = false;
+  std::string reason;            ///< why rejected (empty when accepted)
+  double covisible_ratio = 0.0;  ///< co-located share of trunks inside the other's hull
+  int covisible = 0;             ///< co-located trunks (both directions)
+  double ambiguity = 0.0;        ///< runner-up / best support (max of yaw and translation)
+  double score = 0.0;            ///< covisible_ratio x inlier weight share
+};
+
+/// Verifies T_c_q (from estimatePose on corrs) between query q and candidate c.
+Verification verifyLoop(const Descriptor& q, const Descriptor& c,
+                        const std::vector<Correspondence>& corrs, const PoseEstimate& est,
+                        const VerifierParams& params);
+
+/// Matches one pair end to end (correspondences, pose, verification), without the database.
+/// Returns the loop when verified; `est`/`ver` (optional) receive the intermediate results.
+std::optional<LoopClosure> matchPair(const Descriptor& q, const Descriptor& c,
+                                     const LoopDetectorParams& params, PoseEstimate* est = nullptr,
+                                     Verification* ver = nullptr, QueryStats* stats = nullptr);
 
 /// Sequential loop detector. Not thread-safe: callers serialise access. Descriptors are held
 /// by shared_ptr to const and may be shared with other owners.
