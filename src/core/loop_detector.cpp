@@ -79,6 +79,84 @@ void coLocated(const std::vector<P2>& a, const std::vector<P2>& b, double radius
   }
 }
 
+struct Refined {
+  Pose T = Pose::Identity();
+  std::vector<std::pair<int, int>> pairs;
+  double rms_xy = 0.0, rms_z = 0.0;
+};
+
+/// Mutually nearest trunk pairs within `radius` under T_c_q.
+std::vector<std::pair<int, int>> mutualPairs(const std::vector<P2>& pq, const std::vector<P2>& pc,
+                                             double radius) {
+  const double r2 = radius * radius;
+  std::vector<int> nq(pq.size(), -1), nc(pc.size(), -1);
+  std::vector<double> dq(pq.size(), r2), dc(pc.size(), r2);
+  for (size_t i = 0; i < pq.size(); ++i) {
+    for (size_t j = 0; j < pc.size(); ++j) {
+      const double d = (pq[i] - pc[j]).squaredNorm();
+      if (d <= dq[i]) dq[i] = d, nq[i] = static_cast<int>(j);
+      if (d <= dc[j]) dc[j] = d, nc[j] = static_cast<int>(i);
+    }
+  }
+  std::vector<std::pair<int, int>> out;
+  for (size_t i = 0; i < pq.size(); ++i) {
+    if (nq[i] >= 0 && nc[nq[i]] == static_cast<int>(i)) out.emplace_back(i, nq[i]);
+  }
+  return out;
+}
+
+/// Guided matching: re-associate every trunk by mutual nearest neighbour under the current
+/// pose, then solve Eq. (3.11) by least squares on those pairs (2-D Procrustes for yaw and
+/// t_xy, median for t_z); a few rounds until the pairs stop changing.
+Refined guidedRefine(const Descriptor& q, const Descriptor& c, const Pose& T0, double radius) {
+  Refined out;
+  out.T = T0;
+  std::vector<P2> pc;
+  for (const Trunk& t : c.trunks) pc.emplace_back(t.x, t.y);
+  for (int it = 0; it < 5; ++it) {
+    std::vector<P2> pq;
+    for (const Trunk& t : q.trunks)
+      pq.push_back((out.T * Eigen::Vector3d(t.x, t.y, t.z)).head<2>());
+    std::vector<std::pair<int, int>> pairs = mutualPairs(pq, pc, radius);
+    if (pairs.size() < 2) break;
+    if (pairs == out.pairs) break;
+    out.pairs = pairs;
+    Eigen::Vector2d mq = Eigen::Vector2d::Zero(), mc = Eigen::Vector2d::Zero();
+    for (const auto& [i, j] : pairs) {
+      mq += Eigen::Vector2d(q.trunks[i].x, q.trunks[i].y);
+      mc += pc[j];
+    }
+    mq /= pairs.size();
+    mc /= pairs.size();
+    double sc = 0.0, ss = 0.0;
+    std::vector<double> dz;
+    for (const auto& [i, j] : pairs) {
+      const Eigen::Vector2d a = Eigen::Vector2d(q.trunks[i].x, q.trunks[i].y) - mq, b = pc[j] - mc;
+      sc += a.dot(b);
+      ss += a.x() * b.y() - a.y() * b.x();
+      dz.push_back(c.trunks[j].z - q.trunks[i].z);
+    }
+    const double yaw = std::atan2(ss, sc);
+    std::nth_element(dz.begin(), dz.begin() + dz.size() / 2, dz.end());
+    out.T = Pose::Identity();
+    out.T.linear() = rotZ(yaw);
+    const Eigen::Vector2d t = mc - Eigen::Rotation2Dd(yaw).toRotationMatrix() * mq;
+    out.T.translation() = Eigen::Vector3d(t.x(), t.y(), dz[dz.size() / 2]);
+  }
+  double sxy = 0.0, sz = 0.0;
+  for (const auto& [i, j] : out.pairs) {
+    const Eigen::Vector3d r = Eigen::Vector3d(c.trunks[j].x, c.trunks[j].y, c.trunks[j].z) -
+                              out.T * Eigen::Vector3d(q.trunks[i].x, q.trunks[i].y, q.trunks[i].z);
+    sxy += r.head<2>().squaredNorm();
+    sz += r.z() * r.z();
+  }
+  if (!out.pairs.empty()) {
+    out.rms_xy = std::sqrt(sxy / out.pairs.size());
+    out.rms_z = std::sqrt(sz / out.pairs.size());
+  }
+  return out;
+}
+
 // ---- database file ----------------------------------------------------------------------------
 
 constexpr char kDbMagic[8] = {'D', 'T', 'I', 'F', 'D', 'B', '\0', '\0'};
@@ -113,7 +191,8 @@ T get(const std::vector<uint8_t>& in, size_t* pos) {
 
 std::string VerifierParams::validate() const {
   std::ostringstream err;
-  if (min_inliers < 2) err << "min_inliers must be >= 2; ";
+  if (min_hypothesis_inliers < 3) err << "min_hypothesis_inliers must be >= 3; ";
+  if (min_inliers < 3) err << "min_inliers must be >= 3; ";
   if (!(min_inlier_weight >= 0.0)) err << "min_inlier_weight must be >= 0; ";
   if (!(max_rms_xy_m > 0.0)) err << "max_rms_xy_m must be > 0; ";
   if (!(match_radius_m > 0.0 && std::isfinite(match_radius_m))) {
@@ -156,9 +235,10 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
     return v;
   };
   if (!est.ok) return reject("no pose");
-  if (static_cast<int>(est.inliers_T.size()) < params.min_inliers) return reject("few inliers");
+  if (static_cast<int>(est.inliers_T.size()) < params.min_hypothesis_inliers) {
+    return reject("few hypothesis inliers");
+  }
   if (est.inlier_weight < params.min_inlier_weight) return reject("low inlier weight");
-  if (est.rms_xy_m > params.max_rms_xy_m) return reject("large residual");
 
   // Repetitive stands (plantation grids) support several poses almost equally; a loop is only
   // trusted when the chosen hypothesis clearly dominates the runner-up in yaw and translation.
@@ -168,11 +248,24 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
   v.ambiguity = std::max(amb_yaw, amb_t);
   if (v.ambiguity > params.max_ambiguity) return reject("ambiguous");
 
+  const Refined ref = guidedRefine(q, c, est.T_c_q, params.match_radius_m);
+  v.T_c_q = ref.T;
+  v.pairs = ref.pairs;
+  v.rms_xy_m = ref.rms_xy;
+  v.rms_z_m = ref.rms_z;
+  // The refinement must stay near the hypothesis: a jump means it locked onto other trunks.
+  if ((ref.T.translation().head<2>() - est.T_c_q.translation().head<2>()).norm() >
+      params.match_radius_m) {
+    return reject("refinement diverged");
+  }
+  if (static_cast<int>(ref.pairs.size()) < params.min_inliers) return reject("few inliers");
+  if (ref.rms_xy > params.max_rms_xy_m) return reject("large residual");
+
   // Co-visibility: after alignment, trunks of one submap inside the other's footprint (convex
   // hull) must mostly have a partner. A false loop explains its inliers but not the rest.
   std::vector<P2> pq, pc;
   for (const Trunk& t : q.trunks) {
-    pq.push_back((est.T_c_q * Eigen::Vector3d(t.x, t.y, t.z)).head<2>());
+    pq.push_back((ref.T * Eigen::Vector3d(t.x, t.y, t.z)).head<2>());
   }
   for (const Trunk& t : c.trunks) pc.emplace_back(t.x, t.y);
   int inside = 0, matched = 0;
@@ -198,8 +291,11 @@ std::optional<LoopClosure> matchPair(const Descriptor& q, const Descriptor& c,
   auto t0 = Clock::now();
   const std::vector<Correspondence> corrs = buildCorrespondences(q, c, params.matcher);
   if (stats) stats->match_ms += msSince(t0);
-  if (static_cast<int>(corrs.size()) < params.verification.min_inliers) {
-    if (ver_out) *ver_out = Verification{false, "few correspondences"};
+  if (static_cast<int>(corrs.size()) < params.verification.min_hypothesis_inliers) {
+    if (ver_out) {
+      *ver_out = Verification{};
+      ver_out->reason = "few correspondences";
+    }
     if (est_out) *est_out = PoseEstimate{};
     return std::nullopt;
   }
@@ -220,25 +316,28 @@ std::optional<LoopClosure> matchPair(const Descriptor& q, const Descriptor& c,
   lc.query_id = q.submap_id;
   lc.candidate_robot = c.robot;
   lc.candidate_id = c.submap_id;
-  lc.T_c_q = est.T_c_q;
-  lc.inliers = static_cast<int>(est.inliers_T.size());
+  lc.T_c_q = ver.T_c_q;
+  lc.inliers = static_cast<int>(ver.pairs.size());
   lc.score = ver.score;
-  for (int i : est.inliers_T) lc.inlier_pairs.emplace_back(corrs[i].iq, corrs[i].ic);
+  lc.inlier_pairs = ver.pairs;
   for (const Correspondence& k : corrs) lc.all_pairs.emplace_back(k.iq, k.ic);
 
   // Covariance from the inlier residuals: per-axis residual variance sigma^2 = rms_xy^2 / 2
   // (each residual mixes two trunk errors, hence the mean of n residuals has sigma^2 / n);
   // yaw from the lever arms of the inliers about their centroid.
   const double n = static_cast<double>(lc.inliers);
-  const double s2 = est.rms_xy_m * est.rms_xy_m / 2.0;
+  const double s2 = ver.rms_xy_m * ver.rms_xy_m / 2.0;
   Eigen::Vector2d mean = Eigen::Vector2d::Zero();
-  for (int i : est.inliers_T) mean += corrs[i].pq.head<2>();
+  for (const auto& pr : ver.pairs)
+    mean += Eigen::Vector2d(q.trunks[pr.first].x, q.trunks[pr.first].y);
   mean /= n;
   double lever2 = 0.0;
-  for (int i : est.inliers_T) lever2 += (corrs[i].pq.head<2>() - mean).squaredNorm();
+  for (const auto& pr : ver.pairs) {
+    lever2 += (Eigen::Vector2d(q.trunks[pr.first].x, q.trunks[pr.first].y) - mean).squaredNorm();
+  }
   lc.covariance.setZero();
   lc.covariance(0, 0) = lc.covariance(1, 1) = std::max(s2 / n, kMinXyVar);
-  lc.covariance(2, 2) = std::max(est.rms_z_m * est.rms_z_m / n, kMinZVar);
+  lc.covariance(2, 2) = std::max(ver.rms_z_m * ver.rms_z_m / n, kMinZVar);
   lc.covariance(3, 3) = lc.covariance(4, 4) = kRollPitchVar;
   lc.covariance(5, 5) = std::max(lever2 > 0 ? s2 / lever2 : 1.0, kMinYawVar);
   return lc;
