@@ -254,10 +254,14 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
   v.rms_xy_m = ref.rms_xy;
   v.rms_z_m = ref.rms_z;
   // The refinement must stay near the hypothesis: a jump means it locked onto other trunks.
-  if ((ref.T.translation().head<2>() - est.T_c_q.translation().head<2>()).norm() >
-      params.match_radius_m) {
-    return reject("refinement diverged");
+  // Measured on the query's own trunks (the raw translation swings with the yaw when the
+  // coordinates are far from the origin, e.g. UTM).
+  double shift = 0.0;
+  for (const Trunk& t : q.trunks) {
+    const Eigen::Vector3d p(t.x, t.y, t.z);
+    shift = std::max(shift, ((ref.T * p) - (est.T_c_q * p)).head<2>().norm());
   }
+  if (shift > params.match_radius_m) return reject("refinement diverged");
   if (static_cast<int>(ref.pairs.size()) < params.min_inliers) return reject("few inliers");
   if (ref.rms_xy > params.max_rms_xy_m) return reject("large residual");
 
