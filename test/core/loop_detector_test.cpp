@@ -91,6 +91,24 @@ TEST(LoopDetector, RecoversOverlappingPairsInRandomStands) {
   EXPECT_LT(sum_z / accepted, 0.1);
 }
 
+TEST(LoopDetector, Exact180DegreesAndUtmScaleCoordinates) {
+  std::mt19937 rng(180);
+  const Trunks world = test::randomStand(rng, 80, 80, 600);
+  const Pose T_w_c = poseXyYaw(312000.0, 5096000.0, 180.0, 0.0);
+  const Pose T_w_q = poseXyYaw(-1e5, 1e5, -50.0, M_PI);
+  const Descriptor c = describe(observe(rng, world, {40, 40}, T_w_c), "a", 0, 0.0);
+  const Descriptor q = describe(observe(rng, world, {45, 38}, T_w_q), "b", 1, 0.0);
+  Verification ver;
+  const auto lc = matchPair(q, c, LoopDetectorParams{}, nullptr, &ver);
+  ASSERT_TRUE(lc) << ver.reason;
+  const Pose T_c_q = T_w_c.inverse() * T_w_q;
+  EXPECT_LT(test::yawError(lc->T_c_q, T_c_q) * 180.0 / M_PI, 0.3);
+  // Compare the effect on a point of the query submap, not the ~1e5 m raw translation.
+  const Eigen::Vector3d p = T_w_q.inverse() * Eigen::Vector3d(45, 38, 0);
+  EXPECT_LT((lc->T_c_q * p - T_c_q * p).head<2>().norm(), 0.15);
+  EXPECT_LT(std::fabs((lc->T_c_q * p - T_c_q * p).z()), 0.1);
+}
+
 TEST(LoopDetector, RejectsDisjointPlacesOfRandomStands) {
   std::mt19937 rng(77);
   const LoopDetectorParams params;
