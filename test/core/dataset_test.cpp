@@ -14,9 +14,10 @@ namespace fs = std::filesystem;
 class DatasetTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("dtif_dataset_test_" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()) +
-            "_" + ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    dir_ =
+        fs::temp_directory_path() /
+        ("dtif_dataset_test_" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()) +
+         "_" + ::testing::UnitTest::GetInstance()->current_test_info()->name());
     fs::remove_all(dir_);
   }
   void TearDown() override { fs::remove_all(dir_); }
@@ -120,9 +121,11 @@ TEST_F(DatasetTest, MissingFolderAndSubmapsCsv) {
 }
 
 TEST_F(DatasetTest, BadRowsAreNamed) {
-  const std::string header = "id,robot,stamp,file,odom_tx,odom_ty,odom_tz,odom_qx,odom_qy,odom_qz,odom_qw\n";
+  const std::string header =
+      "id,robot,stamp,file,odom_tx,odom_ty,odom_tz,odom_qx,odom_qy,odom_qz,odom_qw\n";
   writeFile("submaps/1.pcd", "");
-  writeFile("submaps.csv", header + "1,a,0.0,submaps/1.pcd,0,0,0,0,0,0,1\n1,a,1.0,submaps/1.pcd,0,0,0,0,0,0,1\n");
+  writeFile("submaps.csv",
+            header + "1,a,0.0,submaps/1.pcd,0,0,0,0,0,0,1\n1,a,1.0,submaps/1.pcd,0,0,0,0,0,0,1\n");
   expectError("submaps.csv", "duplicate id 1");
   writeFile("submaps.csv", header + "1,bad-name,0.0,submaps/1.pcd,0,0,0,0,0,0,1\n");
   expectError("submaps.csv", "robot name");

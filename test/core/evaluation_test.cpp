@@ -130,10 +130,10 @@ TEST(SummaryOutput, JsonHasExactKeysAndNullsWhenUndefined) {
   ss << in.rdbuf();
   const std::string text = ss.str();
   for (const char* key :
-       {"\"dataset\"", "\"submaps\"", "\"queries_with_loop\"", "\"accepted\"",
-        "\"true_positives\"", "\"false_positives\"", "\"precision\": null", "\"recall\": null",
-        "\"mean_err_all\"", "\"mean_err_tp\"", "\"rot_deg\": null", "\"rmse_rot_deg\": null",
-        "\"rmse_trans_m\": null", "\"time_ms\"", "\"solver\"", "\"descriptor_bytes_mean\""}) {
+       {"\"dataset\"", "\"submaps\"", "\"queries_with_loop\"", "\"accepted\"", "\"true_positives\"",
+        "\"false_positives\"", "\"precision\": null", "\"recall\": null", "\"mean_err_all\"",
+        "\"mean_err_tp\"", "\"rot_deg\": null", "\"rmse_rot_deg\": null", "\"rmse_trans_m\": null",
+        "\"time_ms\"", "\"solver\"", "\"descriptor_bytes_mean\""}) {
     EXPECT_NE(text.find(key), std::string::npos) << key;
   }
   std::filesystem::remove(path);

@@ -17,21 +17,29 @@ namespace dtif {
 
 /// Acceptance of a loop. False loops corrupt merged maps, so these err on rejecting.
 struct VerifierParams {
-  int min_inliers = 6;               ///< |I_T| at least
+  int min_hypothesis_inliers = 4;    ///< |I_T| from the descriptor correspondences at least
+  int min_inliers = 6;               ///< trunk pairs co-located after guided refinement at least
   double min_inlier_weight = 8.0;    ///< sum of omega_k over I_T at least
-  double max_rms_xy_m = 0.2;         ///< RMS horizontal residual of I_T at most [m]
+  double max_rms_xy_m = 0.2;         ///< RMS horizontal residual of the refined pairs at most [m]
   double match_radius_m = 0.4;       ///< trunks this close after alignment co-locate [m]
   double min_covisible_ratio = 0.5;  ///< co-located share of trunks in the common area [0..1]
+  int min_covisible = 6;             ///< co-located trunks (both directions summed) at least
+  /// Runner-up hypothesis (another yaw > 10 deg away, or another translation mode) with more
+  /// than this share of the best one's support: ambiguous (repetitive stand), rejected [0..1].
+  double max_ambiguity = 0.5;
 
   std::string validate() const;
 
   template <class V>
   void visit(V& v) {
+    v("min_hypothesis_inliers", min_hypothesis_inliers);
     v("min_inliers", min_inliers);
     v("min_inlier_weight", min_inlier_weight);
     v("max_rms_xy_m", max_rms_xy_m);
     v("match_radius_m", match_radius_m);
     v("min_covisible_ratio", min_covisible_ratio);
+    v("min_covisible", min_covisible);
+    v("max_ambiguity", max_ambiguity);
   }
 };
 
@@ -65,9 +73,9 @@ struct LoopClosure {
   Pose T_c_q = Pose::Identity();
   /// Covariance of (x, y, z, roll, pitch, yaw) [m^2, rad^2], ROS PoseWithCovariance order.
   Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Identity();
-  int inliers = 0;     ///< |I_T|
+  int inliers = 0;     ///< trunk pairs supporting T_c_q after guided refinement
   double score = 0.0;  ///< verification score (co-visible ratio x inlier weight share) [0..1]
-  std::vector<std::pair<int, int>> inlier_pairs;  ///< (query trunk, candidate trunk) of I_T
+  std::vector<std::pair<int, int>> inlier_pairs;  ///< (query trunk, candidate trunk), refined
   std::vector<std::pair<int, int>> all_pairs;     ///< every correspondence that was solved
 };
 
@@ -80,7 +88,35 @@ struct QueryStats {
   size_t eligible = 0;     ///< database entries after recent-submap exclusion
   size_t screened_in = 0;  ///< entries passing histogram screening
   size_t matched = 0;      ///< candidates that reached pose estimation
+  size_t verified = 0;     ///< candidates that passed verification
 };
+
+/// Outcome of verifying one pose hypothesis (exposed for tests and diagnostics).
+struct Verification {
+  bool accepted = false;
+  Pose T_c_q = Pose::Identity();           ///< pose after guided refinement (the one verified)
+  std::vector<std::pair<int, int>> pairs;  ///< mutual nearest trunk pairs under T_c_q
+  double rms_xy_m = 0.0;                   ///< RMS horizontal residual of pairs [m]
+  double rms_z_m = 0.0;                    ///< RMS elevation residual of pairs [m]
+  std::string reason;                      ///< why rejected (empty when accepted)
+  double covisible_ratio = 0.0;            ///< co-located share of trunks inside the other's hull
+  int covisible = 0;                       ///< co-located trunks (both directions)
+  double ambiguity = 0.0;  ///< runner-up / best support (max of yaw and translation)
+  double score = 0.0;      ///< covisible_ratio x inlier weight share
+};
+
+/// Verifies T_c_q (from estimatePose on corrs) between query q and candidate c. The pose is
+/// first refined on every mutually nearest trunk pair (guided matching): the descriptor
+/// correspondences give the hypothesis, all co-located trunks then fix it more precisely.
+Verification verifyLoop(const Descriptor& q, const Descriptor& c,
+                        const std::vector<Correspondence>& corrs, const PoseEstimate& est,
+                        const VerifierParams& params);
+
+/// Matches one pair end to end (correspondences, pose, verification), without the database.
+/// Returns the loop when verified; `est`/`ver` (optional) receive the intermediate results.
+std::optional<LoopClosure> matchPair(const Descriptor& q, const Descriptor& c,
+                                     const LoopDetectorParams& params, PoseEstimate* est = nullptr,
+                                     Verification* ver = nullptr, QueryStats* stats = nullptr);
 
 /// Sequential loop detector. Not thread-safe: callers serialise access. Descriptors are held
 /// by shared_ptr to const and may be shared with other owners.

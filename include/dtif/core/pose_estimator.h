@@ -43,6 +43,11 @@ struct PoseEstimate {
   double inlier_weight = 0.0;     ///< sum of omega_k over I_T
   double rms_xy_m = 0.0;          ///< RMS horizontal residual over I_T [m]
   double rms_z_m = 0.0;           ///< RMS elevation residual over I_T [m]
+  // Hypothesis distinctiveness, for verification in repetitive stands:
+  double yaw_consensus = 0.0;          ///< weighted TIM consensus at the best yaw
+  double yaw_runner_up = 0.0;          ///< best consensus at yaws > 10 deg away from it
+  double translation_consensus = 0.0;  ///< weight of I_R within beta_xy of t_xy
+  double translation_runner_up = 0.0;  ///< best such weight of a mode > 2 beta_xy away
 };
 
 /// Solves Eqs. (3.11)-(3.17) on weighted correspondences. Pure; thread-safe; deterministic.

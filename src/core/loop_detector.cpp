@@ -1,0 +1,478 @@
+// Descriptor database, loop query and false-loop verification.
+#include "dtif/core/loop_detector.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <iterator>
+#include <sstream>
+#include <stdexcept>
+
+namespace dtif {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double msSince(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+/// Roll and pitch come from the gravity-aligned front end (FAST-LIO2), not from the match:
+/// their uncertainty is the IMU levelling error, taken as (0.5 deg)^2.
+constexpr double kRollPitchVar = (0.5 * M_PI / 180.0) * (0.5 * M_PI / 180.0);
+/// Floors on the reported variances: a handful of inliers with tiny residuals must not claim
+/// millimetre certainty (trunk centres are only fitted to ~1-2 cm).
+constexpr double kMinXyVar = 0.02 * 0.02;
+constexpr double kMinZVar = 0.03 * 0.03;
+constexpr double kMinYawVar = (0.1 * M_PI / 180.0) * (0.1 * M_PI / 180.0);
+
+using P2 = Eigen::Vector2d;
+
+double cross(const P2& o, const P2& a, const P2& b) {
+  return (a.x() - o.x()) * (b.y() - o.y()) - (a.y() - o.y()) * (b.x() - o.x());
+}
+
+/// Convex hull, counter-clockwise (Andrew's monotone chain). CGAL stays in descriptor.cpp.
+std::vector<P2> convexHull(std::vector<P2> p) {
+  std::sort(p.begin(), p.end(), [](const P2& a, const P2& b) {
+    return a.x() < b.x() || (a.x() == b.x() && a.y() < b.y());
+  });
+  if (p.size() < 3) return p;
+  std::vector<P2> h(2 * p.size());
+  size_t k = 0;
+  for (size_t i = 0; i < p.size(); ++i) {
+    while (k >= 2 && cross(h[k - 2], h[k - 1], p[i]) <= 0) --k;
+    h[k++] = p[i];
+  }
+  for (size_t i = p.size() - 1, t = k + 1; i > 0; --i) {
+    while (k >= t && cross(h[k - 2], h[k - 1], p[i - 1]) <= 0) --k;
+    h[k++] = p[i - 1];
+  }
+  h.resize(k - 1);
+  return h;
+}
+
+bool insideHull(const std::vector<P2>& hull, const P2& p) {
+  if (hull.size() < 3) return false;
+  for (size_t i = 0; i < hull.size(); ++i) {
+    if (cross(hull[i], hull[(i + 1) % hull.size()], p) < 0) return false;
+  }
+  return true;
+}
+
+/// Of the points of `a` inside the hull of `b`, how many have a partner in `b` within radius.
+void coLocated(const std::vector<P2>& a, const std::vector<P2>& b, double radius, int* inside,
+               int* matched) {
+  const std::vector<P2> hull = convexHull(b);
+  const double r2 = radius * radius;
+  for (const P2& p : a) {
+    if (!insideHull(hull, p)) continue;
+    ++*inside;
+    for (const P2& q : b) {
+      if ((p - q).squaredNorm() <= r2) {
+        ++*matched;
+        break;
+      }
+    }
+  }
+}
+
+struct Refined {
+  Pose T = Pose::Identity();
+  std::vector<std::pair<int, int>> pairs;
+  double rms_xy = 0.0, rms_z = 0.0;
+};
+
+/// Mutually nearest trunk pairs within `radius` under T_c_q.
+std::vector<std::pair<int, int>> mutualPairs(const std::vector<P2>& pq, const std::vector<P2>& pc,
+                                             double radius) {
+  const double r2 = radius * radius;
+  std::vector<int> nq(pq.size(), -1), nc(pc.size(), -1);
+  std::vector<double> dq(pq.size(), r2), dc(pc.size(), r2);
+  for (size_t i = 0; i < pq.size(); ++i) {
+    for (size_t j = 0; j < pc.size(); ++j) {
+      const double d = (pq[i] - pc[j]).squaredNorm();
+      if (d <= dq[i]) dq[i] = d, nq[i] = static_cast<int>(j);
+      if (d <= dc[j]) dc[j] = d, nc[j] = static_cast<int>(i);
+    }
+  }
+  std::vector<std::pair<int, int>> out;
+  for (size_t i = 0; i < pq.size(); ++i) {
+    if (nq[i] >= 0 && nc[nq[i]] == static_cast<int>(i)) out.emplace_back(i, nq[i]);
+  }
+  return out;
+}
+
+/// Guided matching: re-associate every trunk by mutual nearest neighbour under the current
+/// pose, then solve Eq. (3.11) by least squares on those pairs (2-D Procrustes for yaw and
+/// t_xy, median for t_z); a few rounds until the pairs stop changing.
+Refined guidedRefine(const Descriptor& q, const Descriptor& c, const Pose& T0, double radius) {
+  Refined out;
+  out.T = T0;
+  std::vector<P2> pc;
+  for (const Trunk& t : c.trunks) pc.emplace_back(t.x, t.y);
+  for (int it = 0; it < 5; ++it) {
+    std::vector<P2> pq;
+    for (const Trunk& t : q.trunks)
+      pq.push_back((out.T * Eigen::Vector3d(t.x, t.y, t.z)).head<2>());
+    std::vector<std::pair<int, int>> pairs = mutualPairs(pq, pc, radius);
+    if (pairs.size() < 2) break;
+    if (pairs == out.pairs) break;
+    out.pairs = pairs;
+    Eigen::Vector2d mq = Eigen::Vector2d::Zero(), mc = Eigen::Vector2d::Zero();
+    for (const auto& [i, j] : pairs) {
+      mq += Eigen::Vector2d(q.trunks[i].x, q.trunks[i].y);
+      mc += pc[j];
+    }
+    mq /= pairs.size();
+    mc /= pairs.size();
+    double sc = 0.0, ss = 0.0;
+    std::vector<double> dz;
+    for (const auto& [i, j] : pairs) {
+      const Eigen::Vector2d a = Eigen::Vector2d(q.trunks[i].x, q.trunks[i].y) - mq, b = pc[j] - mc;
+      sc += a.dot(b);
+      ss += a.x() * b.y() - a.y() * b.x();
+      dz.push_back(c.trunks[j].z - q.trunks[i].z);
+    }
+    const double yaw = std::atan2(ss, sc);
+    std::nth_element(dz.begin(), dz.begin() + dz.size() / 2, dz.end());
+    out.T = Pose::Identity();
+    out.T.linear() = rotZ(yaw);
+    const Eigen::Vector2d t = mc - Eigen::Rotation2Dd(yaw).toRotationMatrix() * mq;
+    out.T.translation() = Eigen::Vector3d(t.x(), t.y(), dz[dz.size() / 2]);
+  }
+  double sxy = 0.0, sz = 0.0;
+  for (const auto& [i, j] : out.pairs) {
+    const Eigen::Vector3d r = Eigen::Vector3d(c.trunks[j].x, c.trunks[j].y, c.trunks[j].z) -
+                              out.T * Eigen::Vector3d(q.trunks[i].x, q.trunks[i].y, q.trunks[i].z);
+    sxy += r.head<2>().squaredNorm();
+    sz += r.z() * r.z();
+  }
+  if (!out.pairs.empty()) {
+    out.rms_xy = std::sqrt(sxy / out.pairs.size());
+    out.rms_z = std::sqrt(sz / out.pairs.size());
+  }
+  return out;
+}
+
+// ---- database file ----------------------------------------------------------------------------
+
+constexpr char kDbMagic[8] = {'D', 'T', 'I', 'F', 'D', 'B', '\0', '\0'};
+constexpr uint32_t kDbVersion = 1;
+
+uint32_t fnv1a(const uint8_t* p, size_t n) {
+  uint32_t h = 2166136261u;
+  for (size_t i = 0; i < n; ++i) {
+    h ^= p[i];
+    h *= 16777619u;
+  }
+  return h;
+}
+
+template <class T>
+void put(std::vector<uint8_t>& out, T v) {
+  uint8_t b[sizeof(T)];
+  std::memcpy(b, &v, sizeof(T));
+  out.insert(out.end(), b, b + sizeof(T));
+}
+
+template <class T>
+T get(const std::vector<uint8_t>& in, size_t* pos) {
+  if (in.size() - *pos < sizeof(T)) throw std::runtime_error("truncated");
+  T v;
+  std::memcpy(&v, in.data() + *pos, sizeof(T));
+  *pos += sizeof(T);
+  return v;
+}
+
+}  // namespace
+
+std::string VerifierParams::validate() const {
+  std::ostringstream err;
+  if (min_hypothesis_inliers < 3) err << "min_hypothesis_inliers must be >= 3; ";
+  if (min_inliers < 3) err << "min_inliers must be >= 3; ";
+  if (!(min_inlier_weight >= 0.0)) err << "min_inlier_weight must be >= 0; ";
+  if (!(max_rms_xy_m > 0.0)) err << "max_rms_xy_m must be > 0; ";
+  if (!(match_radius_m > 0.0 && std::isfinite(match_radius_m))) {
+    err << "match_radius_m must be > 0; ";
+  }
+  if (!(min_covisible_ratio >= 0.0 && min_covisible_ratio <= 1.0)) {
+    err << "min_covisible_ratio must be in [0, 1]; ";
+  }
+  if (min_covisible < 0) err << "min_covisible must be >= 0; ";
+  if (!(max_ambiguity >= 0.0 && max_ambiguity <= 1.0)) err << "max_ambiguity must be in [0, 1]; ";
+  return err.str();
+}
+
+std::string DatabaseParams::validate() const {
+  std::ostringstream err;
+  if (!(exclude_recent_s >= 0.0)) err << "exclude_recent_s must be >= 0; ";
+  if (max_candidates < 1) err << "max_candidates must be >= 1; ";
+  return err.str();
+}
+
+std::string LoopDetectorParams::validate() const {
+  std::string out;
+  auto add = [&](const char* section, const std::string& e) {
+    if (!e.empty()) out += std::string(section) + ": " + e;
+  };
+  add("matcher", matcher.validate());
+  add("pose", pose.validate());
+  add("verification", verification.validate());
+  add("database", database.validate());
+  return out;
+}
+
+Verification verifyLoop(const Descriptor& q, const Descriptor& c,
+                        const std::vector<Correspondence>& corrs, const PoseEstimate& est,
+                        const VerifierParams& params) {
+  Verification v;
+  auto reject = [&](const std::string& why) {
+    v.accepted = false;
+    v.reason = why;
+    return v;
+  };
+  if (!est.ok) return reject("no pose");
+  if (static_cast<int>(est.inliers_T.size()) < params.min_hypothesis_inliers) {
+    return reject("few hypothesis inliers");
+  }
+  if (est.inlier_weight < params.min_inlier_weight) return reject("low inlier weight");
+
+  // Repetitive stands (plantation grids) support several poses almost equally; a loop is only
+  // trusted when the chosen hypothesis clearly dominates the runner-up in yaw and translation.
+  const double amb_yaw = est.yaw_consensus > 0 ? est.yaw_runner_up / est.yaw_consensus : 1.0;
+  const double amb_t =
+      est.translation_consensus > 0 ? est.translation_runner_up / est.translation_consensus : 1.0;
+  v.ambiguity = std::max(amb_yaw, amb_t);
+  if (v.ambiguity > params.max_ambiguity) return reject("ambiguous");
+
+  const Refined ref = guidedRefine(q, c, est.T_c_q, params.match_radius_m);
+  v.T_c_q = ref.T;
+  v.pairs = ref.pairs;
+  v.rms_xy_m = ref.rms_xy;
+  v.rms_z_m = ref.rms_z;
+  // The refinement must stay near the hypothesis: a jump means it locked onto other trunks.
+  // Measured on the query's own trunks (the raw translation swings with the yaw when the
+  // coordinates are far from the origin, e.g. UTM).
+  double shift = 0.0;
+  for (const Trunk& t : q.trunks) {
+    const Eigen::Vector3d p(t.x, t.y, t.z);
+    shift = std::max(shift, ((ref.T * p) - (est.T_c_q * p)).head<2>().norm());
+  }
+  if (shift > params.match_radius_m) return reject("refinement diverged");
+  if (static_cast<int>(ref.pairs.size()) < params.min_inliers) return reject("few inliers");
+  if (ref.rms_xy > params.max_rms_xy_m) return reject("large residual");
+
+  // Co-visibility: after alignment, trunks of one submap inside the other's footprint (convex
+  // hull) must mostly have a partner. A false loop explains its inliers but not the rest.
+  std::vector<P2> pq, pc;
+  for (const Trunk& t : q.trunks) {
+    pq.push_back((ref.T * Eigen::Vector3d(t.x, t.y, t.z)).head<2>());
+  }
+  for (const Trunk& t : c.trunks) pc.emplace_back(t.x, t.y);
+  int inside = 0, matched = 0;
+  coLocated(pq, pc, params.match_radius_m, &inside, &matched);
+  coLocated(pc, pq, params.match_radius_m, &inside, &matched);
+  v.covisible = matched;
+  v.covisible_ratio = inside > 0 ? static_cast<double>(matched) / inside : 0.0;
+  if (matched < params.min_covisible) return reject("few co-visible trunks");
+  if (v.covisible_ratio < params.min_covisible_ratio) return reject("low co-visibility");
+
+  double total_w = 0.0;
+  for (const Correspondence& k : corrs) total_w += k.w;
+  double inlier_w = 0.0;  // in omega units even with unit_weights, so scores stay comparable
+  for (int i : est.inliers_T) inlier_w += corrs[i].w;
+  v.score = v.covisible_ratio * (total_w > 0 ? inlier_w / total_w : 0.0);
+  v.accepted = true;
+  return v;
+}
+
+std::optional<LoopClosure> matchPair(const Descriptor& q, const Descriptor& c,
+                                     const LoopDetectorParams& params, PoseEstimate* est_out,
+                                     Verification* ver_out, QueryStats* stats) {
+  auto t0 = Clock::now();
+  const std::vector<Correspondence> corrs = buildCorrespondences(q, c, params.matcher);
+  if (stats) stats->match_ms += msSince(t0);
+  if (static_cast<int>(corrs.size()) < params.verification.min_hypothesis_inliers) {
+    if (ver_out) {
+      *ver_out = Verification{};
+      ver_out->reason = "few correspondences";
+    }
+    if (est_out) *est_out = PoseEstimate{};
+    return std::nullopt;
+  }
+  if (stats) ++stats->matched;
+  t0 = Clock::now();
+  const PoseEstimate est = estimatePose(corrs, params.pose);
+  if (stats) stats->solver_ms += msSince(t0);
+  t0 = Clock::now();
+  const Verification ver = verifyLoop(q, c, corrs, est, params.verification);
+  if (stats) stats->verify_ms += msSince(t0);
+  if (est_out) *est_out = est;
+  if (ver_out) *ver_out = ver;
+  if (!ver.accepted) return std::nullopt;
+  if (stats) ++stats->verified;
+
+  LoopClosure lc;
+  lc.query_robot = q.robot;
+  lc.query_id = q.submap_id;
+  lc.candidate_robot = c.robot;
+  lc.candidate_id = c.submap_id;
+  lc.T_c_q = ver.T_c_q;
+  lc.inliers = static_cast<int>(ver.pairs.size());
+  lc.score = ver.score;
+  lc.inlier_pairs = ver.pairs;
+  for (const Correspondence& k : corrs) lc.all_pairs.emplace_back(k.iq, k.ic);
+
+  // Covariance from the inlier residuals: per-axis residual variance sigma^2 = rms_xy^2 / 2
+  // (each residual mixes two trunk errors, hence the mean of n residuals has sigma^2 / n);
+  // yaw from the lever arms of the inliers about their centroid.
+  const double n = static_cast<double>(lc.inliers);
+  const double s2 = ver.rms_xy_m * ver.rms_xy_m / 2.0;
+  Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+  for (const auto& pr : ver.pairs)
+    mean += Eigen::Vector2d(q.trunks[pr.first].x, q.trunks[pr.first].y);
+  mean /= n;
+  double lever2 = 0.0;
+  for (const auto& pr : ver.pairs) {
+    lever2 += (Eigen::Vector2d(q.trunks[pr.first].x, q.trunks[pr.first].y) - mean).squaredNorm();
+  }
+  lc.covariance.setZero();
+  lc.covariance(0, 0) = lc.covariance(1, 1) = std::max(s2 / n, kMinXyVar);
+  lc.covariance(2, 2) = std::max(ver.rms_z_m * ver.rms_z_m / n, kMinZVar);
+  lc.covariance(3, 3) = lc.covariance(4, 4) = kRollPitchVar;
+  lc.covariance(5, 5) = std::max(lever2 > 0 ? s2 / lever2 : 1.0, kMinYawVar);
+  return lc;
+}
+
+LoopDetector::LoopDetector(const LoopDetectorParams& params) : params_(params) {
+  const std::string err = params_.validate();
+  if (!err.empty()) throw std::invalid_argument("bad loop detector params: " + err);
+}
+
+bool LoopDetector::insert(std::shared_ptr<const Descriptor> d) {
+  if (!d || !d->valid) return false;
+  entries_.push_back(std::move(d));
+  return true;
+}
+
+std::optional<LoopClosure> LoopDetector::query(const Descriptor& q, QueryStats* stats) const {
+  QueryStats local;
+  QueryStats& st = stats ? *stats : local;
+  st = QueryStats{};
+  if (!q.valid) return std::nullopt;
+
+  // Screening: histogram similarity of every eligible entry, best max_candidates kept.
+  auto t0 = Clock::now();
+  struct Cand {
+    double sim;
+    size_t index;
+  };
+  std::vector<Cand> cands;
+  const MatcherParams& mp = params_.matcher;
+  for (size_t i = 0; i < entries_.size(); ++i) {
+    const Descriptor& c = *entries_[i];
+    if (c.robot == q.robot && (c.submap_id == q.submap_id ||
+                               std::fabs(c.stamp - q.stamp) < params_.database.exclude_recent_s)) {
+      continue;
+    }
+    ++st.eligible;
+    const double se = histogramIntersection(q.edge_hist, c.edge_hist);
+    if (se < mp.min_edge_hist_sim) continue;
+    const double sr = histogramIntersection(q.radius_hist, c.radius_hist);
+    if (sr < mp.min_radius_hist_sim) continue;
+    cands.push_back({0.5 * (se + sr), i});
+  }
+  st.screened_in = cands.size();
+  const size_t keep = std::min(cands.size(), static_cast<size_t>(params_.database.max_candidates));
+  std::partial_sort(cands.begin(), cands.begin() + keep, cands.end(),
+                    [](const Cand& a, const Cand& b) {
+                      return a.sim > b.sim || (a.sim == b.sim && a.index < b.index);
+                    });
+  cands.resize(keep);
+  st.screen_ms = msSince(t0);
+
+  std::optional<LoopClosure> best;
+  for (const Cand& cd : cands) {
+    auto lc = matchPair(q, *entries_[cd.index], params_, nullptr, nullptr, &st);
+    if (lc && (!best || lc->score > best->score)) best = std::move(lc);
+  }
+  return best;
+}
+
+// File layout: 8-byte magic, u32 version, u64 entry count, entries (u32 size + encoded
+// descriptor), u32 FNV-1a of everything before it.
+void LoopDetector::save(const std::string& path) const {
+  std::vector<uint8_t> buf(kDbMagic, kDbMagic + 8);
+  put<uint32_t>(buf, kDbVersion);
+  put<uint64_t>(buf, entries_.size());
+  for (const auto& d : entries_) {
+    const std::vector<uint8_t> e = encodeDescriptor(*d);
+    put<uint32_t>(buf, static_cast<uint32_t>(e.size()));
+    buf.insert(buf.end(), e.begin(), e.end());
+  }
+  put<uint32_t>(buf, fnv1a(buf.data(), buf.size()));
+
+  const std::string tmp = path + ".tmp";
+  {
+    std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
+    if (!f) throw std::runtime_error(tmp + ": cannot open for writing");
+    f.write(reinterpret_cast<const char*>(buf.data()), static_cast<std::streamsize>(buf.size()));
+    f.flush();
+    if (!f) {
+      std::remove(tmp.c_str());
+      throw std::runtime_error(tmp + ": write failed");
+    }
+  }
+  // rename() is atomic on POSIX: readers see the old or the new database, never half of one.
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    std::remove(tmp.c_str());
+    throw std::runtime_error(path + ": cannot rename " + tmp + " into place");
+  }
+}
+
+void LoopDetector::load(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw std::runtime_error(path + ": cannot open database file");
+  const std::vector<uint8_t> buf((std::istreambuf_iterator<char>(f)),
+                                 std::istreambuf_iterator<char>());
+  auto fail = [&](const std::string& why) {
+    throw std::runtime_error(path + ": not a valid dtif database: " + why);
+  };
+  if (buf.size() < 8 + 4 + 8 + 4 || std::memcmp(buf.data(), kDbMagic, 8) != 0) fail("bad magic");
+  size_t pos = 8;
+  const uint32_t version = get<uint32_t>(buf, &pos);
+  if (version != kDbVersion) {
+    fail("version " + std::to_string(version) + ", expected " + std::to_string(kDbVersion));
+  }
+  uint32_t stored_sum;
+  std::memcpy(&stored_sum, buf.data() + buf.size() - 4, 4);
+  if (fnv1a(buf.data(), buf.size() - 4) != stored_sum) fail("checksum mismatch");
+  const std::vector<uint8_t> body(buf.begin(), buf.end() - 4);
+  // Decode everything into a new list first; the database changes only when all of it is good.
+  std::vector<std::shared_ptr<const Descriptor>> loaded;
+  try {
+    const uint64_t n = get<uint64_t>(body, &pos);
+    // The loosest params: keep each descriptor's saved validity.
+    DescriptorParams loose;
+    loose.min_trunks = 3;
+    loose.min_triangles = 1;
+    for (uint64_t i = 0; i < n; ++i) {
+      const uint32_t sz = get<uint32_t>(body, &pos);
+      if (body.size() - pos < sz) throw std::runtime_error("entry truncated");
+      std::vector<uint8_t> e(body.begin() + pos, body.begin() + pos + sz);
+      pos += sz;
+      auto d = std::make_shared<Descriptor>(decodeDescriptor(e, loose));
+      if (!d->valid) throw std::runtime_error("entry " + std::to_string(i) + " is not valid");
+      loaded.push_back(std::move(d));
+    }
+    if (pos != body.size()) throw std::runtime_error("trailing bytes");
+  } catch (const std::runtime_error& e) {
+    fail(e.what());
+  }
+  entries_ = std::move(loaded);
+}
+
+}  // namespace dtif

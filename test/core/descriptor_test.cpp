@@ -1,0 +1,213 @@
+#include "dtif/core/descriptor.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <numeric>
+#include <random>
+#include <stdexcept>
+
+#include "core/match_test_utils.h"
+
+namespace dtif {
+namespace {
+
+TEST(Descriptor, CanonicalTriangleOrderMatchesEq32) {
+  // Right triangle with sides 5 (A-B), 4 (B-C), 3 (C-A):
+  // A=(0,3), B=(4,0), C=(0,0). e1 = AB (5), e2 = BC (4), e3 = CA (3).
+  // I = (e1^e2, e2^e3, e3^e1) = (B, C, A).
+  const Trunks t = {{0, 3, 0, 0.1}, {4, 0, 0, 0.2}, {0, 0, 0, 0.3}};
+  for (auto perm : {std::array<int, 3>{0, 1, 2}, {1, 2, 0}, {2, 1, 0}, {0, 2, 1}}) {
+    const Triangle tri = makeCanonicalTriangle(t, perm[0], perm[1], perm[2]);
+    EXPECT_EQ(tri.v, (std::array<int, 3>{1, 2, 0}));
+    EXPECT_FLOAT_EQ(tri.len[0], 5.0f);
+    EXPECT_FLOAT_EQ(tri.len[1], 4.0f);
+    EXPECT_FLOAT_EQ(tri.len[2], 3.0f);
+    // Eq. (3.3): radii follow I.
+    EXPECT_FLOAT_EQ(tri.r[0], 0.2f);
+    EXPECT_FLOAT_EQ(tri.r[1], 0.3f);
+    EXPECT_FLOAT_EQ(tri.r[2], 0.1f);
+    // kEdgeEnds: e1 joins v[0], v[2] (B, A); e2 joins v[0], v[1] (B, C); e3 v[1], v[2] (C, A).
+    for (int a = 0; a < 3; ++a) {
+      const Trunk& p = t[tri.v[kEdgeEnds[a][0]]];
+      const Trunk& q = t[tri.v[kEdgeEnds[a][1]]];
+      EXPECT_FLOAT_EQ(static_cast<float>(std::hypot(p.x - q.x, p.y - q.y)), tri.len[a]);
+    }
+  }
+}
+
+TEST(Descriptor, CanonicalTriangleTiesAreDeterministic) {
+  // Equilateral: every order is a tie; the result must not depend on the vertex order.
+  const Trunks t = {{0, 0, 0, 0.1}, {2, 0, 0, 0.2}, {1, std::sqrt(3.0), 0, 0.3}};
+  const Triangle ref = makeCanonicalTriangle(t, 0, 1, 2);
+  EXPECT_EQ(makeCanonicalTriangle(t, 2, 0, 1).v, ref.v);
+  EXPECT_EQ(makeCanonicalTriangle(t, 1, 0, 2).v, ref.v);
+}
+
+TEST(Descriptor, EmptyAndTooFewTrunksAreInvalid) {
+  DescriptorParams p;
+  Descriptor d = buildDescriptor({}, p);
+  EXPECT_FALSE(d.valid);
+  EXPECT_NE(d.invalid_reason.find("too few trunks"), std::string::npos);
+  d = buildDescriptor({{0, 0, 0, .1}, {1, 0, 0, .1}}, p);
+  EXPECT_FALSE(d.valid);
+  EXPECT_FALSE(d.invalid_reason.empty());
+}
+
+TEST(Descriptor, CollinearIsInvalidWithReason) {
+  Trunks t;
+  for (int i = 0; i < 8; ++i) t.push_back({1.5 * i, 0.5 * i, 0, 0.1});
+  const Descriptor d = buildDescriptor(t, DescriptorParams{});
+  EXPECT_FALSE(d.valid);
+  EXPECT_NE(d.invalid_reason.find("collinear"), std::string::npos) << d.invalid_reason;
+}
+
+TEST(Descriptor, DuplicateAndNanTrunksAreRemoved) {
+  Trunks t = {{0, 0, 0, .1}, {5, 0, 0, .2}, {0, 5, 0, .3}, {5, 5.5, 0, .15}};
+  Trunks with = t;
+  with.push_back({5.004, 0.003, 0, .22});  // same stem seen twice
+  with.push_back({std::numeric_limits<double>::quiet_NaN(), 1, 0, .1});
+  with.push_back({1, 1, 0, std::numeric_limits<double>::infinity()});
+  const Descriptor a = buildDescriptor(t, DescriptorParams{});
+  const Descriptor b = buildDescriptor(with, DescriptorParams{});
+  ASSERT_TRUE(a.valid) << a.invalid_reason;
+  ASSERT_TRUE(b.valid) << b.invalid_reason;
+  ASSERT_EQ(b.trunks.size(), 4u);
+  EXPECT_NEAR(b.trunks[1].r, 0.21, 1e-9);  // merged: mean radius
+  ASSERT_EQ(a.triangles.size(), b.triangles.size());
+  for (size_t i = 0; i < a.triangles.size(); ++i) {
+    EXPECT_EQ(a.triangles[i].v, b.triangles[i].v);
+  }
+  for (const Trunk& x : b.trunks) EXPECT_TRUE(std::isfinite(x.x) && std::isfinite(x.r));
+}
+
+TEST(Descriptor, TrianglesSortedAndHistogramsNormalised) {
+  std::mt19937 rng(7);
+  const Trunks world = test::randomStand(rng, 40, 40, 600);
+  const Descriptor d = buildDescriptor(world, DescriptorParams{});
+  ASSERT_TRUE(d.valid);
+  ASSERT_GT(d.triangles.size(), 20u);
+  for (size_t i = 1; i < d.triangles.size(); ++i) {
+    EXPECT_LE(d.triangles[i - 1].len[0], d.triangles[i].len[0]);
+  }
+  for (const Triangle& t : d.triangles) {
+    EXPECT_GE(t.len[0], t.len[1]);
+    EXPECT_GE(t.len[1], t.len[2]);
+  }
+  EXPECT_NEAR(std::accumulate(d.edge_hist.begin(), d.edge_hist.end(), 0.0), 1.0, 1e-5);
+  EXPECT_NEAR(std::accumulate(d.radius_hist.begin(), d.radius_hist.end(), 0.0), 1.0, 1e-5);
+  EXPECT_EQ(d.edge_hist.size(), 16u);
+  EXPECT_EQ(d.radius_hist.size(), 10u);
+  // Delaunay on M points in general position has at most 2M - 5 faces.
+  EXPECT_LE(d.triangles.size(), 2 * d.trunks.size() - 5);
+}
+
+TEST(Descriptor, MinAngleAndMaxEdgeDropFaces) {
+  // A sliver: C almost on AB.
+  const Trunks t = {{0, 0, 0, .1}, {10, 0, 0, .1}, {5, 0.2, 0, .1}, {5, 6, 0, .1}};
+  DescriptorParams p;
+  p.min_trunks = 3;
+  p.min_triangles = 1;
+  const Descriptor d = buildDescriptor(t, p);
+  ASSERT_TRUE(d.valid) << d.invalid_reason;
+  EXPECT_EQ(d.triangles.size(), 2u);  // the sliver (0,1,2) is dropped, 2 faces remain
+  // Both remaining faces have a 7.81 m edge (A-D, B-D): a 7.5 m limit drops them all.
+  for (const Triangle& tri : d.triangles) EXPECT_NEAR(tri.len[0], std::hypot(5.0, 6.0), 1e-5);
+  p.max_edge_m = 7.5;
+  const Descriptor e = buildDescriptor(t, p);
+  EXPECT_TRUE(e.triangles.empty());
+  EXPECT_FALSE(e.valid);
+  EXPECT_NE(e.invalid_reason.find("too few triangles"), std::string::npos);
+}
+
+TEST(Descriptor, InvariantToRigidMotionIncludingHugeOffsetsAnd180Degrees) {
+  std::mt19937 rng(11);
+  const Trunks local = test::randomStand(rng, 30, 30, 600);
+  const Descriptor a = buildDescriptor(local, DescriptorParams{});
+  ASSERT_TRUE(a.valid);
+  const Pose T = test::poseXyYaw(1e5, -2e5, 300.0, M_PI);
+  Trunks moved;
+  for (const Trunk& t : local) {
+    const Eigen::Vector3d p = T * Eigen::Vector3d(t.x, t.y, t.z);
+    moved.push_back({p.x(), p.y(), p.z(), t.r});
+  }
+  const Descriptor b = buildDescriptor(moved, DescriptorParams{});
+  ASSERT_TRUE(b.valid);
+  ASSERT_EQ(a.triangles.size(), b.triangles.size());
+  for (size_t i = 0; i < a.triangles.size(); ++i) {
+    for (int k = 0; k < 3; ++k) EXPECT_NEAR(a.triangles[i].len[k], b.triangles[i].len[k], 1e-4);
+  }
+  EXPECT_EQ(a.edge_hist, b.edge_hist);
+}
+
+TEST(Descriptor, WireRoundTripSmallAndExact) {
+  std::mt19937 rng(3);
+  Trunks t = test::randomStand(rng, 40, 40, 500);
+  for (Trunk& x : t) x.x += 312000.0, x.y += 5096000.0;  // UTM-like offsets
+  Descriptor d = buildDescriptor(t, DescriptorParams{});
+  ASSERT_TRUE(d.valid);
+  d.robot = "robot_b";
+  d.submap_id = 42;
+  d.stamp = 1234.5;
+  const std::vector<uint8_t> bytes = encodeDescriptor(d);
+  std::printf("[ info ] %zu trunks, %zu faces -> %zu bytes\n", d.trunks.size(), d.triangles.size(),
+              bytes.size());
+  EXPECT_LE(bytes.size(), 8192u);
+  const Descriptor e = decodeDescriptor(bytes, DescriptorParams{});
+  EXPECT_TRUE(e.valid);
+  EXPECT_EQ(e.robot, "robot_b");
+  EXPECT_EQ(e.submap_id, 42);
+  EXPECT_EQ(e.stamp, 1234.5);
+  ASSERT_EQ(e.trunks.size(), d.trunks.size());
+  for (size_t i = 0; i < d.trunks.size(); ++i) {
+    EXPECT_NEAR(e.trunks[i].x, d.trunks[i].x, 1e-3);  // float32 offsets: mm at 50 m
+    EXPECT_NEAR(e.trunks[i].y, d.trunks[i].y, 1e-3);
+    EXPECT_NEAR(e.trunks[i].r, d.trunks[i].r, 1e-6);
+  }
+  ASSERT_EQ(e.triangles.size(), d.triangles.size());
+  for (size_t i = 0; i < d.triangles.size(); ++i) {
+    for (int k = 0; k < 3; ++k) EXPECT_NEAR(e.triangles[i].len[k], d.triangles[i].len[k], 1e-3);
+  }
+  ASSERT_EQ(e.edge_hist.size(), d.edge_hist.size());
+  for (size_t i = 0; i < d.edge_hist.size(); ++i) EXPECT_NEAR(e.edge_hist[i], d.edge_hist[i], 4e-3);
+}
+
+TEST(Descriptor, DecodeRejectsMalformedBytes) {
+  std::mt19937 rng(5);
+  const Descriptor d = buildDescriptor(test::randomStand(rng, 30, 30, 600), DescriptorParams{});
+  ASSERT_TRUE(d.valid);
+  const std::vector<uint8_t> good = encodeDescriptor(d);
+  EXPECT_THROW(decodeDescriptor({}, DescriptorParams{}), std::runtime_error);
+  std::vector<uint8_t> bad = good;
+  bad.resize(good.size() / 2);
+  EXPECT_THROW(decodeDescriptor(bad, DescriptorParams{}), std::runtime_error);
+  bad = good;
+  bad[0] ^= 0xff;  // magic
+  EXPECT_THROW(decodeDescriptor(bad, DescriptorParams{}), std::runtime_error);
+  bad = good;
+  bad[4] = 99;  // version
+  EXPECT_THROW(decodeDescriptor(bad, DescriptorParams{}), std::runtime_error);
+  bad = good;
+  bad[good.size() - 20] ^= 0x10;  // payload bit flip
+  EXPECT_THROW(decodeDescriptor(bad, DescriptorParams{}), std::runtime_error);
+  bad = good;
+  bad.push_back(0);
+  EXPECT_THROW(decodeDescriptor(bad, DescriptorParams{}), std::runtime_error);
+}
+
+TEST(Descriptor, ParamsValidate) {
+  EXPECT_EQ(DescriptorParams{}.validate(), "");
+  DescriptorParams p;
+  p.edge_hist_bins = 0;
+  EXPECT_NE(p.validate(), "");
+  p = DescriptorParams{};
+  p.min_angle_deg = 70;
+  EXPECT_NE(p.validate(), "");
+  p = DescriptorParams{};
+  p.radius_hist_max_m = 0;
+  EXPECT_NE(p.validate(), "");
+}
+
+}  // namespace
+}  // namespace dtif
