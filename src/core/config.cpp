@@ -142,6 +142,7 @@ void loadParamsYaml(const std::string& path, DtifParams* p) {
 
 std::string paramsToYaml(const DtifParams& p) {
   YAML::Emitter out;
+  out.SetDoublePrecision(12);
   out << YAML::BeginMap;
   writeSection(out, "trunk_extraction", p.trunk_extraction);
   writeSection(out, "descriptor", p.descriptor);

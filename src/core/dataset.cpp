@@ -145,6 +145,86 @@ void closeChecked(std::ofstream& os, const std::string& path) {
   if (!os) fail(path, "write failed");
 }
 
+/// PCL's reader crashes on some malformed files, so the header is checked here first: the
+/// fields, their sizes/types/counts, the point count and that the data section is long enough.
+void checkPcdHeader(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) fail(path, "cannot open file");
+  in.seekg(0, std::ios::end);
+  const std::streamoff file_size = in.tellg();
+  in.seekg(0);
+  std::map<std::string, std::vector<std::string>> h;
+  std::string line, data;
+  while (data.empty() && std::getline(in, line)) {
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream ss(line);
+    std::string key, v;
+    ss >> key;
+    std::vector<std::string> values;
+    while (ss >> v) values.push_back(v);
+    if (key == "DATA") {
+      data = values.empty() ? "?" : values[0];
+    } else if (key == "VERSION" || key == "FIELDS" || key == "SIZE" || key == "TYPE" ||
+               key == "COUNT" || key == "WIDTH" || key == "HEIGHT" || key == "VIEWPOINT" ||
+               key == "POINTS") {
+      h[key] = values;
+    } else {
+      fail(path, "not a PCD file (unexpected header line '" + line.substr(0, 40) + "')");
+    }
+  }
+  if (data.empty()) fail(path, "not a PCD file (no DATA line)");
+  const auto& fields = h["FIELDS"];
+  const auto& sizes = h["SIZE"];
+  const auto& types = h["TYPE"];
+  auto counts = h["COUNT"];
+  if (counts.empty()) counts.assign(fields.size(), "1");
+  if (fields.empty() || sizes.size() != fields.size() || types.size() != fields.size() ||
+      counts.size() != fields.size()) {
+    fail(path, "malformed PCD header (FIELDS, SIZE, TYPE and COUNT disagree)");
+  }
+  auto toCount = [&](const std::string& s, const char* what) -> long long {
+    char* end = nullptr;
+    const long long v = std::strtoll(s.c_str(), &end, 10);
+    if (s.empty() || *end != '\0' || v < 0) fail(path, std::string("malformed PCD ") + what);
+    return v;
+  };
+  long long point_step = 0;
+  for (size_t i = 0; i < fields.size(); ++i) {
+    const long long sz = toCount(sizes[i], "SIZE");
+    if (sz != 1 && sz != 2 && sz != 4 && sz != 8) fail(path, "malformed PCD SIZE");
+    if (types[i] != "F" && types[i] != "I" && types[i] != "U") fail(path, "malformed PCD TYPE");
+    point_step += sz * toCount(counts[i], "COUNT");
+  }
+  long long points = 0;
+  if (!h["POINTS"].empty()) {
+    points = toCount(h["POINTS"][0], "POINTS");
+  } else if (!h["WIDTH"].empty()) {
+    points = toCount(h["WIDTH"][0], "WIDTH") *
+             (h["HEIGHT"].empty() ? 1 : toCount(h["HEIGHT"][0], "HEIGHT"));
+  } else {
+    fail(path, "malformed PCD header (no POINTS or WIDTH)");
+  }
+  const std::streamoff data_start = in.tellg();
+  const long long remaining = data_start < 0 ? 0 : file_size - data_start;
+  if (data == "binary") {
+    if (points * point_step > remaining) fail(path, "truncated PCD (binary data too short)");
+  } else if (data == "binary_compressed") {
+    if (points > 0) {
+      uint32_t sizes_hdr[2] = {0, 0};
+      if (remaining < 8 || !in.read(reinterpret_cast<char*>(sizes_hdr), 8)) {
+        fail(path, "truncated PCD (no compressed block)");
+      }
+      if (sizes_hdr[0] > remaining - 8) fail(path, "truncated PCD (compressed data too short)");
+      if (static_cast<long long>(sizes_hdr[1]) != points * point_step) {
+        fail(path, "malformed PCD (compressed size disagrees with POINTS)");
+      }
+    }
+  } else if (data != "ascii") {
+    fail(path, "malformed PCD (DATA must be ascii, binary or binary_compressed)");
+  }
+}
+
 }  // namespace
 
 Dataset readDataset(const std::string& dir) {
@@ -223,6 +303,7 @@ Dataset readDataset(const std::string& dir) {
 
 Cloud::Ptr loadPcd(const std::string& path) {
   if (!fs::exists(path)) fail(path, "point cloud does not exist");
+  checkPcdHeader(path);
   pcl::PCLPointCloud2 blob;
   pcl::PCDReader reader;
   // PCL prints its own diagnostics; our one-line error below is what the user needs.

@@ -164,6 +164,28 @@ TEST_F(DatasetTest, MalformedPcdIsNamed) {
   EXPECT_THROW(loadPcd((dir_ / "absent.pcd").string()), DatasetError);
 }
 
+TEST_F(DatasetTest, TruncatedAndInconsistentPcdsAreRejected) {
+  const std::string header =
+      "VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 100\nHEIGHT 1\n"
+      "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 100\n";
+  writeFile("short.pcd", header + "DATA binary\n" + std::string(40, '\0'));
+  writeFile(
+      "fields.pcd",
+      "VERSION .7\nFIELDS x y z\nSIZE 4 4\nTYPE F F F\nWIDTH 1\nPOINTS 1\nDATA ascii\n1 2 3\n");
+  writeFile("data.pcd", header + "DATA zip\n");
+  writeFile("noxyz.pcd",
+            "VERSION .7\nFIELDS a b\nSIZE 4 4\nTYPE F F\nWIDTH 1\nPOINTS 1\nDATA ascii\n1 2\n");
+  writeFile("compressed.pcd", header + "DATA binary_compressed\n" + std::string(8, '\x7f'));
+  for (const char* f : {"short.pcd", "fields.pcd", "data.pcd", "noxyz.pcd", "compressed.pcd"}) {
+    try {
+      loadPcd((dir_ / f).string());
+      ADD_FAILURE() << f << " was accepted";
+    } catch (const DatasetError& e) {
+      EXPECT_NE(std::string(e.what()).find(f), std::string::npos) << e.what();
+    }
+  }
+}
+
 TEST_F(DatasetTest, TrunkCsvWithAndWithoutHeader) {
   writeFile("a.csv", "x,y,z,r\n1,2,0.5,0.2\n3,4,0.1,0.15\n");
   writeFile("b.csv", "1,2,0.5,0.2,extra\n");
