@@ -24,30 +24,10 @@
 #include "dtif/ros/conversions.h"
 #include "dtif/ros/markers.h"
 #include "dtif/ros/msgs.h"
+#include "dtif/ros/node_params.h"
 #include "dtif/ros/params.h"
 
 namespace dtif {
-
-/// Node-level parameters (the core's sections `matcher`, `pose`, `verification`, `database`
-/// are read separately).
-struct LoopClosureNodeParams {
-  std::vector<std::string> robots;              ///< robots whose descriptors are subscribed
-  std::string descriptor_topic = "descriptor";  ///< subscribes `<robot>/<descriptor_topic>`
-  std::string database_file;                    ///< loaded at startup when it exists
-  bool publish_tf = true;                       ///< TF between odometry frames of linked robots
-  double tf_rate_hz = 10.0;                     ///< TF re-publication rate [Hz]
-  int queue_size = 100;                         ///< descriptors waiting; the oldest is dropped
-
-  template <class V>
-  void visit(V& v) {
-    v("robots", robots);
-    v("descriptor_topic", descriptor_topic);
-    v("database_file", database_file);
-    v("publish_tf", publish_tf);
-    v("tf_rate_hz", tf_rate_hz);
-    v("queue_size", queue_size);
-  }
-};
 
 /// Thread-safety: descriptor callbacks only enqueue (queue_mutex_). One worker thread queries
 /// and inserts; it and the service callbacks serialise on db_mutex_ (the LoopDetector is not
@@ -327,7 +307,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     return true;
   }
 
-  LoopClosureNodeParams node_;
+  ros_glue::LoopClosureNodeParams node_;
 
   std::mutex db_mutex_;  // detector_, index_, meta_, links_, robot_frames_
   std::unique_ptr<LoopDetector> detector_;

@@ -24,31 +24,11 @@
 #include "dtif/ros/conversions.h"
 #include "dtif/ros/markers.h"
 #include "dtif/ros/msgs.h"
+#include "dtif/ros/node_params.h"
 #include "dtif/ros/params.h"
 #include "dtif/ros/submap_assembler.h"
 
 namespace dtif {
-
-/// Node-level parameters (the core's sections `trunk_extraction` and `descriptor` are read
-/// separately).
-struct TrunkExtractionNodeParams {
-  std::string input = "odometry";     ///< "odometry": cloud_registered + Odometry; "submap"
-  std::string robot;                  ///< robot name; empty: last element of the namespace
-  std::string odom_frame;             ///< expected odometry frame; empty: take it from the input
-  int first_submap_id = 0;            ///< id of the first submap (raise it after a restart)
-  int queue_size = 2;                 ///< submaps waiting for extraction; the oldest is dropped
-  bool publish_submap_cloud = false;  ///< publish the assembled submap on `submap_cloud`
-
-  template <class V>
-  void visit(V& v) {
-    v("input", input);
-    v("robot", robot);
-    v("odom_frame", odom_frame);
-    v("first_submap_id", first_submap_id);
-    v("queue_size", queue_size);
-    v("publish_submap_cloud", publish_submap_cloud);
-  }
-};
 
 /// Thread-safety: subscriber callbacks may run concurrently (multi-threaded manager); they
 /// share the assembler under mutex_ and only enqueue. One worker thread extracts and publishes.
@@ -280,7 +260,7 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
     }
   }
 
-  TrunkExtractionNodeParams node_;
+  ros_glue::TrunkExtractionNodeParams node_;
   ros_glue::SubmapAssemblerParams assembler_params_;
   TrunkExtractorParams extractor_params_;
   DescriptorParams descriptor_params_;
