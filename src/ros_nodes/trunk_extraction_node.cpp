@@ -1,5 +1,5 @@
-// Runs dtif/TrunkExtractionNodelet as a plain node (same class as the nodelet): `rosrun dtif trunk_extraction_node`.
-// Private parameters, remappings and the namespace work as for the nodelet.
+// Runs dtif/TrunkExtractionNodelet as a plain node (same class as the nodelet): `rosrun dtif
+// trunk_extraction_node`. Private parameters, remappings and the namespace work as for the nodelet.
 #include <nodelet/loader.h>
 #include <ros/ros.h>
 
