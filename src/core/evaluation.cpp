@@ -1,0 +1,359 @@
+// The evaluation protocol of DATASET.md, exactly: sequential descriptor/query/insert over the
+// submaps in file order, overlap ground truth from occupied 1 m cells, paper-style errors.
+#include "dtif/core/evaluation.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <iomanip>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <unordered_map>
+
+#include "dtif/core/descriptor.h"
+#include "dtif/core/loop_detector.h"
+#include "dtif/core/trunk_extractor.h"
+
+namespace dtif {
+
+namespace {
+
+constexpr double kRadToDeg = 180.0 / M_PI;
+constexpr double kCellM = 1.0;       // overlap cell (DATASET.md)
+constexpr double kTileM = 2.0;       // local-ground tile
+constexpr int kWindowTiles = 1;      // 6 m window = the tile and one tile on each side
+constexpr double kGroundPct = 0.05;  // 5th percentile
+constexpr double kMinAboveM = 0.3;   // counted band above the local ground
+constexpr double kMaxAboveM = 3.0;
+
+int64_t packCell(int64_t ix, int64_t iy) { return (ix << 32) ^ (iy & 0xffffffffLL); }
+
+double msSince(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+}  // namespace
+
+PoseError poseError(const Pose& T_gt, const Pose& T_est) {
+  PoseError e;
+  const Eigen::Matrix3d R = T_gt.rotation().transpose() * T_est.rotation();
+  // Eq. (4.4), argument clipped to [-1, 1].
+  const double c = std::clamp((R.trace() - 1.0) / 2.0, -1.0, 1.0);
+  e.rot_deg = std::acos(c) * kRadToDeg;
+  // ZYX Euler decomposition R = Rz(yaw) Ry(pitch) Rx(roll).
+  e.yaw_deg = std::fabs(std::atan2(R(1, 0), R(0, 0))) * kRadToDeg;
+  e.pitch_deg = std::fabs(std::asin(std::clamp(-R(2, 0), -1.0, 1.0))) * kRadToDeg;
+  e.roll_deg = std::fabs(std::atan2(R(2, 1), R(2, 2))) * kRadToDeg;
+  const Eigen::Vector3d dt = T_est.translation() - T_gt.translation();
+  e.x_m = std::fabs(dt.x());
+  e.y_m = std::fabs(dt.y());
+  e.z_m = std::fabs(dt.z());
+  e.trans_m = dt.norm();
+  return e;
+}
+
+std::unordered_set<int64_t> overlapCells(const Cloud& cloud_S, const Pose& T_W_S) {
+  std::unordered_set<int64_t> cells;
+  if (cloud_S.empty()) return cells;
+  // Local ground per 2 m tile (in S): 5th percentile of z inside the 6 m window around it.
+  std::unordered_map<int64_t, std::vector<float>> tile_z;
+  auto tileOf = [](float v) { return static_cast<int64_t>(std::floor(v / kTileM)); };
+  for (const auto& p : cloud_S) {
+    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) continue;
+    tile_z[packCell(tileOf(p.x), tileOf(p.y))].push_back(p.z);
+  }
+  std::unordered_map<int64_t, float> ground;
+  std::vector<float> window;
+  for (const auto& kv : tile_z) {
+    const int64_t tx = kv.first >> 32;
+    const int64_t ty = static_cast<int32_t>(kv.first & 0xffffffffLL);
+    window.clear();
+    for (int64_t dx = -kWindowTiles; dx <= kWindowTiles; ++dx) {
+      for (int64_t dy = -kWindowTiles; dy <= kWindowTiles; ++dy) {
+        const auto it = tile_z.find(packCell(tx + dx, ty + dy));
+        if (it != tile_z.end()) window.insert(window.end(), it->second.begin(), it->second.end());
+      }
+    }
+    const size_t k = static_cast<size_t>(kGroundPct * static_cast<double>(window.size() - 1));
+    std::nth_element(window.begin(), window.begin() + k, window.end());
+    ground[kv.first] = window[k];
+  }
+  const Eigen::Isometry3f T = T_W_S.cast<float>();
+  for (const auto& p : cloud_S) {
+    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) continue;
+    const float h = p.z - ground[packCell(tileOf(p.x), tileOf(p.y))];
+    if (h < kMinAboveM || h > kMaxAboveM) continue;
+    const Eigen::Vector3f w = T * Eigen::Vector3f(p.x, p.y, p.z);
+    cells.insert(packCell(static_cast<int64_t>(std::floor(w.x() / kCellM)),
+                          static_cast<int64_t>(std::floor(w.y() / kCellM))));
+  }
+  return cells;
+}
+
+double cellOverlap(const std::unordered_set<int64_t>& a, const std::unordered_set<int64_t>& b) {
+  if (a.empty() || b.empty()) return 0.0;
+  const auto& small = a.size() < b.size() ? a : b;
+  const auto& large = a.size() < b.size() ? b : a;
+  size_t common = 0;
+  for (int64_t c : small) common += large.count(c);
+  return static_cast<double>(common) / static_cast<double>(small.size());
+}
+
+EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const EvalParams& eval,
+                         const std::function<void(size_t, size_t)>& progress) {
+  for (const auto& rec : ds.submaps) {
+    if (!ds.T_W_S.count(rec.id)) {
+      throw DatasetError(ds.root + "/ground_truth.csv: no ground truth for submap " +
+                         std::to_string(rec.id) + " (evaluation needs every submap's T_W_S)");
+    }
+  }
+  EvalResult result;
+  LoopDetector detector(params.loop);
+  std::vector<std::unordered_set<int64_t>> cells;
+  cells.reserve(ds.submaps.size());
+  double bytes_sum = 0.0;
+  const size_t n = ds.submaps.size();
+
+  for (size_t i = 0; i < n; ++i) {
+    const SubmapRecord& rec = ds.submaps[i];
+    const Pose& T_W_q = ds.T_W_S.at(rec.id);
+    const Cloud::Ptr cloud = loadSubmapCloud(ds, rec);
+    cells.push_back(overlapCells(*cloud, T_W_q));
+
+    EvalRow row;
+    row.query = rec.id;
+
+    // 1. Descriptor (timed: desc).
+    auto t0 = std::chrono::steady_clock::now();
+    const TrunkExtractionResult ext = extractTrunks(*cloud, params.trunk_extraction);
+    auto desc = std::make_shared<Descriptor>(buildDescriptor(ext.trunks, params.descriptor));
+    row.t_desc_ms = msSince(t0);
+    desc->robot = rec.robot;
+    desc->submap_id = rec.id;
+    desc->stamp = rec.stamp;
+    row.trunks = ext.trunks.size();
+    row.invalid_reason = desc->invalid_reason;
+    bytes_sum += static_cast<double>(encodeDescriptor(*desc).size());
+
+    // 2.-3. Query against all earlier descriptors (timed: loop; solver alone: solver).
+    QueryStats qs;
+    t0 = std::chrono::steady_clock::now();
+    const std::optional<LoopClosure> loop = detector.query(*desc, &qs);
+    row.t_loop_ms = msSince(t0);
+    row.t_solver_ms = qs.solver_ms;
+
+    // Ground truth: does any eligible earlier submap form a true loop with q?
+    for (size_t j = 0; j < i && !row.has_loop; ++j) {
+      const SubmapRecord& c = ds.submaps[j];
+      if (c.robot == rec.robot &&
+          std::fabs(c.stamp - rec.stamp) < params.loop.database.exclude_recent_s) {
+        continue;
+      }
+      row.has_loop = cellOverlap(cells[i], cells[j]) >= eval.true_loop_overlap;
+    }
+
+    if (loop) {
+      row.accepted = true;
+      row.candidate = loop->candidate_id;
+      row.inliers = loop->inliers;
+      row.score = loop->score;
+      row.T_c_q_est = loop->T_c_q;
+      size_t j = 0;
+      while (j < i && ds.submaps[j].id != loop->candidate_id) ++j;
+      if (j == i) {
+        throw std::logic_error("loop detector returned an unknown candidate id " +
+                               std::to_string(loop->candidate_id));
+      }
+      const Pose T_c_q_gt = ds.T_W_S.at(loop->candidate_id).inverse() * T_W_q;  // Eq. (4.2)
+      row.err = poseError(T_c_q_gt, loop->T_c_q);
+      row.overlap = cellOverlap(cells[i], cells[j]);
+      row.true_loop = row.overlap >= eval.true_loop_overlap;
+      row.true_positive = row.true_loop && row.err->rot_deg <= eval.max_rot_err_deg &&
+                          row.err->trans_m <= eval.max_trans_err_m;
+    }
+
+    // 4. Insert q.
+    detector.insert(desc);
+    result.rows.push_back(std::move(row));
+    if (progress) progress(i + 1, n);
+  }
+
+  // Summary.
+  EvalSummary& s = result.summary;
+  s.dataset = ds.root;
+  s.submaps = n;
+  PoseError sum_all, sum_tp;
+  double sq_rot = 0.0, sq_trans = 0.0;
+  auto accumulate = [](PoseError& acc, const PoseError& e) {
+    acc.roll_deg += e.roll_deg;
+    acc.pitch_deg += e.pitch_deg;
+    acc.yaw_deg += e.yaw_deg;
+    acc.rot_deg += e.rot_deg;
+    acc.x_m += e.x_m;
+    acc.y_m += e.y_m;
+    acc.z_m += e.z_m;
+    acc.trans_m += e.trans_m;
+  };
+  auto scaled = [](PoseError e, double k) {
+    e.roll_deg *= k;
+    e.pitch_deg *= k;
+    e.yaw_deg *= k;
+    e.rot_deg *= k;
+    e.x_m *= k;
+    e.y_m *= k;
+    e.z_m *= k;
+    e.trans_m *= k;
+    return e;
+  };
+  for (const auto& r : result.rows) {
+    s.queries_with_loop += r.has_loop;
+    s.t_desc_ms += r.t_desc_ms;
+    s.t_loop_ms += r.t_loop_ms;
+    s.t_solver_ms += r.t_solver_ms;
+    if (!r.accepted) continue;
+    ++s.accepted;
+    accumulate(sum_all, *r.err);
+    sq_rot += r.err->rot_deg * r.err->rot_deg;
+    sq_trans += r.err->trans_m * r.err->trans_m;
+    if (r.true_positive) {
+      ++s.true_positives;
+      accumulate(sum_tp, *r.err);
+    }
+  }
+  s.false_positives = s.accepted - s.true_positives;
+  if (n > 0) {
+    s.t_desc_ms /= static_cast<double>(n);
+    s.t_loop_ms /= static_cast<double>(n);
+    s.t_solver_ms /= static_cast<double>(n);
+    s.descriptor_bytes_mean = bytes_sum / static_cast<double>(n);
+  }
+  s.t_total_ms = s.t_desc_ms + s.t_loop_ms;
+  if (s.accepted > 0) {
+    const double k = 1.0 / static_cast<double>(s.accepted);
+    s.precision = static_cast<double>(s.true_positives) * k;
+    s.mean_err_all = scaled(sum_all, k);
+    s.rmse_rot_deg = std::sqrt(sq_rot * k);
+    s.rmse_trans_m = std::sqrt(sq_trans * k);
+  }
+  if (s.true_positives > 0) {
+    s.mean_err_tp = scaled(sum_tp, 1.0 / static_cast<double>(s.true_positives));
+  }
+  if (s.queries_with_loop > 0) {
+    s.recall = static_cast<double>(s.true_positives) / static_cast<double>(s.queries_with_loop);
+  }
+  return result;
+}
+
+void writeResultsCsv(const std::string& path, const std::vector<EvalRow>& rows) {
+  std::ofstream os(path);
+  if (!os) throw DatasetError(path + ": cannot open file for writing");
+  os << "query,candidate,accepted,true_loop,has_loop,overlap,err_roll_deg,err_pitch_deg,"
+        "err_yaw_deg,err_rot_deg,err_x_m,err_y_m,err_z_m,err_trans_m,inliers,score,t_desc_ms,"
+        "t_loop_ms,t_solver_ms,est_tx,est_ty,est_tz,est_qx,est_qy,est_qz,est_qw\n";
+  os << std::setprecision(9);
+  for (const auto& r : rows) {
+    os << r.query << ',';
+    if (r.candidate) os << *r.candidate;
+    os << ',' << int(r.accepted) << ',' << int(r.true_loop) << ',' << int(r.has_loop) << ','
+       << r.overlap << ',';
+    if (r.err) {
+      const PoseError& e = *r.err;
+      os << e.roll_deg << ',' << e.pitch_deg << ',' << e.yaw_deg << ',' << e.rot_deg << ',' << e.x_m
+         << ',' << e.y_m << ',' << e.z_m << ',' << e.trans_m << ',';
+    } else {
+      os << ",,,,,,,,";
+    }
+    os << r.inliers << ',' << r.score << ',' << r.t_desc_ms << ',' << r.t_loop_ms << ','
+       << r.t_solver_ms << ',';
+    if (r.T_c_q_est) {
+      const Eigen::Quaterniond q(r.T_c_q_est->rotation());
+      const Eigen::Vector3d t = r.T_c_q_est->translation();
+      os << t.x() << ',' << t.y() << ',' << t.z() << ',' << q.x() << ',' << q.y() << ',' << q.z()
+         << ',' << q.w();
+    } else {
+      os << ",,,,,,";
+    }
+    os << '\n';
+  }
+  os.close();
+  if (!os) throw DatasetError(path + ": write failed");
+}
+
+namespace {
+
+nlohmann::json errJson(const std::optional<PoseError>& e) {
+  nlohmann::json j;
+  const char* keys[] = {"roll_deg", "pitch_deg", "yaw_deg", "rot_deg",
+                        "x_m",      "y_m",       "z_m",     "trans_m"};
+  if (!e) {
+    for (const char* k : keys) j[k] = nullptr;
+    return j;
+  }
+  const double v[] = {e->roll_deg, e->pitch_deg, e->yaw_deg, e->rot_deg,
+                      e->x_m,      e->y_m,       e->z_m,     e->trans_m};
+  for (int i = 0; i < 8; ++i) j[keys[i]] = v[i];
+  return j;
+}
+
+nlohmann::json optJson(const std::optional<double>& v) {
+  return v ? nlohmann::json(*v) : nlohmann::json(nullptr);
+}
+
+std::string fmt(const std::optional<double>& v, int prec = 3) {
+  if (!v) return "-";
+  std::ostringstream ss;
+  ss << std::fixed << std::setprecision(prec) << *v;
+  return ss.str();
+}
+
+}  // namespace
+
+void writeSummaryJson(const std::string& path, const EvalSummary& s) {
+  nlohmann::ordered_json j;
+  j["dataset"] = s.dataset;
+  j["submaps"] = s.submaps;
+  j["queries_with_loop"] = s.queries_with_loop;
+  j["accepted"] = s.accepted;
+  j["true_positives"] = s.true_positives;
+  j["false_positives"] = s.false_positives;
+  j["precision"] = optJson(s.precision);
+  j["recall"] = optJson(s.recall);
+  j["mean_err_all"] = errJson(s.mean_err_all);
+  j["mean_err_tp"] = errJson(s.mean_err_tp);
+  j["rmse_rot_deg"] = optJson(s.rmse_rot_deg);
+  j["rmse_trans_m"] = optJson(s.rmse_trans_m);
+  j["time_ms"] = {{"desc", s.t_desc_ms},
+                  {"loop", s.t_loop_ms},
+                  {"solver", s.t_solver_ms},
+                  {"total", s.t_total_ms}};
+  j["descriptor_bytes_mean"] = s.descriptor_bytes_mean;
+  std::ofstream os(path);
+  if (!os) throw DatasetError(path + ": cannot open file for writing");
+  os << j.dump(2) << '\n';
+  os.close();
+  if (!os) throw DatasetError(path + ": write failed");
+}
+
+std::string formatTable(const EvalSummary& s, const std::string& method) {
+  const auto& e = s.mean_err_all;
+  auto f = [&](double PoseError::*m) { return e ? fmt((*e).*m) : std::string("-"); };
+  std::ostringstream os;
+  os << "| Method | Roll | Pitch | Yaw | Rot. | X | Y | Z | Trans. | RMSE-R | RMSE-T | Desc. ms"
+        " | Loop ms | Total ms | Solver ms | Precision | Recall | TP/Acc./Loops | Bytes |\n"
+     << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+  os << "| " << method << " | " << f(&PoseError::roll_deg) << " | " << f(&PoseError::pitch_deg)
+     << " | " << f(&PoseError::yaw_deg) << " | " << f(&PoseError::rot_deg) << " | "
+     << f(&PoseError::x_m) << " | " << f(&PoseError::y_m) << " | " << f(&PoseError::z_m) << " | "
+     << f(&PoseError::trans_m) << " | " << fmt(s.rmse_rot_deg) << " | " << fmt(s.rmse_trans_m)
+     << " | " << fmt(s.t_desc_ms) << " | " << fmt(s.t_loop_ms) << " | " << fmt(s.t_total_ms)
+     << " | " << fmt(s.t_solver_ms) << " | " << fmt(s.precision) << " | " << fmt(s.recall) << " | "
+     << s.true_positives << "/" << s.accepted << "/" << s.queries_with_loop << " | "
+     << fmt(s.descriptor_bytes_mean, 0) << " |\n";
+  os << "(errors in deg and m, averaged over all accepted loops as in the paper; " << s.submaps
+     << " submaps)\n";
+  return os.str();
+}
+
+}  // namespace dtif

@@ -1,0 +1,44 @@
+// dtif extract <cloud.pcd> [--out trunks.csv] [--config params.yaml]
+#include <chrono>
+#include <iostream>
+
+#include "commands.h"
+#include "dtif/core/dataset.h"
+#include "dtif/core/descriptor.h"
+#include "options.h"
+
+namespace dtif::tool {
+
+int runExtract(const Args& args) {
+  const Options o = parseOptions(args, {"out", "config"}, {});
+  if (o.positional.size() != 1) throw UsageError{"expected one cloud.pcd"};
+  const DtifParams params = loadParams(o);
+  const std::string& path = o.positional[0];
+  const Cloud::Ptr cloud = loadPcd(path);
+
+  const auto t0 = std::chrono::steady_clock::now();
+  const TrunkExtractionResult ext = extractTrunks(*cloud, params.trunk_extraction);
+  const auto t1 = std::chrono::steady_clock::now();
+  const Descriptor d = buildDescriptor(ext.trunks, params.descriptor);
+  const auto t2 = std::chrono::steady_clock::now();
+  using Ms = std::chrono::duration<double, std::milli>;
+
+  std::cout << path << ": " << ext.stats.finite_points << " finite points of "
+            << ext.stats.input_points << "\n"
+            << "  trunks: " << ext.trunks.size() << " (candidates " << ext.stats.candidates
+            << ", rejected fit " << ext.stats.rejected_fit << ", leaning "
+            << ext.stats.rejected_lean << ", duplicates " << ext.stats.duplicates << ")\n"
+            << "  Delaunay faces: " << d.triangles.size() << "\n"
+            << "  descriptor: "
+            << (d.valid ? "valid" : "excluded from retrieval: " + d.invalid_reason) << ", "
+            << encodeDescriptor(d).size() << " bytes\n"
+            << "  time: extraction " << Ms(t1 - t0).count() << " ms, descriptor "
+            << Ms(t2 - t1).count() << " ms\n";
+  if (const auto out = o.get("out")) {
+    writeTrunkCsv(*out, ext.trunks);
+    std::cout << "  wrote " << *out << "\n";
+  }
+  return 0;
+}
+
+}  // namespace dtif::tool

@@ -1,0 +1,143 @@
+#include "dtif/core/evaluation.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <sstream>
+
+namespace dtif {
+namespace {
+
+constexpr double kDeg = M_PI / 180.0;
+
+Pose makePose(double x, double y, double z, double roll, double pitch, double yaw) {
+  Pose T = Pose::Identity();
+  T.translation() = Eigen::Vector3d(x, y, z);
+  T.linear() = (Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) *
+                Eigen::AngleAxisd(pitch, Eigen::Vector3d::UnitY()) *
+                Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitX()))
+                   .toRotationMatrix();
+  return T;
+}
+
+TEST(PoseError, ZeroForIdenticalPoses) {
+  const Pose T = makePose(1, 2, 3, 0.1, -0.2, 2.5);
+  const PoseError e = poseError(T, T);
+  EXPECT_NEAR(e.rot_deg, 0.0, 1e-6);
+  EXPECT_NEAR(e.trans_m, 0.0, 1e-12);
+}
+
+TEST(PoseError, SeparatesEulerComponentsAndTranslation) {
+  const Pose gt = makePose(10, -5, 1, 0, 0, 1.0);
+  // Residual R_gt^T R_est = Rz(2 deg) Ry(-1 deg) Rx(0.5 deg).
+  Pose est = gt;
+  est.linear() = gt.rotation() * makePose(0, 0, 0, 0.5 * kDeg, -1.0 * kDeg, 2.0 * kDeg).rotation();
+  est.translation() += Eigen::Vector3d(0.3, -0.4, 0.12);
+  const PoseError e = poseError(gt, est);
+  EXPECT_NEAR(e.yaw_deg, 2.0, 1e-9);
+  EXPECT_NEAR(e.pitch_deg, 1.0, 1e-9);
+  EXPECT_NEAR(e.roll_deg, 0.5, 1e-9);
+  EXPECT_NEAR(e.x_m, 0.3, 1e-12);
+  EXPECT_NEAR(e.y_m, 0.4, 1e-12);
+  EXPECT_NEAR(e.z_m, 0.12, 1e-12);
+  EXPECT_NEAR(e.trans_m, std::sqrt(0.09 + 0.16 + 0.0144), 1e-12);
+  // Geodesic angle of the composed residual is not the sum of its Euler angles.
+  const Eigen::AngleAxisd aa(gt.rotation().transpose() * est.rotation());
+  EXPECT_NEAR(e.rot_deg, aa.angle() / kDeg, 1e-9);
+}
+
+TEST(PoseError, HalfTurnDoesNotProduceNan) {
+  const PoseError e = poseError(Pose::Identity(), makePose(0, 0, 0, 0, 0, M_PI));
+  EXPECT_NEAR(e.rot_deg, 180.0, 1e-6);
+  EXPECT_NEAR(e.yaw_deg, 180.0, 1e-6);
+}
+
+/// Flat ground at z = g, plus a wall of points from 0 to 5 m over a square of side `side` m.
+Cloud squareScene(double side, double g) {
+  Cloud c;
+  for (double x = 0.05; x < side; x += 0.25) {
+    for (double y = 0.05; y < side; y += 0.25) {
+      c.push_back(pcl::PointXYZ(x, y, g));
+      for (double h = 0.5; h < 5.0; h += 0.5) c.push_back(pcl::PointXYZ(x, y, g + h));
+    }
+  }
+  return c;
+}
+
+TEST(Overlap, CountsOnlyTheBandAboveTheLocalGround) {
+  // 10 m x 10 m area: ground plus returns up to 5 m; only 0.3-3 m count, so all 100 cells.
+  const Cloud c = squareScene(10.0, -1.7);
+  const auto cells = overlapCells(c, Pose::Identity());
+  EXPECT_EQ(cells.size(), 100u);
+
+  // Points only at the ground or only in the canopy give no cells.
+  Cloud canopy;
+  for (double x = 0.1; x < 10; x += 0.5) {
+    canopy.push_back(pcl::PointXYZ(x, 1, 0));
+    canopy.push_back(pcl::PointXYZ(x, 1, 8));
+  }
+  EXPECT_TRUE(overlapCells(canopy, Pose::Identity()).empty());
+}
+
+TEST(Overlap, FollowsGroundTruthPose) {
+  const Cloud c = squareScene(10.0, 0.0);
+  const auto a = overlapCells(c, Pose::Identity());
+  const auto b = overlapCells(c, makePose(5.0, 0.0, 3.0, 0, 0, 0));  // half shifted
+  EXPECT_NEAR(cellOverlap(a, b), 0.5, 1e-9);
+  const auto far = overlapCells(c, makePose(100.0, 0.0, 0.0, 0, 0, 0));
+  EXPECT_EQ(cellOverlap(a, far), 0.0);
+  EXPECT_EQ(cellOverlap(a, {}), 0.0);
+  EXPECT_NEAR(cellOverlap(a, a), 1.0, 1e-12);
+}
+
+TEST(Overlap, IgnoresNonFinitePoints) {
+  Cloud c = squareScene(4.0, 0.0);
+  const size_t before = overlapCells(c, Pose::Identity()).size();
+  c.push_back(pcl::PointXYZ(std::nanf(""), 1.f, 1.f));
+  c.push_back(pcl::PointXYZ(1.f, INFINITY, 1.f));
+  EXPECT_EQ(overlapCells(c, Pose::Identity()).size(), before);
+}
+
+TEST(Overlap, SlopedGroundUsesLocalPercentile) {
+  // Ground rising 0.4 m per m (about 22 deg) with a 1.5 m high stem line every 2 m: a global
+  // ground level would drop the uphill stems; the local 6 m window keeps every one of them.
+  Cloud c;
+  for (double x = 0.05; x < 20; x += 0.1) {
+    for (double y = 0.05; y < 4; y += 0.1) c.push_back(pcl::PointXYZ(x, y, 0.4 * x));
+  }
+  for (int k = 0; k < 10; ++k) {
+    const double x = 2.0 * k + 0.5;
+    for (double h = 0.4; h < 2.0; h += 0.1) c.push_back(pcl::PointXYZ(x, 2.5, 0.4 * x + h));
+  }
+  const auto cells = overlapCells(c, Pose::Identity());
+  for (int k = 0; k < 10; ++k) {
+    const int64_t ix = static_cast<int64_t>(std::floor(2.0 * k + 0.5));
+    EXPECT_TRUE(cells.count((ix << 32) ^ 2)) << "stem " << k;
+  }
+}
+
+TEST(SummaryOutput, JsonHasExactKeysAndNullsWhenUndefined) {
+  EvalSummary s;
+  s.dataset = "d";
+  s.submaps = 4;
+  const auto path = std::filesystem::temp_directory_path() / "dtif_eval_summary_test.json";
+  writeSummaryJson(path.string(), s);
+  std::ifstream in(path);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  const std::string text = ss.str();
+  for (const char* key :
+       {"\"dataset\"", "\"submaps\"", "\"queries_with_loop\"", "\"accepted\"",
+        "\"true_positives\"", "\"false_positives\"", "\"precision\": null", "\"recall\": null",
+        "\"mean_err_all\"", "\"mean_err_tp\"", "\"rot_deg\": null", "\"rmse_rot_deg\": null",
+        "\"rmse_trans_m\": null", "\"time_ms\"", "\"solver\"", "\"descriptor_bytes_mean\""}) {
+    EXPECT_NE(text.find(key), std::string::npos) << key;
+  }
+  std::filesystem::remove(path);
+}
+
+}  // namespace
+}  // namespace dtif
