@@ -82,7 +82,7 @@ TEST(StrictParams, SectionsOfOneNodeAreUnknownToTheOther) {
 
 // Every shipped node-level YAML names only declared keys, with values of the declared types.
 TEST(ShippedYaml, NodeYamlsUseOnlyDeclaredKeys) {
-  const std::string dir = std::string(DTIF_SOURCE_DIR) + "/config/";
+  const std::string dir = std::string(DTIF_SOURCE_DIR) + "/config/ros/";
   const std::vector<std::pair<std::string, std::set<std::string>>> files = {
       {"trunk_extraction_node.yaml", extractionKeys()},
       {"loop_closure_node.yaml", loopClosureKeys()}};
@@ -106,6 +106,24 @@ TEST(ShippedYaml, NodeYamlsUseOnlyDeclaredKeys) {
   YAML::Node lc = YAML::LoadFile(dir + "loop_closure_node.yaml");
   EXPECT_GE(lc["robots"].as<std::vector<std::string>>().size(), 1u);
   EXPECT_GT(lc["tf_rate_hz"].as<double>(), 0.0);
+}
+
+// The core's component YAMLs, loaded by the launch files into the nodelets' namespaces, hold only
+// keys those nodelets read (else the strict check would stop them at startup).
+TEST(ShippedYaml, ComponentYamlsFitTheNodeletsThatLoadThem) {
+  const std::string dir = std::string(DTIF_SOURCE_DIR) + "/config/";
+  const std::vector<std::pair<std::string, std::set<std::string>>> files = {
+      {"trunk_extraction.yaml", extractionKeys()},
+      {"descriptor.yaml", extractionKeys()},
+      {"loop_closure.yaml", loopClosureKeys()}};
+  for (const auto& f : files) {
+    YAML::Node root;
+    ASSERT_NO_THROW(root = YAML::LoadFile(dir + f.first)) << f.first;
+    std::vector<std::string> keys;
+    flatten(root, "", &keys);
+    EXPECT_FALSE(keys.empty()) << f.first;
+    for (const auto& k : keys) EXPECT_TRUE(f.second.count(k)) << f.first << ": unknown key " << k;
+  }
 }
 
 }  // namespace
