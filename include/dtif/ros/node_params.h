@@ -1,0 +1,54 @@
+// Node-level parameters of the two nodelets (the core's parameter sections are read separately
+// into the core's own structs). Declared here so tests can check the shipped YAMLs against them.
+#pragma once
+
+#include <string>
+#include <vector>
+
+namespace dtif {
+namespace ros_glue {
+
+/// Node-level parameters (the core's sections `trunk_extraction` and `descriptor` are read
+/// separately).
+struct TrunkExtractionNodeParams {
+  std::string input = "odometry";     ///< "odometry": cloud_registered + Odometry; "submap"
+  std::string robot;                  ///< robot name; empty: last element of the namespace
+  std::string odom_frame;             ///< expected odometry frame; empty: take it from the input
+  int first_submap_id = 0;            ///< id of the first submap (raise it after a restart)
+  int queue_size = 2;                 ///< submaps waiting for extraction; the oldest is dropped
+  bool publish_submap_cloud = false;  ///< publish the assembled submap on `submap_cloud`
+
+  template <class V>
+  void visit(V& v) {
+    v("input", input);
+    v("robot", robot);
+    v("odom_frame", odom_frame);
+    v("first_submap_id", first_submap_id);
+    v("queue_size", queue_size);
+    v("publish_submap_cloud", publish_submap_cloud);
+  }
+};
+
+/// Node-level parameters (the core's sections `matcher`, `pose`, `verification`, `database`
+/// are read separately).
+struct LoopClosureNodeParams {
+  std::vector<std::string> robots;              ///< robots whose descriptors are subscribed
+  std::string descriptor_topic = "descriptor";  ///< subscribes `<robot>/<descriptor_topic>`
+  std::string database_file;                    ///< loaded at startup when it exists
+  bool publish_tf = true;                       ///< TF between odometry frames of linked robots
+  double tf_rate_hz = 10.0;                     ///< TF re-publication rate [Hz]
+  int queue_size = 100;                         ///< descriptors waiting; the oldest is dropped
+
+  template <class V>
+  void visit(V& v) {
+    v("robots", robots);
+    v("descriptor_topic", descriptor_topic);
+    v("database_file", database_file);
+    v("publish_tf", publish_tf);
+    v("tf_rate_hz", tf_rate_hz);
+    v("queue_size", queue_size);
+  }
+};
+
+}  // namespace ros_glue
+}  // namespace dtif

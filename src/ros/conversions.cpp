@@ -1,0 +1,262 @@
+#include "dtif/ros/conversions.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <set>
+
+namespace dtif {
+namespace ros_glue {
+namespace {
+
+bool fail(std::string* error, const std::string& why) {
+  if (error) *error = why;
+  return false;
+}
+
+bool finite(double v) { return std::isfinite(v); }
+
+}  // namespace
+
+geometry_msgs::Pose toMsg(const Pose& T) {
+  geometry_msgs::Pose m;
+  const Eigen::Vector3d t = T.translation();
+  const Eigen::Quaterniond q(T.rotation());
+  m.position.x = t.x();
+  m.position.y = t.y();
+  m.position.z = t.z();
+  m.orientation.x = q.x();
+  m.orientation.y = q.y();
+  m.orientation.z = q.z();
+  m.orientation.w = q.w();
+  return m;
+}
+
+geometry_msgs::Transform toTransformMsg(const Pose& T) {
+  const geometry_msgs::Pose p = toMsg(T);
+  geometry_msgs::Transform m;
+  m.translation.x = p.position.x;
+  m.translation.y = p.position.y;
+  m.translation.z = p.position.z;
+  m.rotation = p.orientation;
+  return m;
+}
+
+bool fromMsg(const geometry_msgs::Pose& msg, Pose* T, std::string* error) {
+  const auto& p = msg.position;
+  const auto& o = msg.orientation;
+  if (!finite(p.x) || !finite(p.y) || !finite(p.z) || !finite(o.x) || !finite(o.y) ||
+      !finite(o.z) || !finite(o.w)) {
+    return fail(error, "pose has a non-finite value");
+  }
+  Eigen::Quaterniond q(o.w, o.x, o.y, o.z);
+  if (q.norm() < 1e-6) return fail(error, "pose has a zero quaternion");
+  q.normalize();
+  *T = Pose::Identity();
+  T->linear() = q.toRotationMatrix();
+  T->translation() = Eigen::Vector3d(p.x, p.y, p.z);
+  return true;
+}
+
+dtif_msgs::TrunkDescriptor toMsg(const Descriptor& d, const Pose& T_O_S,
+                                 const std::string& odom_frame) {
+  dtif_msgs::TrunkDescriptor m;
+  m.header.frame_id = odom_frame;
+  if (d.stamp > 0.0 && std::isfinite(d.stamp)) m.header.stamp.fromSec(d.stamp);
+  m.robot = d.robot;
+  m.submap_id = d.submap_id;
+  m.odom_pose = toMsg(T_O_S);
+  m.trunks.reserve(d.trunks.size());
+  for (const Trunk& t : d.trunks) {
+    dtif_msgs::Trunk mt;
+    mt.x = static_cast<float>(t.x);
+    mt.y = static_cast<float>(t.y);
+    mt.z = static_cast<float>(t.z);
+    mt.r = static_cast<float>(t.r);
+    m.trunks.push_back(mt);
+  }
+  m.faces.reserve(3 * d.triangles.size());
+  for (const Triangle& tri : d.triangles) {
+    for (int i : tri.v) m.faces.push_back(static_cast<uint16_t>(i));
+  }
+  m.edge_hist = d.edge_hist;
+  m.radius_hist = d.radius_hist;
+  m.valid = d.valid;
+  m.invalid_reason = d.invalid_reason;
+  return m;
+}
+
+bool fromMsg(const dtif_msgs::TrunkDescriptor& msg, Descriptor* d, Pose* T_O_S,
+             std::string* error) {
+  Descriptor out;
+  out.robot = msg.robot;
+  out.submap_id = msg.submap_id;
+  out.stamp = msg.header.stamp.toSec();
+  if (msg.trunks.size() > std::numeric_limits<uint16_t>::max()) {
+    return fail(error, "too many trunks for uint16 face indices");
+  }
+  out.trunks.reserve(msg.trunks.size());
+  for (size_t i = 0; i < msg.trunks.size(); ++i) {
+    const dtif_msgs::Trunk& t = msg.trunks[i];
+    if (!finite(t.x) || !finite(t.y) || !finite(t.z) || !finite(t.r) || t.r < 0.0f) {
+      return fail(error, "trunk " + std::to_string(i) + " is not finite or has a negative radius");
+    }
+    out.trunks.push_back(Trunk{t.x, t.y, t.z, t.r});
+  }
+  if (msg.faces.size() % 3 != 0) return fail(error, "faces is not a list of triples");
+  const size_t n = out.trunks.size();
+  out.triangles.reserve(msg.faces.size() / 3);
+  for (size_t f = 0; f < msg.faces.size(); f += 3) {
+    const int a = msg.faces[f], b = msg.faces[f + 1], c = msg.faces[f + 2];
+    if (static_cast<size_t>(a) >= n || static_cast<size_t>(b) >= n || static_cast<size_t>(c) >= n) {
+      return fail(error, "face " + std::to_string(f / 3) + " indexes a missing trunk");
+    }
+    if (a == b || b == c || a == c) {
+      return fail(error, "face " + std::to_string(f / 3) + " repeats a vertex");
+    }
+    out.triangles.push_back(makeCanonicalTriangle(out.trunks, a, b, c));
+  }
+  // buildDescriptor's order: ascending longest edge (the matcher's length index relies on it).
+  std::stable_sort(out.triangles.begin(), out.triangles.end(),
+                   [](const Triangle& x, const Triangle& y) { return x.len[0] < y.len[0]; });
+  for (float v : msg.edge_hist) {
+    if (!std::isfinite(v) || v < 0.0f) return fail(error, "edge histogram is not finite");
+  }
+  for (float v : msg.radius_hist) {
+    if (!std::isfinite(v) || v < 0.0f) return fail(error, "radius histogram is not finite");
+  }
+  out.edge_hist = msg.edge_hist;
+  out.radius_hist = msg.radius_hist;
+  out.valid = msg.valid;
+  out.invalid_reason = msg.invalid_reason;
+  Pose T = Pose::Identity();
+  std::string pose_error;
+  if (!fromMsg(msg.odom_pose, &T, &pose_error)) return fail(error, "odom_pose: " + pose_error);
+  if (T_O_S) *T_O_S = T;
+  *d = std::move(out);
+  return true;
+}
+
+dtif_msgs::LoopClosure toMsg(const LoopClosure& lc) {
+  dtif_msgs::LoopClosure m;
+  m.query_robot = lc.query_robot;
+  m.query_id = lc.query_id;
+  m.candidate_robot = lc.candidate_robot;
+  m.candidate_id = lc.candidate_id;
+  m.T_c_q = toMsg(lc.T_c_q);
+  for (int r = 0; r < 6; ++r) {
+    for (int c = 0; c < 6; ++c) m.covariance[6 * r + c] = lc.covariance(r, c);
+  }
+  m.inliers = lc.inliers;
+  m.score = lc.score;
+  m.inlier_query_trunks.reserve(lc.inlier_pairs.size());
+  m.inlier_candidate_trunks.reserve(lc.inlier_pairs.size());
+  for (const auto& p : lc.inlier_pairs) {
+    m.inlier_query_trunks.push_back(p.first);
+    m.inlier_candidate_trunks.push_back(p.second);
+  }
+  return m;
+}
+
+bool fromMsg(const dtif_msgs::LoopClosure& msg, LoopClosure* lc, std::string* error) {
+  LoopClosure out;
+  out.query_robot = msg.query_robot;
+  out.query_id = msg.query_id;
+  out.candidate_robot = msg.candidate_robot;
+  out.candidate_id = msg.candidate_id;
+  std::string pose_error;
+  if (!fromMsg(msg.T_c_q, &out.T_c_q, &pose_error)) return fail(error, "T_c_q: " + pose_error);
+  for (int r = 0; r < 6; ++r) {
+    for (int c = 0; c < 6; ++c) {
+      const double v = msg.covariance[6 * r + c];
+      if (!std::isfinite(v)) return fail(error, "covariance is not finite");
+      out.covariance(r, c) = v;
+    }
+  }
+  if (!std::isfinite(msg.score)) return fail(error, "score is not finite");
+  if (msg.inlier_query_trunks.size() != msg.inlier_candidate_trunks.size()) {
+    return fail(error, "inlier index lists differ in length");
+  }
+  out.inliers = msg.inliers;
+  out.score = msg.score;
+  for (size_t i = 0; i < msg.inlier_query_trunks.size(); ++i) {
+    out.inlier_pairs.emplace_back(msg.inlier_query_trunks[i], msg.inlier_candidate_trunks[i]);
+  }
+  *lc = std::move(out);
+  return true;
+}
+
+namespace {
+
+// Reads one coordinate of a point; datatype is FLOAT32 or FLOAT64 (checked by the caller).
+double readCoord(const uint8_t* p, uint8_t datatype, bool bigendian) {
+  uint8_t buf[8];
+  const size_t n = datatype == sensor_msgs::PointField::FLOAT64 ? 8 : 4;
+  std::memcpy(buf, p, n);
+  if (bigendian) std::reverse(buf, buf + n);
+  if (n == 8) {
+    double d;
+    std::memcpy(&d, buf, 8);
+    return d;
+  }
+  float f;
+  std::memcpy(&f, buf, 4);
+  return f;
+}
+
+}  // namespace
+
+bool fromMsg(const sensor_msgs::PointCloud2& msg, Cloud* cloud, size_t* dropped,
+             std::string* error) {
+  const sensor_msgs::PointField* fields[3] = {nullptr, nullptr, nullptr};
+  for (const auto& f : msg.fields) {
+    for (int i = 0; i < 3; ++i) {
+      if (f.name == std::string(1, static_cast<char>('x' + i))) fields[i] = &f;
+    }
+  }
+  for (int i = 0; i < 3; ++i) {
+    if (!fields[i]) return fail(error, std::string("cloud has no field ") + char('x' + i));
+    const uint8_t t = fields[i]->datatype;
+    if (t != sensor_msgs::PointField::FLOAT32 && t != sensor_msgs::PointField::FLOAT64) {
+      return fail(error, "cloud coordinates are neither float32 nor float64");
+    }
+    const size_t size = t == sensor_msgs::PointField::FLOAT64 ? 8 : 4;
+    if (fields[i]->offset + size > msg.point_step) {
+      return fail(error, "cloud field lies outside point_step");
+    }
+  }
+  const size_t n = static_cast<size_t>(msg.width) * msg.height;
+  if (msg.height > 0 && msg.row_step < static_cast<size_t>(msg.width) * msg.point_step) {
+    return fail(error, "cloud row_step is smaller than width * point_step");
+  }
+  if (static_cast<size_t>(msg.row_step) * msg.height > msg.data.size()) {
+    return fail(error, "cloud data is shorter than its header says");
+  }
+  cloud->clear();
+  cloud->reserve(n);
+  size_t bad = 0;
+  for (size_t row = 0; row < msg.height; ++row) {
+    const uint8_t* base = msg.data.data() + row * msg.row_step;
+    for (size_t col = 0; col < msg.width; ++col) {
+      const uint8_t* p = base + col * msg.point_step;
+      const double x = readCoord(p + fields[0]->offset, fields[0]->datatype, msg.is_bigendian);
+      const double y = readCoord(p + fields[1]->offset, fields[1]->datatype, msg.is_bigendian);
+      const double z = readCoord(p + fields[2]->offset, fields[2]->datatype, msg.is_bigendian);
+      if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) {
+        ++bad;
+        continue;
+      }
+      cloud->push_back(
+          pcl::PointXYZ(static_cast<float>(x), static_cast<float>(y), static_cast<float>(z)));
+    }
+  }
+  cloud->width = static_cast<uint32_t>(cloud->size());
+  cloud->height = 1;
+  cloud->is_dense = true;
+  if (dropped) *dropped = bad;
+  return true;
+}
+
+}  // namespace ros_glue
+}  // namespace dtif

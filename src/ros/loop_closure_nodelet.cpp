@@ -1,0 +1,334 @@
+// dtif/LoopClosureNodelet: one, shared by all robots. Keeps the descriptor database, queries
+// each new descriptor before inserting it, publishes loop closures, markers and the TF between
+// the robots' odometry frames.
+#include <geometry_msgs/TransformStamped.h>
+#include <nodelet/nodelet.h>
+#include <ros/ros.h>
+#include <tf2_ros/transform_broadcaster.h>
+#include <visualization_msgs/MarkerArray.h>
+
+#include <boost/bind/bind.hpp>
+#include <condition_variable>
+#include <deque>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <pluginlib/class_list_macros.hpp>
+#include <queue>
+#include <set>
+#include <thread>
+
+#include "dtif/core/loop_detector.h"
+#include "dtif/ros/conversions.h"
+#include "dtif/ros/markers.h"
+#include "dtif/ros/msgs.h"
+#include "dtif/ros/node_params.h"
+#include "dtif/ros/params.h"
+
+namespace dtif {
+
+/// Thread-safety: descriptor callbacks only enqueue (queue_mutex_). One worker thread queries
+/// and inserts; it and the service callbacks serialise on db_mutex_ (the LoopDetector is not
+/// thread-safe). The TF timer reads the link table under db_mutex_. Worker joined on destruction.
+class LoopClosureNodelet : public nodelet::Nodelet {
+ public:
+  ~LoopClosureNodelet() override {
+    {
+      std::lock_guard<std::mutex> lock(queue_mutex_);
+      stop_ = true;
+    }
+    cv_.notify_all();
+    if (worker_.joinable()) worker_.join();
+  }
+
+ private:
+  // What the database itself does not keep: the submap's pose in its odometry frame.
+  struct Meta {
+    Pose T_O_S = Pose::Identity();
+    std::string odom_frame;
+  };
+  using Key = std::pair<std::string, int64_t>;
+
+  void onInit() override {
+    ros::NodeHandle& nh = getNodeHandle();
+    ros::NodeHandle& pnh = getPrivateNodeHandle();
+    LoopDetectorParams det;
+    try {
+      ros_glue::ParamReader reader(pnh);
+      reader.readSection("", &node_);
+      reader.readSection("matcher", &det.matcher);
+      reader.readSection("pose", &det.pose);
+      reader.readSection("verification", &det.verification);
+      reader.readSection("database", &det.database);
+      reader.checkNoUnknownKeys();
+      std::string problems = det.validate();
+      if (node_.robots.empty()) problems += "robots: list at least one robot\n";
+      if (node_.queue_size < 1) problems += "queue_size must be >= 1\n";
+      if (!(node_.tf_rate_hz >= 0.0)) problems += "tf_rate_hz must be >= 0\n";
+      if (!problems.empty()) throw ParamError(pnh.getNamespace() + ": " + problems);
+    } catch (const ParamError& e) {
+      NODELET_FATAL("%s", e.what());
+      throw;
+    }
+    detector_ = std::make_unique<LoopDetector>(det);
+    if (!node_.database_file.empty()) {
+      std::ifstream probe(node_.database_file);
+      if (probe.good()) {
+        std::string message;
+        loadDatabase(node_.database_file, &message);
+        NODELET_INFO("%s", message.c_str());
+      }
+    }
+
+    loop_pub_ = nh.advertise<dtif_msgs::LoopClosure>("loop_closures", 50);
+    marker_pub_ = nh.advertise<visualization_msgs::MarkerArray>("markers", 2);
+    for (const std::string& robot : node_.robots) {
+      const std::string topic = robot + "/" + node_.descriptor_topic;
+      subs_.push_back(nh.subscribe<dtif_msgs::TrunkDescriptor>(
+          topic, 50,
+          boost::bind(&LoopClosureNodelet::onDescriptor, this, boost::placeholders::_1, robot)));
+      NODELET_INFO("subscribed to %s", nh.resolveName(topic).c_str());
+    }
+    save_srv_ = pnh.advertiseService("save_database", &LoopClosureNodelet::onSave, this);
+    load_srv_ = pnh.advertiseService("load_database", &LoopClosureNodelet::onLoad, this);
+    size_srv_ = pnh.advertiseService("database_size", &LoopClosureNodelet::onSize, this);
+    if (node_.publish_tf && node_.tf_rate_hz > 0.0) {
+      tf_timer_ = nh.createWallTimer(ros::WallDuration(1.0 / node_.tf_rate_hz),
+                                     [this](const ros::WallTimerEvent&) { publishTf(); });
+    }
+    worker_ = std::thread(&LoopClosureNodelet::work, this);
+  }
+
+  void onDescriptor(const dtif_msgs::TrunkDescriptor::ConstPtr& msg, const std::string& robot) {
+    if (msg->robot != robot) {
+      NODELET_WARN_THROTTLE(5.0, "descriptor of robot '%s' on the topic of '%s': dropped",
+                            msg->robot.c_str(), robot.c_str());
+      return;
+    }
+    {
+      std::lock_guard<std::mutex> lock(queue_mutex_);
+      if (queue_.size() >= static_cast<size_t>(node_.queue_size)) {
+        NODELET_WARN_THROTTLE(5.0, "loop detection is behind: dropping a descriptor of '%s'",
+                              queue_.front()->robot.c_str());
+        queue_.pop_front();
+      }
+      queue_.push_back(msg);
+    }
+    cv_.notify_one();
+  }
+
+  void work() {
+    while (true) {
+      dtif_msgs::TrunkDescriptor::ConstPtr msg;
+      {
+        std::unique_lock<std::mutex> lock(queue_mutex_);
+        cv_.wait(lock, [this] { return stop_ || !queue_.empty(); });
+        if (stop_) return;
+        msg = queue_.front();
+        queue_.pop_front();
+      }
+      process(*msg);
+    }
+  }
+
+  void process(const dtif_msgs::TrunkDescriptor& msg) {
+    auto d = std::make_shared<Descriptor>();
+    Meta meta;
+    std::string error;
+    if (!ros_glue::fromMsg(msg, d.get(), &meta.T_O_S, &error)) {
+      NODELET_WARN_THROTTLE(5.0, "descriptor %s/%ld: %s: dropped", msg.robot.c_str(),
+                            static_cast<long>(msg.submap_id), error.c_str());
+      return;
+    }
+    meta.odom_frame = msg.header.frame_id;
+    if (!d->valid) {
+      NODELET_DEBUG("descriptor %s/%ld is invalid (%s): not queried, not inserted",
+                    d->robot.c_str(), static_cast<long>(d->submap_id), d->invalid_reason.c_str());
+      return;
+    }
+    if (d->trunks.size() < 3 || d->triangles.empty()) {
+      NODELET_WARN_THROTTLE(5.0, "descriptor %s/%ld has %zu trunks and %zu faces: dropped",
+                            d->robot.c_str(), static_cast<long>(d->submap_id), d->trunks.size(),
+                            d->triangles.size());
+      return;
+    }
+    std::optional<LoopClosure> lc;
+    std::shared_ptr<const Descriptor> candidate;
+    std::optional<Meta> candidate_meta;
+    {
+      std::lock_guard<std::mutex> lock(db_mutex_);
+      const Key key(d->robot, d->submap_id);
+      if (index_.count(key)) {
+        NODELET_WARN_THROTTLE(5.0, "descriptor %s/%ld already in the database: dropped",
+                              d->robot.c_str(), static_cast<long>(d->submap_id));
+        return;
+      }
+      try {
+        lc = detector_->query(*d);
+      } catch (const std::exception& e) {
+        NODELET_ERROR_THROTTLE(5.0, "query of %s/%ld failed: %s", d->robot.c_str(),
+                               static_cast<long>(d->submap_id), e.what());
+      }
+      if (lc) {
+        auto it = index_.find(Key(lc->candidate_robot, lc->candidate_id));
+        if (it != index_.end()) candidate = it->second;
+        auto m = meta_.find(Key(lc->candidate_robot, lc->candidate_id));
+        if (m != meta_.end()) candidate_meta = m->second;
+      }
+      if (detector_->insert(d)) {
+        index_[key] = d;
+        meta_[key] = meta;
+      }
+      if (lc && candidate_meta && lc->candidate_robot != lc->query_robot &&
+          !candidate_meta->odom_frame.empty() && !meta.odom_frame.empty() &&
+          candidate_meta->odom_frame != meta.odom_frame) {
+        // T_Oc_Oq = T_Oc_Sc * T_c_q * inverse(T_Oq_Sq): the latest accepted estimate wins.
+        const Pose T_Oc_Oq = candidate_meta->T_O_S * lc->T_c_q * meta.T_O_S.inverse();
+        links_[{candidate_meta->odom_frame, meta.odom_frame}] = T_Oc_Oq;
+        links_.erase({meta.odom_frame, candidate_meta->odom_frame});
+        robot_frames_.insert(candidate_meta->odom_frame);
+        robot_frames_.insert(meta.odom_frame);
+      }
+    }
+    if (!lc) return;
+    boost::shared_ptr<dtif_msgs::LoopClosure> out(new dtif_msgs::LoopClosure(ros_glue::toMsg(*lc)));
+    out->header.stamp = msg.header.stamp;
+    out->header.frame_id = candidate_meta ? candidate_meta->odom_frame : std::string();
+    loop_pub_.publish(boost::shared_ptr<const dtif_msgs::LoopClosure>(out));
+    NODELET_INFO("loop %s/%ld -> %s/%ld: %d inliers, score %.2f", lc->query_robot.c_str(),
+                 static_cast<long>(lc->query_id), lc->candidate_robot.c_str(),
+                 static_cast<long>(lc->candidate_id), lc->inliers, lc->score);
+    if (candidate && marker_pub_.getNumSubscribers() > 0) {
+      boost::shared_ptr<visualization_msgs::MarkerArray> markers(
+          new visualization_msgs::MarkerArray(ros_glue::loopMarkers(
+              *d, *candidate, *lc, meta.T_O_S, meta.odom_frame, msg.header.stamp)));
+      marker_pub_.publish(boost::shared_ptr<const visualization_msgs::MarkerArray>(markers));
+    }
+    if (node_.publish_tf && node_.tf_rate_hz <= 0.0) publishTf();
+  }
+
+  // Publishes a spanning tree of the link graph: each connected group of odometry frames hangs
+  // from its frame that sorts first (TF needs one parent per frame).
+  void publishTf() {
+    std::vector<geometry_msgs::TransformStamped> tfs;
+    {
+      std::lock_guard<std::mutex> lock(db_mutex_);
+      if (links_.empty()) return;
+      std::map<std::string, std::vector<std::pair<std::string, Pose>>> adj;  // T_a_b
+      for (const auto& l : links_) {
+        adj[l.first.first].emplace_back(l.first.second, l.second);
+        adj[l.first.second].emplace_back(l.first.first, l.second.inverse());
+      }
+      std::set<std::string> seen;
+      const ros::Time now = ros::Time::now();
+      for (const std::string& root : robot_frames_) {
+        if (seen.count(root)) continue;
+        seen.insert(root);
+        std::queue<std::string> todo;
+        todo.push(root);
+        while (!todo.empty()) {
+          const std::string a = todo.front();
+          todo.pop();
+          for (const auto& e : adj[a]) {
+            if (seen.count(e.first)) continue;
+            seen.insert(e.first);
+            todo.push(e.first);
+            geometry_msgs::TransformStamped t;
+            t.header.stamp = now;
+            t.header.frame_id = a;
+            t.child_frame_id = e.first;
+            t.transform = ros_glue::toTransformMsg(e.second);
+            tfs.push_back(t);
+          }
+        }
+      }
+    }
+    if (!tf_broadcaster_) tf_broadcaster_ = std::make_unique<tf2_ros::TransformBroadcaster>();
+    tf_broadcaster_->sendTransform(tfs);
+  }
+
+  bool loadDatabase(const std::string& path, std::string* message) {
+    std::lock_guard<std::mutex> lock(db_mutex_);
+    try {
+      detector_->load(path);  // throws and leaves the database unchanged on a bad file
+    } catch (const std::exception& e) {
+      *message = std::string("load failed, database unchanged: ") + e.what();
+      return false;
+    }
+    index_.clear();
+    for (const auto& e : detector_->entries()) index_[Key(e->robot, e->submap_id)] = e;
+    // Odometry poses of loaded entries are unknown until they are seen again (no TF for them).
+    for (auto it = meta_.begin(); it != meta_.end();) {
+      it = index_.count(it->first) ? std::next(it) : meta_.erase(it);
+    }
+    *message = "loaded " + std::to_string(detector_->size()) + " descriptors from " + path;
+    return true;
+  }
+
+  bool onSave(dtif_msgs::SaveDatabase::Request& req, dtif_msgs::SaveDatabase::Response& res) {
+    std::lock_guard<std::mutex> lock(db_mutex_);
+    res.size = detector_->size();
+    if (req.path.empty()) {
+      res.success = false;
+      res.message = "empty path";
+      return true;
+    }
+    try {
+      detector_->save(req.path);
+      res.success = true;
+      res.message = "saved " + std::to_string(res.size) + " descriptors to " + req.path;
+    } catch (const std::exception& e) {
+      res.success = false;
+      res.message = std::string("save failed: ") + e.what();
+      NODELET_ERROR("%s", res.message.c_str());
+    }
+    return true;
+  }
+
+  bool onLoad(dtif_msgs::LoadDatabase::Request& req, dtif_msgs::LoadDatabase::Response& res) {
+    res.success = loadDatabase(req.path, &res.message);
+    if (!res.success) NODELET_ERROR("%s", res.message.c_str());
+    std::lock_guard<std::mutex> lock(db_mutex_);
+    res.size = detector_->size();
+    return true;
+  }
+
+  bool onSize(dtif_msgs::GetDatabaseSize::Request&, dtif_msgs::GetDatabaseSize::Response& res) {
+    std::lock_guard<std::mutex> lock(db_mutex_);
+    res.size = detector_->size();
+    std::map<std::string, uint64_t> per_robot;
+    for (const auto& e : detector_->entries()) ++per_robot[e->robot];
+    for (const auto& p : per_robot) {
+      res.robots.push_back(p.first);
+      res.per_robot.push_back(p.second);
+    }
+    return true;
+  }
+
+  ros_glue::LoopClosureNodeParams node_;
+
+  std::mutex db_mutex_;  // detector_, index_, meta_, links_, robot_frames_
+  std::unique_ptr<LoopDetector> detector_;
+  std::map<Key, std::shared_ptr<const Descriptor>> index_;
+  std::map<Key, Meta> meta_;
+  std::map<std::pair<std::string, std::string>, Pose> links_;  // (a, b) -> T_a_b
+  std::set<std::string> robot_frames_;
+
+  std::mutex queue_mutex_;  // queue_, stop_
+  std::condition_variable cv_;
+  std::deque<dtif_msgs::TrunkDescriptor::ConstPtr> queue_;
+  bool stop_ = false;
+  std::thread worker_;
+
+  std::unique_ptr<tf2_ros::TransformBroadcaster> tf_broadcaster_;
+  ros::Publisher loop_pub_, marker_pub_;
+  std::vector<ros::Subscriber> subs_;
+  ros::ServiceServer save_srv_, load_srv_, size_srv_;
+  ros::WallTimer tf_timer_;
+};
+
+}  // namespace dtif
+
+PLUGINLIB_EXPORT_CLASS(dtif::LoopClosureNodelet, nodelet::Nodelet)

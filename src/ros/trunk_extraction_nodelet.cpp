@@ -1,0 +1,288 @@
+// dtif/TrunkExtractionNodelet: one per robot. Assembles gravity-aligned submaps (or takes
+// ready-made ones), extracts trunks and publishes the trunk-topology descriptor.
+#include <nav_msgs/Odometry.h>
+#include <nodelet/nodelet.h>
+#include <pcl/common/transforms.h>
+#include <pcl_conversions/pcl_conversions.h>
+#include <ros/ros.h>
+#include <sensor_msgs/PointCloud2.h>
+#include <tf2_ros/buffer.h>
+#include <tf2_ros/transform_listener.h>
+#include <visualization_msgs/MarkerArray.h>
+
+#include <chrono>
+#include <condition_variable>
+#include <deque>
+#include <memory>
+#include <mutex>
+#include <pluginlib/class_list_macros.hpp>
+#include <regex>
+#include <thread>
+
+#include "dtif/core/descriptor.h"
+#include "dtif/core/trunk_extractor.h"
+#include "dtif/ros/conversions.h"
+#include "dtif/ros/markers.h"
+#include "dtif/ros/msgs.h"
+#include "dtif/ros/node_params.h"
+#include "dtif/ros/params.h"
+#include "dtif/ros/submap_assembler.h"
+
+namespace dtif {
+
+/// Thread-safety: subscriber callbacks may run concurrently (multi-threaded manager); they
+/// share the assembler under mutex_ and only enqueue. One worker thread extracts and publishes.
+/// The worker is joined in the destructor.
+class TrunkExtractionNodelet : public nodelet::Nodelet {
+ public:
+  ~TrunkExtractionNodelet() override {
+    {
+      std::lock_guard<std::mutex> lock(queue_mutex_);
+      stop_ = true;
+    }
+    cv_.notify_all();
+    if (worker_.joinable()) worker_.join();
+  }
+
+ private:
+  void onInit() override {
+    ros::NodeHandle& nh = getNodeHandle();
+    ros::NodeHandle& pnh = getPrivateNodeHandle();
+    ros_glue::ParamReader reader(pnh);
+    try {
+      reader.readSection("", &node_);
+      reader.readSection("", &assembler_params_);
+      reader.readSection("trunk_extraction", &extractor_params_);
+      reader.readSection("descriptor", &descriptor_params_);
+      reader.checkNoUnknownKeys();
+      std::string problems = assembler_params_.validate() + extractor_params_.validate() +
+                             descriptor_params_.validate();
+      if (node_.input != "odometry" && node_.input != "submap") {
+        problems += "input must be 'odometry' or 'submap', not '" + node_.input + "'\n";
+      }
+      if (node_.queue_size < 1) problems += "queue_size must be >= 1\n";
+      if (node_.robot.empty()) {
+        const std::string ns = nh.getNamespace();
+        node_.robot = ns.substr(ns.find_last_of('/') + 1);
+      }
+      if (!std::regex_match(node_.robot, std::regex("[A-Za-z0-9_]+"))) {
+        problems += "robot name '" + node_.robot +
+                    "' is not [A-Za-z0-9_]+ (set ~robot or run in the robot's namespace)\n";
+      }
+      if (!problems.empty()) throw ParamError(pnh.getNamespace() + ": " + problems);
+    } catch (const ParamError& e) {
+      NODELET_FATAL("%s", e.what());
+      throw;
+    }
+
+    assembler_ =
+        std::make_unique<ros_glue::SubmapAssembler>(assembler_params_, node_.first_submap_id);
+    descriptor_pub_ = nh.advertise<dtif_msgs::TrunkDescriptor>("descriptor", 10);
+    trunks_pub_ = nh.advertise<visualization_msgs::MarkerArray>("trunks", 2);
+    if (node_.publish_submap_cloud) {
+      cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("submap_cloud", 2);
+    }
+    if (node_.input == "odometry") {
+      odom_sub_ = nh.subscribe("Odometry", 200, &TrunkExtractionNodelet::onOdometry, this);
+      cloud_sub_ = nh.subscribe("cloud_registered", 20, &TrunkExtractionNodelet::onCloud, this);
+    } else {
+      if (!node_.odom_frame.empty()) {
+        tf_buffer_ = std::make_unique<tf2_ros::Buffer>();
+        tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh);
+      }
+      submap_sub_ = nh.subscribe("submap", 4, &TrunkExtractionNodelet::onSubmap, this);
+    }
+    worker_ = std::thread(&TrunkExtractionNodelet::work, this);
+    NODELET_INFO("robot '%s', input '%s', window %.1f s", node_.robot.c_str(), node_.input.c_str(),
+                 assembler_params_.window_s);
+  }
+
+  // Checks the frame of a message against ~odom_frame (learnt from the first message if unset).
+  bool acceptFrame(const std::string& frame, const char* what) {
+    if (frame.empty()) {
+      NODELET_WARN_THROTTLE(5.0, "%s without frame_id: dropped", what);
+      return false;
+    }
+    if (odom_frame_.empty()) odom_frame_ = node_.odom_frame.empty() ? frame : node_.odom_frame;
+    if (frame != odom_frame_) {
+      NODELET_WARN_THROTTLE(5.0, "%s in frame '%s', expected '%s': dropped", what, frame.c_str(),
+                            odom_frame_.c_str());
+      return false;
+    }
+    return true;
+  }
+
+  void report(ros_glue::SubmapAssembler::Status s, const char* what) {
+    using S = ros_glue::SubmapAssembler::Status;
+    if (s == S::kOk) return;
+    NODELET_WARN_THROTTLE(5.0, "%s: %s", what, ros_glue::SubmapAssembler::describe(s));
+  }
+
+  void onOdometry(const nav_msgs::Odometry::ConstPtr& msg) {
+    Pose T_O_B;
+    std::string error;
+    if (!ros_glue::fromMsg(msg->pose.pose, &T_O_B, &error)) {
+      NODELET_WARN_THROTTLE(5.0, "Odometry: %s: dropped", error.c_str());
+      return;
+    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!acceptFrame(msg->header.frame_id, "Odometry")) return;
+    report(assembler_->addOdometry(msg->header.stamp.toSec(), T_O_B), "Odometry");
+  }
+
+  void onCloud(const sensor_msgs::PointCloud2::ConstPtr& msg) {
+    Cloud cloud;
+    size_t dropped = 0;
+    std::string error;
+    if (!ros_glue::fromMsg(*msg, &cloud, &dropped, &error)) {
+      NODELET_WARN_THROTTLE(5.0, "cloud_registered: %s: dropped", error.c_str());
+      return;
+    }
+    if (dropped > 0) {
+      NODELET_WARN_THROTTLE(30.0, "cloud_registered: %zu non-finite points dropped", dropped);
+    }
+    std::optional<ros_glue::AssembledSubmap> done;
+    std::string frame;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (!acceptFrame(msg->header.frame_id, "cloud_registered")) return;
+      report(assembler_->addCloud(msg->header.stamp.toSec(), cloud, &done), "cloud_registered");
+      frame = odom_frame_;
+    }
+    if (done) enqueue(std::move(*done), frame);
+  }
+
+  void onSubmap(const sensor_msgs::PointCloud2::ConstPtr& msg) {
+    if (msg->header.frame_id.empty()) {
+      NODELET_WARN_THROTTLE(5.0, "submap without frame_id: dropped");
+      return;
+    }
+    ros_glue::AssembledSubmap s;
+    s.cloud.reset(new Cloud);
+    size_t dropped = 0;
+    std::string error;
+    if (!ros_glue::fromMsg(*msg, s.cloud.get(), &dropped, &error)) {
+      NODELET_WARN_THROTTLE(5.0, "submap: %s: dropped", error.c_str());
+      return;
+    }
+    if (s.cloud->empty()) {
+      NODELET_WARN_THROTTLE(5.0, "submap: empty cloud: dropped");
+      return;
+    }
+    const double stamp = msg->header.stamp.toSec();
+    std::string frame = msg->header.frame_id;
+    if (tf_buffer_) {
+      // T_O_S from TF; without it the descriptor would carry a wrong pose, so drop.
+      try {
+        const auto tf = tf_buffer_->lookupTransform(node_.odom_frame, frame, msg->header.stamp,
+                                                    ros::Duration(0.1));
+        const auto& t = tf.transform;
+        s.T_O_S = Eigen::Translation3d(t.translation.x, t.translation.y, t.translation.z) *
+                  Eigen::Quaterniond(t.rotation.w, t.rotation.x, t.rotation.y, t.rotation.z);
+        frame = node_.odom_frame;
+      } catch (const tf2::TransformException& e) {
+        NODELET_WARN_THROTTLE(5.0, "submap: no transform %s <- %s: %s: dropped",
+                              node_.odom_frame.c_str(), msg->header.frame_id.c_str(), e.what());
+        return;
+      }
+    }
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (stamp <= last_submap_stamp_) {
+        NODELET_WARN_THROTTLE(5.0, "submap: stamp not newer than the previous one: dropped");
+        return;
+      }
+      last_submap_stamp_ = stamp;
+      s.id = next_submap_id_++ + node_.first_submap_id;
+    }
+    s.stamp = stamp;
+    enqueue(std::move(s), frame);
+  }
+
+  void enqueue(ros_glue::AssembledSubmap s, const std::string& frame) {
+    {
+      std::lock_guard<std::mutex> lock(queue_mutex_);
+      if (queue_.size() >= static_cast<size_t>(node_.queue_size)) {
+        NODELET_WARN_THROTTLE(5.0, "extraction is behind: dropping submap %ld",
+                              static_cast<long>(queue_.front().first.id));
+        queue_.pop_front();
+      }
+      queue_.emplace_back(std::move(s), frame);
+    }
+    cv_.notify_one();
+  }
+
+  void work() {
+    while (true) {
+      std::pair<ros_glue::AssembledSubmap, std::string> job;
+      {
+        std::unique_lock<std::mutex> lock(queue_mutex_);
+        cv_.wait(lock, [this] { return stop_ || !queue_.empty(); });
+        if (stop_) return;
+        job = std::move(queue_.front());
+        queue_.pop_front();
+      }
+      process(job.first, job.second);
+    }
+  }
+
+  void process(const ros_glue::AssembledSubmap& s, const std::string& frame) {
+    const auto t0 = std::chrono::steady_clock::now();
+    const TrunkExtractionResult r = extractTrunks(*s.cloud, extractor_params_);
+    Descriptor d = buildDescriptor(r.trunks, descriptor_params_);
+    d.robot = node_.robot;
+    d.submap_id = s.id;
+    d.stamp = s.stamp;
+    const double ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    NODELET_DEBUG("submap %ld: %zu points, %zu trunks, %zu faces, %.1f ms%s%s",
+                  static_cast<long>(s.id), s.cloud->size(), d.trunks.size(), d.triangles.size(), ms,
+                  d.valid ? "" : ", invalid: ", d.invalid_reason.c_str());
+    boost::shared_ptr<dtif_msgs::TrunkDescriptor> msg(
+        new dtif_msgs::TrunkDescriptor(ros_glue::toMsg(d, s.T_O_S, frame)));
+    descriptor_pub_.publish(boost::shared_ptr<const dtif_msgs::TrunkDescriptor>(msg));
+    if (trunks_pub_.getNumSubscribers() > 0) {
+      boost::shared_ptr<visualization_msgs::MarkerArray> markers(
+          new visualization_msgs::MarkerArray(ros_glue::trunkMarkers(
+              d, s.T_O_S, frame, node_.robot + "/submap_" + std::to_string(s.id),
+              msg->header.stamp)));
+      trunks_pub_.publish(boost::shared_ptr<const visualization_msgs::MarkerArray>(markers));
+    }
+    if (node_.publish_submap_cloud && cloud_pub_.getNumSubscribers() > 0) {
+      // In the odometry frame, so rviz needs no extra TF for the submap frame.
+      Cloud cloud_O;
+      pcl::transformPointCloud(*s.cloud, cloud_O, s.T_O_S.matrix().cast<float>());
+      boost::shared_ptr<sensor_msgs::PointCloud2> cloud(new sensor_msgs::PointCloud2);
+      pcl::toROSMsg(cloud_O, *cloud);
+      cloud->header.stamp = msg->header.stamp;
+      cloud->header.frame_id = frame;
+      cloud_pub_.publish(boost::shared_ptr<const sensor_msgs::PointCloud2>(cloud));
+    }
+  }
+
+  ros_glue::TrunkExtractionNodeParams node_;
+  ros_glue::SubmapAssemblerParams assembler_params_;
+  TrunkExtractorParams extractor_params_;
+  DescriptorParams descriptor_params_;
+
+  std::mutex mutex_;  // assembler_, odom_frame_, last_submap_stamp_, next_submap_id_
+  std::unique_ptr<ros_glue::SubmapAssembler> assembler_;
+  std::string odom_frame_;
+  double last_submap_stamp_ = -1.0;
+  int64_t next_submap_id_ = 0;
+
+  std::mutex queue_mutex_;  // queue_, stop_
+  std::condition_variable cv_;
+  std::deque<std::pair<ros_glue::AssembledSubmap, std::string>> queue_;
+  bool stop_ = false;
+  std::thread worker_;
+
+  std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
+  std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
+  ros::Publisher descriptor_pub_, trunks_pub_, cloud_pub_;
+  ros::Subscriber odom_sub_, cloud_sub_, submap_sub_;
+};
+
+}  // namespace dtif
+
+PLUGINLIB_EXPORT_CLASS(dtif::TrunkExtractionNodelet, nodelet::Nodelet)

@@ -1,0 +1,263 @@
+// Glue tests without a master: message conversions round trip and reject bad input.
+#include "dtif/ros/conversions.h"
+
+#include <gtest/gtest.h>
+#include <pcl/point_types.h>
+#include <pcl_conversions/pcl_conversions.h>
+
+#include <cmath>
+#include <limits>
+#include <random>
+
+#include "dtif/core/descriptor.h"
+
+namespace dtif {
+namespace ros_glue {
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+Pose makePose(double x, double y, double z, double roll, double pitch, double yaw) {
+  Pose T = Pose::Identity();
+  T.linear() = (Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) *
+                Eigen::AngleAxisd(pitch, Eigen::Vector3d::UnitY()) *
+                Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitX()))
+                   .toRotationMatrix();
+  T.translation() = Eigen::Vector3d(x, y, z);
+  return T;
+}
+
+// A fixed-seed trunk map with plausible spacing (about 4 m) and radii.
+Trunks forest(int n, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> xy(-15.0, 15.0), z(-0.3, 0.3), r(0.08, 0.35);
+  Trunks t;
+  while (static_cast<int>(t.size()) < n) {
+    Trunk c{xy(rng), xy(rng), z(rng), r(rng)};
+    bool ok = true;
+    for (const Trunk& o : t) ok = ok && std::hypot(o.x - c.x, o.y - c.y) > 2.0;
+    if (ok) t.push_back(c);
+  }
+  return t;
+}
+
+TEST(PoseConversion, RoundTrip) {
+  const Pose T = makePose(1.5, -2.0, 0.25, 0.02, -0.01, 2.5);
+  Pose back;
+  ASSERT_TRUE(fromMsg(toMsg(T), &back));
+  EXPECT_TRUE(back.isApprox(T, 1e-12));
+}
+
+TEST(PoseConversion, RejectsNaNAndZeroQuaternionNormalisesOthers) {
+  geometry_msgs::Pose m = toMsg(Pose::Identity());
+  Pose T;
+  std::string error;
+  m.position.y = kNaN;
+  EXPECT_FALSE(fromMsg(m, &T, &error));
+  EXPECT_NE(error.find("non-finite"), std::string::npos);
+  m = geometry_msgs::Pose();  // all zero, quaternion too
+  EXPECT_FALSE(fromMsg(m, &T, &error));
+  m.orientation.w = 2.0;  // not unit: normalised
+  ASSERT_TRUE(fromMsg(m, &T));
+  EXPECT_TRUE(T.linear().isApprox(Eigen::Matrix3d::Identity()));
+}
+
+TEST(DescriptorConversion, RoundTripRebuildsTriangles) {
+  Descriptor d = buildDescriptor(forest(25, 7), DescriptorParams());
+  d.robot = "alpha";
+  d.submap_id = 42;
+  d.stamp = 1234.5;
+  ASSERT_FALSE(d.triangles.empty());
+  const Pose T_O_S = makePose(10.0, 20.0, -1.0, 0.0, 0.0, 0.7);
+  const dtif_msgs::TrunkDescriptor m = toMsg(d, T_O_S, "alpha/odom");
+  EXPECT_EQ(m.header.frame_id, "alpha/odom");
+  EXPECT_EQ(m.faces.size(), 3 * d.triangles.size());
+
+  Descriptor back;
+  Pose T_back;
+  std::string error;
+  ASSERT_TRUE(fromMsg(m, &back, &T_back, &error)) << error;
+  EXPECT_EQ(back.robot, "alpha");
+  EXPECT_EQ(back.submap_id, 42);
+  EXPECT_NEAR(back.stamp, 1234.5, 1e-6);
+  EXPECT_TRUE(T_back.isApprox(T_O_S, 1e-12));
+  EXPECT_EQ(back.valid, d.valid);
+  EXPECT_EQ(back.invalid_reason, d.invalid_reason);
+  ASSERT_EQ(back.trunks.size(), d.trunks.size());
+  for (size_t i = 0; i < d.trunks.size(); ++i) {
+    EXPECT_NEAR(back.trunks[i].x, d.trunks[i].x, 1e-5);
+    EXPECT_NEAR(back.trunks[i].y, d.trunks[i].y, 1e-5);
+    EXPECT_NEAR(back.trunks[i].z, d.trunks[i].z, 1e-5);
+    EXPECT_NEAR(back.trunks[i].r, d.trunks[i].r, 1e-6);
+  }
+  ASSERT_EQ(back.triangles.size(), d.triangles.size());
+  for (size_t i = 0; i < d.triangles.size(); ++i) {
+    EXPECT_EQ(back.triangles[i].v, d.triangles[i].v) << "triangle " << i;
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_NEAR(back.triangles[i].len[k], d.triangles[i].len[k], 1e-4);
+      EXPECT_NEAR(back.triangles[i].r[k], d.triangles[i].r[k], 1e-6);
+    }
+  }
+  EXPECT_EQ(back.edge_hist, d.edge_hist);
+  EXPECT_EQ(back.radius_hist, d.radius_hist);
+}
+
+TEST(DescriptorConversion, RejectsBadMessages) {
+  const Descriptor d = buildDescriptor(forest(10, 3), DescriptorParams());
+  ASSERT_FALSE(d.triangles.empty());
+  const dtif_msgs::TrunkDescriptor good = toMsg(d, Pose::Identity(), "o");
+  Descriptor out;
+  std::string error;
+
+  dtif_msgs::TrunkDescriptor m = good;
+  m.faces.back() = static_cast<uint16_t>(m.trunks.size());  // index past the end
+  EXPECT_FALSE(fromMsg(m, &out, nullptr, &error));
+  EXPECT_NE(error.find("missing trunk"), std::string::npos) << error;
+
+  m = good;
+  m.faces.pop_back();  // not triples
+  EXPECT_FALSE(fromMsg(m, &out, nullptr, &error));
+
+  m = good;
+  m.faces[1] = m.faces[0];  // repeated vertex
+  EXPECT_FALSE(fromMsg(m, &out, nullptr, &error));
+
+  m = good;
+  m.trunks[0].x = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_FALSE(fromMsg(m, &out, nullptr, &error));
+
+  m = good;
+  m.edge_hist.push_back(std::numeric_limits<float>::infinity());
+  EXPECT_FALSE(fromMsg(m, &out, nullptr, &error));
+
+  m = good;
+  m.odom_pose.orientation.w = kNaN;
+  EXPECT_FALSE(fromMsg(m, &out, nullptr, &error));
+  EXPECT_NE(error.find("odom_pose"), std::string::npos) << error;
+
+  m = dtif_msgs::TrunkDescriptor();  // empty: converts, stays invalid
+  m.odom_pose.orientation.w = 1.0;
+  ASSERT_TRUE(fromMsg(m, &out, nullptr, &error)) << error;
+  EXPECT_TRUE(out.trunks.empty());
+  EXPECT_FALSE(out.valid);
+}
+
+TEST(LoopClosureConversion, RoundTrip) {
+  LoopClosure lc;
+  lc.query_robot = "bravo";
+  lc.query_id = 7;
+  lc.candidate_robot = "alpha";
+  lc.candidate_id = 3;
+  lc.T_c_q = makePose(4.0, -3.0, 0.2, 0.0, 0.0, -1.2);
+  for (int r = 0; r < 6; ++r) {
+    for (int c = 0; c < 6; ++c) lc.covariance(r, c) = r == c ? 0.01 * (r + 1) : 0.001 * (r + c);
+  }
+  lc.inliers = 3;
+  lc.score = 0.8;
+  lc.inlier_pairs = {{0, 5}, {2, 1}, {9, 4}};
+  const dtif_msgs::LoopClosure m = toMsg(lc);
+  EXPECT_EQ(m.covariance[6 * 1 + 2], lc.covariance(1, 2));  // row-major
+  LoopClosure back;
+  ASSERT_TRUE(fromMsg(m, &back));
+  EXPECT_EQ(back.query_robot, "bravo");
+  EXPECT_EQ(back.query_id, 7);
+  EXPECT_EQ(back.candidate_robot, "alpha");
+  EXPECT_EQ(back.candidate_id, 3);
+  EXPECT_TRUE(back.T_c_q.isApprox(lc.T_c_q, 1e-12));
+  EXPECT_TRUE(back.covariance.isApprox(lc.covariance));
+  EXPECT_EQ(back.inliers, 3);
+  EXPECT_DOUBLE_EQ(back.score, 0.8);
+  EXPECT_EQ(back.inlier_pairs, lc.inlier_pairs);
+
+  dtif_msgs::LoopClosure bad = m;
+  bad.inlier_candidate_trunks.pop_back();
+  EXPECT_FALSE(fromMsg(bad, &back));
+  bad = m;
+  bad.covariance[3] = kNaN;
+  EXPECT_FALSE(fromMsg(bad, &back));
+}
+
+TEST(CloudConversion, DropsNonFinitePointsAndKeepsTheRest) {
+  pcl::PointCloud<pcl::PointXYZI> in;
+  in.push_back(pcl::PointXYZI(1.0f));
+  in.back().x = 1.0f;
+  in.back().y = 2.0f;
+  in.back().z = 3.0f;
+  pcl::PointXYZI nan_point;
+  nan_point.x = std::numeric_limits<float>::quiet_NaN();
+  in.push_back(nan_point);
+  pcl::PointXYZI inf_point;
+  inf_point.z = std::numeric_limits<float>::infinity();
+  in.push_back(inf_point);
+  in.push_back(pcl::PointXYZI(0.5f));
+  in.back().x = -4.0f;
+  sensor_msgs::PointCloud2 msg;
+  pcl::toROSMsg(in, msg);
+  Cloud out;
+  size_t dropped = 0;
+  std::string error;
+  ASSERT_TRUE(fromMsg(msg, &out, &dropped, &error)) << error;
+  ASSERT_EQ(out.size(), 2u);
+  EXPECT_EQ(dropped, 2u);
+  EXPECT_FLOAT_EQ(out[0].x, 1.0f);
+  EXPECT_FLOAT_EQ(out[0].z, 3.0f);
+  EXPECT_FLOAT_EQ(out[1].x, -4.0f);
+}
+
+TEST(CloudConversion, ReadsFloat64AndEmptyClouds) {
+  sensor_msgs::PointCloud2 msg;
+  const char* names[3] = {"x", "y", "z"};
+  for (int i = 0; i < 3; ++i) {
+    sensor_msgs::PointField f;
+    f.name = names[i];
+    f.offset = 8 * i;
+    f.datatype = sensor_msgs::PointField::FLOAT64;
+    f.count = 1;
+    msg.fields.push_back(f);
+  }
+  msg.point_step = 24;
+  msg.height = 1;
+  msg.width = 1;
+  msg.row_step = 24;
+  const double xyz[3] = {1.25, -2.5, 1e5};
+  msg.data.resize(24);
+  std::memcpy(msg.data.data(), xyz, 24);
+  Cloud out;
+  ASSERT_TRUE(fromMsg(msg, &out));
+  ASSERT_EQ(out.size(), 1u);
+  EXPECT_FLOAT_EQ(out[0].y, -2.5f);
+  EXPECT_FLOAT_EQ(out[0].z, 1e5f);
+
+  msg.width = 0;
+  msg.row_step = 0;
+  msg.data.clear();
+  ASSERT_TRUE(fromMsg(msg, &out));
+  EXPECT_TRUE(out.empty());
+}
+
+TEST(CloudConversion, RejectsMissingFieldsAndShortData) {
+  pcl::PointCloud<pcl::PointXYZ> in;
+  in.push_back(pcl::PointXYZ(1, 2, 3));
+  sensor_msgs::PointCloud2 msg;
+  pcl::toROSMsg(in, msg);
+  Cloud out;
+  std::string error;
+  sensor_msgs::PointCloud2 bad = msg;
+  bad.data.resize(bad.data.size() / 2);
+  EXPECT_FALSE(fromMsg(bad, &out, nullptr, &error));
+  bad = msg;
+  bad.fields[2].name = "intensity";
+  EXPECT_FALSE(fromMsg(bad, &out, nullptr, &error));
+  EXPECT_NE(error.find("no field z"), std::string::npos) << error;
+  bad = msg;
+  bad.fields[0].datatype = sensor_msgs::PointField::UINT8;
+  EXPECT_FALSE(fromMsg(bad, &out, nullptr, &error));
+  bad = msg;
+  bad.point_step = 4;  // fields beyond the point
+  bad.row_step = 4;
+  EXPECT_FALSE(fromMsg(bad, &out, nullptr, &error));
+}
+
+}  // namespace
+}  // namespace ros_glue
+}  // namespace dtif
