@@ -375,16 +375,15 @@ float reflectivity(Material m) {
   }
 }
 
-// Fraction of the nominal max range at which a target still returns (dark targets fade early).
+// Fraction of the nominal max range (MID-360: 40 m at 10 % reflectivity) at which a target
+// still returns: grazing ground and leaves that fill only part of the beam fade earlier.
 double rangeFactor(Material m) {
   switch (m) {
     case Material::kGround:
-      return 0.6;
+      return 0.7;
     case Material::kFoliage:
-      return 0.5;
-    case Material::kBranch:
       return 0.8;
-    case Material::kLog:
+    case Material::kBranch:
       return 0.9;
     default:
       return 1.0;
