@@ -9,7 +9,7 @@ namespace {
 
 constexpr const char* kUsage =
     "usage: dtif <command> [options]\n"
-    "  simulate <scene.yaml> --out <dataset_dir> [--seed N] [--bag <file.bag>] [--png <file>]\n"
+    "  simulate <scene.yaml> --out <dataset_dir> [--seed N] [--png <file>] [--threads N]\n"
     "  extract  <cloud.pcd> [--out <trunks.csv>] [--config <params.yaml>]\n"
     "  register <query> <candidate> [--config <params.yaml>]  (PCD submaps or x,y,z,r CSVs)\n"
     "  eval     <dataset_dir> --out <dir> [--config <params.yaml>] [--unit-weights]\n";

@@ -1,0 +1,590 @@
+// Survey simulation: stem-avoiding walking paths, helmet motion, FAST-LIO2-like drifting
+// odometry, MID-360 scanning, frames and submaps.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <map>
+#include <mutex>
+#include <queue>
+#include <thread>
+
+#include "dtif/core/params.h"
+#include "dtif/core/sim_world.h"
+#include "dtif/core/simulator.h"
+
+namespace dtif::sim {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr double kDeg = kPi / 180.0;
+
+double uniform(std::mt19937_64& rng, double a, double b) {
+  return std::uniform_real_distribution<double>(a, b)(rng);
+}
+
+// Occupancy grid of the plot for path planning: stems (+ clearance) and logs are blocked.
+class WalkGrid {
+ public:
+  WalkGrid(const World& w, double clearance) : cell_(0.25) {
+    size_ = w.plotSize();
+    nx_ = static_cast<int>(size_.x() / cell_) + 1;
+    ny_ = static_cast<int>(size_.y() / cell_) + 1;
+    cost_.assign(static_cast<size_t>(nx_) * ny_, 1.0f);
+    for (const Stem& s : w.stems()) {
+      const double r = s.maxRadius() + (s.sapling ? 0.25 : clearance);
+      block(s.axisAt(0.0), r);
+      block(s.axisAt(1.7), r);
+    }
+    for (const Cylinder& c : w.cylinders()) {
+      if (c.material != Material::kLog) continue;
+      for (double a = 0; a <= c.length; a += 0.2) {
+        block((c.a + a * c.axis).head<2>(), c.radius + 0.3);
+      }
+    }
+  }
+  bool free(int i, int j) const { return inside(i, j) && cost_[idx(i, j)] < 1e8f; }
+  bool freeAt(const Eigen::Vector2d& p) const { return free(ci(p.x()), cj(p.y())); }
+  int ci(double x) const { return std::clamp(static_cast<int>(std::round(x / cell_)), 0, nx_ - 1); }
+  int cj(double y) const { return std::clamp(static_cast<int>(std::round(y / cell_)), 0, ny_ - 1); }
+  Eigen::Vector2d pos(int i, int j) const { return Eigen::Vector2d(i * cell_, j * cell_); }
+
+  // Nearest free cell (spiral search).
+  std::pair<int, int> nearestFree(int i, int j) const {
+    for (int r = 0; r < 200; ++r) {
+      for (int dj = -r; dj <= r; ++dj) {
+        for (int di = -r; di <= r; ++di) {
+          if (std::max(std::abs(di), std::abs(dj)) != r) continue;
+          if (free(i + di, j + dj)) return {i + di, j + dj};
+        }
+      }
+    }
+    throw ParamError("simulate: no free space to walk near a waypoint");
+  }
+
+  // A* (8-connected, octile heuristic), returns cell centres from a to b.
+  std::vector<Eigen::Vector2d> plan(const Eigen::Vector2d& a, const Eigen::Vector2d& b) const {
+    auto [ai, aj] = nearestFree(ci(a.x()), cj(a.y()));
+    auto [bi, bj] = nearestFree(ci(b.x()), cj(b.y()));
+    const size_t n = cost_.size();
+    std::vector<float> g(n, 1e30f);
+    std::vector<int32_t> parent(n, -1);
+    using Node = std::pair<float, int32_t>;
+    std::priority_queue<Node, std::vector<Node>, std::greater<Node>> open;
+    auto h = [&](int i, int j) {
+      const int dx = std::abs(i - bi), dy = std::abs(j - bj);
+      return static_cast<float>(std::max(dx, dy) + 0.41421356 * std::min(dx, dy));
+    };
+    const int32_t start = static_cast<int32_t>(idx(ai, aj)),
+                  goal = static_cast<int32_t>(idx(bi, bj));
+    g[start] = 0;
+    open.push({h(ai, aj), start});
+    while (!open.empty()) {
+      auto [f, cur] = open.top();
+      open.pop();
+      if (cur == goal) break;
+      const int i = cur % nx_, j = cur / nx_;
+      if (f > g[cur] + h(i, j) + 1e-3f) continue;
+      for (int dj = -1; dj <= 1; ++dj) {
+        for (int di = -1; di <= 1; ++di) {
+          if (!di && !dj) continue;
+          if (!free(i + di, j + dj)) continue;
+          const size_t nb = idx(i + di, j + dj);
+          const float step = (di && dj) ? 1.41421356f : 1.0f;
+          const float ng = g[cur] + step * cost_[nb];
+          if (ng < g[nb]) {
+            g[nb] = ng;
+            parent[nb] = cur;
+            open.push({ng + h(i + di, j + dj), static_cast<int32_t>(nb)});
+          }
+        }
+      }
+    }
+    if (parent[goal] < 0 && goal != start) {
+      throw ParamError("simulate: a waypoint cannot be reached (blocked by stems or logs)");
+    }
+    std::vector<Eigen::Vector2d> path;
+    for (int32_t c = goal; c >= 0; c = parent[c]) path.push_back(pos(c % nx_, c / nx_));
+    std::reverse(path.begin(), path.end());
+    return path;
+  }
+
+ private:
+  bool inside(int i, int j) const { return i >= 0 && j >= 0 && i < nx_ && j < ny_; }
+  size_t idx(int i, int j) const { return static_cast<size_t>(j) * nx_ + i; }
+  void block(const Eigen::Vector2d& c, double r) {
+    const int i0 = ci(c.x() - r), i1 = ci(c.x() + r), j0 = cj(c.y() - r), j1 = cj(c.y() + r);
+    for (int j = j0; j <= j1; ++j) {
+      for (int i = i0; i <= i1; ++i) {
+        const double d = (pos(i, j) - c).norm();
+        if (d <= r) {
+          cost_[idx(i, j)] = 1e9f;
+        } else if (d <= r + 0.5 && cost_[idx(i, j)] < 1e8f) {
+          cost_[idx(i, j)] = std::max(cost_[idx(i, j)], 3.0f);  // prefer some extra room
+        }
+      }
+    }
+  }
+
+  double cell_;
+  Eigen::Vector2d size_;
+  int nx_ = 0, ny_ = 0;
+  std::vector<float> cost_;
+};
+
+// Smooths a grid path (Laplacian, keeping every point in free space) and resamples it at ds.
+std::vector<Eigen::Vector2d> smoothPath(std::vector<Eigen::Vector2d> p, const WalkGrid& grid,
+                                        double ds) {
+  for (int it = 0; it < 60; ++it) {
+    for (size_t i = 1; i + 1 < p.size(); ++i) {
+      const Eigen::Vector2d q = 0.5 * p[i] + 0.25 * (p[i - 1] + p[i + 1]);
+      if (grid.freeAt(q)) p[i] = q;
+    }
+  }
+  std::vector<Eigen::Vector2d> out{p.front()};
+  double carry = 0.0;
+  for (size_t i = 1; i < p.size(); ++i) {
+    const Eigen::Vector2d seg = p[i] - p[i - 1];
+    const double len = seg.norm();
+    double s = ds - carry;
+    while (s <= len) {
+      out.push_back(p[i - 1] + seg * (s / len));
+      s += ds;
+    }
+    carry = len - (s - ds);
+  }
+  if ((out.back() - p.back()).norm() > 1e-6) out.push_back(p.back());
+  return out;
+}
+
+double wrapAngle(double a) {
+  while (a > kPi) a -= 2 * kPi;
+  while (a < -kPi) a += 2 * kPi;
+  return a;
+}
+
+Eigen::Matrix3d rpy(double roll, double pitch, double yaw) {
+  return (Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) *
+          Eigen::AngleAxisd(pitch, Eigen::Vector3d::UnitY()) *
+          Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitX()))
+      .toRotationMatrix();
+}
+
+double yawOf(const Eigen::Matrix3d& R) { return std::atan2(R(1, 0), R(0, 0)); }
+
+// Ground truth and odometry of one robot.
+Trajectory makeTrajectory(const World& world, const WalkGrid& grid, const SceneParams& scene,
+                          const RobotRoute& route, std::mt19937_64& rng) {
+  const MotionParams& mp = scene.motion;
+  std::vector<Eigen::Vector2d> raw;
+  for (size_t i = 0; i + 1 < route.waypoints.size(); ++i) {
+    auto leg = grid.plan(route.waypoints[i], route.waypoints[i + 1]);
+    if (!raw.empty()) leg.erase(leg.begin());
+    raw.insert(raw.end(), leg.begin(), leg.end());
+  }
+  const double ds = 0.05;
+  const std::vector<Eigen::Vector2d> path = smoothPath(raw, grid, ds);
+  const size_t np = path.size();
+  auto at = [&](double s) {
+    const double f = std::clamp(s / ds, 0.0, static_cast<double>(np - 1));
+    const size_t i = std::min(static_cast<size_t>(f), np - 2);
+    return Eigen::Vector2d(path[i] + (f - i) * (path[i + 1] - path[i]));
+  };
+  const double length = ds * static_cast<double>(np - 1);
+
+  // Random smooth speed and head motion (sums of slow sinusoids with random phases).
+  const double ph[8] = {uniform(rng, 0, 2 * kPi), uniform(rng, 0, 2 * kPi),
+                        uniform(rng, 0, 2 * kPi), uniform(rng, 0, 2 * kPi),
+                        uniform(rng, 0, 2 * kPi), uniform(rng, 0, 2 * kPi),
+                        uniform(rng, 0, 2 * kPi), uniform(rng, 0, 2 * kPi)};
+  const double dt = 1.0 / kTrajectoryRateHz;
+  Trajectory tr;
+  tr.robot = route.name;
+  tr.start_s = route.start_s;
+  double s = 0.0, t = 0.0, yaw = 0.0, z_f = 0.0;
+  bool first = true;
+  const OdometryParams& op = scene.odometry;
+  auto signedRate = [&](double lo, double hi) {
+    return (uniform(rng, 0, 1) < 0.5 ? -1.0 : 1.0) * uniform(rng, lo, hi);
+  };
+  const Eigen::Vector3d drift(signedRate(op.trans_drift_min, op.trans_drift_max),
+                              signedRate(op.trans_drift_min, op.trans_drift_max),
+                              signedRate(op.trans_drift_min, op.trans_drift_max));
+  const double yaw_rate = signedRate(op.yaw_drift_min_deg_per_m, op.yaw_drift_max_deg_per_m) * kDeg;
+  std::normal_distribution<double> n01(0.0, 1.0);
+  double tilt_r = op.tilt_sd_deg * kDeg * n01(rng), tilt_p = op.tilt_sd_deg * kDeg * n01(rng);
+  const double a_ou = std::exp(-dt / op.tilt_time_s);
+  const double b_ou = op.tilt_sd_deg * kDeg * std::sqrt(1 - a_ou * a_ou);
+  Pose T_W_O = Pose::Identity();
+  Eigen::Vector3d p_est(0, 0, 0), p_prev(0, 0, 0);
+  double dpsi = 0.0, dist = 0.0;
+  while (true) {
+    const double v_mid = 0.5 * (mp.speed_min_mps + mp.speed_max_mps);
+    const double v_amp = 0.5 * (mp.speed_max_mps - mp.speed_min_mps);
+    // Slow down where the path turns (looking ahead 1.5 m).
+    const Eigen::Vector2d t0 = at(s + 0.5) - at(s), t1 = at(s + 1.5) - at(s + 1.0);
+    const double turn = (t0.norm() > 1e-6 && t1.norm() > 1e-6)
+                            ? std::acos(std::clamp(t0.normalized().dot(t1.normalized()), -1.0, 1.0))
+                            : 0.0;
+    double v = v_mid + v_amp * (0.6 * std::sin(2 * kPi * t / 37.0 + ph[0]) +
+                                0.4 * std::sin(2 * kPi * t / 13.0 + ph[1]));
+    v = std::max(mp.speed_min_mps, v - 0.8 * turn * v_amp);
+    const Eigen::Vector2d xy = at(s);
+    const Eigen::Vector2d ahead = at(s + 1.0) - at(std::max(0.0, s - 0.3));
+    const double path_yaw = ahead.norm() > 1e-6 ? std::atan2(ahead.y(), ahead.x()) : yaw;
+    const double look =
+        mp.look_around_deg * kDeg *
+        (0.7 * std::sin(2 * kPi * t / 9.0 + ph[2]) + 0.3 * std::sin(2 * kPi * t / 3.7 + ph[3]));
+    const double target = path_yaw + look;
+    if (first) {
+      yaw = target;
+    } else {
+      yaw += wrapAngle(target - yaw) * (1.0 - std::exp(-dt / 0.4));  // head turns smoothly
+    }
+    const double ground = world.terrainHeight(xy.x(), xy.y());
+    z_f = first ? ground : z_f + (ground - z_f) * (1.0 - std::exp(-dt / 0.3));
+    const double step_ph = 2 * kPi * mp.step_frequency_hz * t;
+    const double z = z_f + mp.head_height_m + mp.bob_amplitude_m * std::sin(step_ph + ph[4]);
+    const double roll = mp.sway_deg * kDeg * std::sin(0.5 * step_ph + ph[5]);
+    const double pitch = mp.sway_deg * kDeg *
+                         (0.5 * std::sin(step_ph + ph[6]) + std::sin(2 * kPi * t / 11.0 + ph[7]));
+    Pose T_W_B = Pose::Identity();
+    T_W_B.linear() = rpy(roll, pitch, yaw);
+    T_W_B.translation() = Eigen::Vector3d(xy.x(), xy.y(), z);
+
+    // Odometry: integrate the true motion with yaw drift, per-axis translation drift (both per
+    // metre walked) and a slowly wandering roll/pitch error (Ornstein-Uhlenbeck).
+    const Eigen::Vector3d p = T_W_B.translation();
+    if (first) {
+      T_W_O.linear() = rotZ(yaw);  // camera_init: gravity-aligned, at the start pose
+      T_W_O.translation() = p;
+      p_est = p;
+    } else {
+      const double step = (p - p_prev).norm();
+      dist += step;
+      dpsi += yaw_rate * step;
+      p_est += rotZ(dpsi) * (p - p_prev) + drift * step;
+      tilt_r = a_ou * tilt_r + b_ou * n01(rng);
+      tilt_p = a_ou * tilt_p + b_ou * n01(rng);
+    }
+    p_prev = p;
+    Pose T_W_Best = Pose::Identity();  // the estimate, expressed as if it were in W
+    T_W_Best.linear() = rpy(tilt_r, tilt_p, 0.0) * rotZ(dpsi) * T_W_B.linear();
+    T_W_Best.translation() = p_est;
+    tr.T_W_B.push_back(T_W_B);
+    tr.T_O_B.push_back(T_W_O.inverse() * T_W_Best);
+    tr.distance.push_back(dist);
+    first = false;
+    if (s >= length) break;
+    s += v * dt;
+    t += dt;
+  }
+  return tr;
+}
+
+// Gravity-aligned submap frame from an odometry pose: yaw only, origin at the sensor.
+Pose gravityAligned(const Pose& T_O_B) {
+  Pose T = Pose::Identity();
+  T.linear() = rotZ(yawOf(T_O_B.linear()));
+  T.translation() = T_O_B.translation();
+  return T;
+}
+
+// Centroid voxel filter, filled incrementally (bounded memory: one entry per voxel). Open
+// addressing with linear probing: this runs once per return, so it must be cheap.
+class VoxelAccumulator {
+ public:
+  explicit VoxelAccumulator(double voxel) : inv_(1.0 / voxel) { clear(); }
+  void add(const Eigen::Vector3f& p) {
+    const int64_t x = static_cast<int64_t>(std::floor(p.x() * inv_)) + (1 << 20);
+    const int64_t y = static_cast<int64_t>(std::floor(p.y() * inv_)) + (1 << 20);
+    const int64_t z = static_cast<int64_t>(std::floor(p.z() * inv_)) + (1 << 20);
+    if (x < 0 || y < 0 || z < 0 || x >= (1 << 21) || y >= (1 << 21) || z >= (1 << 21)) return;
+    const uint64_t key = (static_cast<uint64_t>(x) << 42) | (static_cast<uint64_t>(y) << 21) |
+                         static_cast<uint64_t>(z);
+    if (2 * (used_ + 1) > cells_.size()) grow();
+    Cell& c = find(key);
+    if (c.n == 0) {
+      c.key = key;
+      ++used_;
+    }
+    c.sum += p;
+    ++c.n;
+    ++raw_;
+  }
+  std::vector<Eigen::Vector3f> centroids() const {
+    std::vector<const Cell*> v;
+    v.reserve(used_);
+    for (const Cell& c : cells_) {
+      if (c.n) v.push_back(&c);
+    }
+    std::sort(v.begin(), v.end(), [](const Cell* a, const Cell* b) { return a->key < b->key; });
+    std::vector<Eigen::Vector3f> out;
+    out.reserve(v.size());
+    for (const Cell* c : v) out.push_back(c->sum / static_cast<float>(c->n));
+    return out;
+  }
+  size_t raw() const { return raw_; }
+  void clear() {
+    cells_.assign(1 << 16, Cell());
+    used_ = 0;
+    raw_ = 0;
+  }
+
+ private:
+  // Sums relative to nothing: submap coordinates stay within ~50 m, so float sums of a few
+  // hundred points keep sub-millimetre precision.
+  struct Cell {
+    uint64_t key = 0;
+    Eigen::Vector3f sum{0, 0, 0};
+    uint32_t n = 0;
+  };
+  Cell& find(uint64_t key) {
+    const size_t mask = cells_.size() - 1;
+    size_t i = (key * 0x9E3779B97F4A7C15ULL) >> 20 & mask;
+    while (cells_[i].n != 0 && cells_[i].key != key) i = (i + 1) & mask;
+    return cells_[i];
+  }
+  void grow() {
+    std::vector<Cell> old;
+    old.swap(cells_);
+    cells_.assign(old.size() * 2, Cell());
+    for (const Cell& c : old) {
+      if (c.n) find(c.key) = c;
+    }
+  }
+  double inv_;
+  std::vector<Cell> cells_;
+  size_t used_ = 0;
+  size_t raw_ = 0;
+};
+
+float reflectivity(Material m) {
+  switch (m) {
+    case Material::kGround:
+      return 25.0f;
+    case Material::kBark:
+      return 60.0f;
+    case Material::kBranch:
+      return 45.0f;
+    case Material::kFoliage:
+      return 15.0f;
+    case Material::kLog:
+      return 40.0f;
+    default:
+      return 0.0f;
+  }
+}
+
+// Fraction of the nominal max range (MID-360: 40 m at 10 % reflectivity) at which a target
+// still returns: grazing ground and leaves that fill only part of the beam fade earlier.
+double rangeFactor(Material m) {
+  switch (m) {
+    case Material::kGround:
+      return 0.7;
+    case Material::kFoliage:
+      return 0.8;
+    case Material::kBranch:
+      return 0.9;
+    default:
+      return 1.0;
+  }
+}
+
+}  // namespace
+
+Simulator::Simulator(const SceneParams& scene, uint64_t seed) : scene_(scene), seed_(seed) {
+  const std::string problems = scene.validate();
+  if (!problems.empty()) throw ParamError("scene: " + problems.substr(0, problems.find('\n')));
+  world_ = std::make_unique<World>(scene_, seed_);
+  const WalkGrid grid(*world_, scene_.motion.clearance_m);
+  for (size_t r = 0; r < scene_.robots.size(); ++r) {
+    std::mt19937_64 rng(seed_ * 1000003ULL + 7919ULL * (r + 1));
+    trajectories_.push_back(makeTrajectory(*world_, grid, scene_, scene_.robots[r], rng));
+  }
+}
+
+Simulator::~Simulator() = default;
+
+SimulationStats Simulator::run(FrameSink* frames, SubmapSink* submaps, int threads) {
+  const auto t_start = std::chrono::steady_clock::now();
+  const SensorParams& sp = scene_.sensor;
+  const double dur = scene_.submap.duration_s;
+  // Submap ids: rank of the anchor stamp over all robots (acquisition order of submaps.csv).
+  struct Slot {
+    double stamp;
+    int robot;
+    int window;
+  };
+  std::vector<Slot> slots;
+  const int slices_per_frame = static_cast<int>(std::lround(kTrajectoryRateHz / sp.frame_rate_hz));
+  // Only whole frames are scanned, and only windows that are complete become submaps.
+  auto numFrames = [&](const Trajectory& tr) {
+    return static_cast<int>((tr.T_W_B.size() - 1) / slices_per_frame);
+  };
+  auto numWindows = [&](const Trajectory& tr) {
+    const double scanned = numFrames(tr) * slices_per_frame / kTrajectoryRateHz;
+    return static_cast<int>(std::floor(scanned / dur + 1e-9));
+  };
+  for (size_t r = 0; r < trajectories_.size(); ++r) {
+    const int n = numWindows(trajectories_[r]);
+    for (int w = 0; w < n; ++w) {
+      slots.push_back(
+          {scene_.epoch_s + trajectories_[r].start_s + (w + 0.5) * dur, static_cast<int>(r), w});
+    }
+  }
+  std::sort(slots.begin(), slots.end(), [](const Slot& a, const Slot& b) {
+    return a.stamp != b.stamp ? a.stamp < b.stamp : a.robot < b.robot;
+  });
+  std::map<std::pair<int, int>, int64_t> slot_id;
+  for (size_t i = 0; i < slots.size(); ++i) slot_id[{slots[i].robot, slots[i].window}] = i;
+
+  std::mutex sink_mutex;
+  SimulationStats stats;
+  stats.stems = 0;
+  for (const auto& s : world_->stems()) (s.sapling ? stats.saplings : stats.stems)++;
+  stats.shrubs = world_->numShrubs();
+  stats.logs = world_->numLogs();
+  stats.branches = world_->cylinders().size() - world_->numLogs();
+  double submap_points = 0.0;
+
+  auto simulateRobot = [&](int r) {
+    const Trajectory& tr = trajectories_[r];
+    const ScanPattern pattern(sp);
+    World::RayScratch scratch = world_->makeScratch(seed_ * 31 + 1000 + r);
+    std::mt19937_64 rng(seed_ * 7 + 77 + r);
+    std::normal_distribution<double> noise(0.0, sp.range_noise_m);
+    std::normal_distribution<double> jitter(0.0, 0.25 * sp.divergence_deg * kDeg);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    const size_t n_samples = tr.T_W_B.size();
+    const int n_frames = numFrames(tr);
+    const int n_windows = numWindows(tr);
+    // Each robot's sensor starts at a different point of the (non-repetitive) pattern.
+    uint64_t k_pt = static_cast<uint64_t>(r) * 7777777ULL;
+    double pts_acc = 0.0;
+    const double pts_per_slice = sp.points_per_s / kTrajectoryRateHz;
+    VoxelAccumulator voxels(scene_.submap.voxel_m);
+    int window = -1;
+    Pose T_S_O = Pose::Identity(), T_O_S = Pose::Identity(), T_W_S = Pose::Identity();
+    Frame frame;
+    frame.robot = tr.robot;
+    frame.robot_index = r;
+    size_t rays = 0, returns = 0;
+    auto flushSubmap = [&]() {
+      if (window < 0 || window >= n_windows) return;
+      Submap sm;
+      sm.id = slot_id.at({r, window});
+      sm.robot = tr.robot;
+      sm.robot_index = r;
+      sm.stamp = scene_.epoch_s + tr.start_s + (window + 0.5) * dur;
+      sm.T_O_S = T_O_S;
+      sm.T_W_S = T_W_S;
+      sm.points = voxels.centroids();
+      sm.raw_points = voxels.raw();
+      std::lock_guard<std::mutex> lock(sink_mutex);
+      stats.submaps++;
+      submap_points += static_cast<double>(sm.points.size());
+      if (submaps) submaps->onSubmap(sm);
+    };
+    for (int f = 0; f < n_frames; ++f) {
+      frame.points.clear();
+      frame.intensity.clear();
+      for (int sl = 0; sl < slices_per_frame; ++sl) {
+        const size_t i = static_cast<size_t>(f) * slices_per_frame + sl;
+        const double t_robot = static_cast<double>(i) / kTrajectoryRateHz;
+        const int w = static_cast<int>(std::floor(t_robot / dur + 1e-9));
+        if (w != window) {
+          flushSubmap();
+          voxels.clear();
+          window = w;
+          if (window < n_windows) {
+            // Anchor at the window's centre: the submap's pose is defined there.
+            const size_t ia = std::min(
+                n_samples - 1,
+                static_cast<size_t>(std::lround((window + 0.5) * dur * kTrajectoryRateHz)));
+            T_O_S = gravityAligned(tr.T_O_B[ia]);
+            T_S_O = T_O_S.inverse();
+            // Ground truth: the estimate maps to W through T_W_B * T_O_B^-1 at the anchor.
+            T_W_S = tr.T_W_B[ia] * tr.T_O_B[ia].inverse() * T_O_S;
+          }
+        }
+        const Pose& T_W_B = tr.T_W_B[i];
+        const Pose& T_O_B = tr.T_O_B[i];
+        pts_acc += pts_per_slice;
+        const int n_pts = static_cast<int>(pts_acc);
+        pts_acc -= n_pts;
+        const Eigen::Vector3d o = T_W_B.translation();
+        for (int k = 0; k < n_pts; ++k, ++k_pt) {
+          Eigen::Vector3d dir_B = pattern.direction(k_pt);
+          if (sp.divergence_deg > 0) {
+            // The beam's footprint: the return comes from somewhere inside it.
+            dir_B += Eigen::Vector3d(jitter(rng), jitter(rng), jitter(rng));
+            dir_B.normalize();
+          }
+          const Eigen::Vector3d dir_W = T_W_B.linear() * dir_B;
+          ++rays;
+          const RayHit hit = world_->castRay(o, dir_W, sp.min_range_m, sp.max_range_m, &scratch);
+          if (hit.material == Material::kNone) continue;
+          const double fade = unit(rng);
+          if (hit.range > sp.max_range_m * rangeFactor(hit.material) * (0.75 + 0.25 * fade)) {
+            continue;
+          }
+          if (unit(rng) < sp.dropout) continue;
+          const double range = hit.range + noise(rng);
+          if (range < sp.min_range_m) continue;
+          const Eigen::Vector3d p_O = T_O_B * (dir_B * range);  // de-skewed as FAST-LIO2 does
+          const Eigen::Vector3f p_Of = p_O.cast<float>();
+          frame.points.push_back(p_Of);
+          frame.intensity.push_back(
+              std::clamp(reflectivity(hit.material) * static_cast<float>(0.8 + 0.4 * unit(rng)),
+                         0.0f, 255.0f));
+          ++returns;
+          if (window < n_windows) voxels.add((T_S_O * p_O).cast<float>());
+        }
+      }
+      const size_t i_end = static_cast<size_t>(f + 1) * slices_per_frame;
+      frame.stamp = scene_.epoch_s + tr.start_s + static_cast<double>(i_end) / kTrajectoryRateHz;
+      frame.T_O_B = tr.T_O_B[i_end];
+      frame.T_W_B = tr.T_W_B[i_end];
+      if (frames) {
+        std::lock_guard<std::mutex> lock(sink_mutex);
+        frames->onFrame(frame);
+      }
+    }
+    // The last window closes when its final slice has been scanned.
+    flushSubmap();  // no-op unless the last window is complete
+    std::lock_guard<std::mutex> lock(sink_mutex);
+    stats.frames += static_cast<size_t>(n_frames);
+    stats.rays += rays;
+    stats.returns += returns;
+  };
+
+  int n_threads =
+      threads > 0 ? threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  n_threads = std::min<int>(n_threads, static_cast<int>(trajectories_.size()));
+  if (n_threads <= 1) {
+    for (size_t r = 0; r < trajectories_.size(); ++r) simulateRobot(static_cast<int>(r));
+  } else {
+    std::vector<std::thread> pool;
+    std::mutex next_mutex;
+    size_t next = 0;
+    for (int t = 0; t < n_threads; ++t) {
+      pool.emplace_back([&]() {
+        while (true) {
+          size_t r;
+          {
+            std::lock_guard<std::mutex> lock(next_mutex);
+            if (next >= trajectories_.size()) return;
+            r = next++;
+          }
+          simulateRobot(static_cast<int>(r));
+        }
+      });
+    }
+    for (auto& th : pool) th.join();
+  }
+  stats.mean_submap_points = stats.submaps ? submap_points / stats.submaps : 0.0;
+  stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+  return stats;
+}
+
+}  // namespace dtif::sim
