@@ -405,6 +405,8 @@ Trunks readTrunkCsv(const std::string& path) {
   }
   t.header = first ? raw.rows[0] : std::vector<std::string>{"x", "y", "z", "r"};
   while (t.header.size() < 4) t.header.push_back("column" + std::to_string(t.header.size()));
+  // Optional fifth column (dtif extract writes it): was the stem base observed.
+  const bool has_base_seen = t.header.size() >= 5 && t.header[4] == "base_seen";
   Trunks trunks;
   for (size_t i = first; i < t.rows.size(); ++i) {
     if (t.rows[i].size() < 4) {
@@ -418,6 +420,16 @@ Trunks readTrunkCsv(const std::string& path) {
     if (tr.r <= 0.0) {
       fail(path, "line " + std::to_string(t.line_numbers[i]) + ": radius must be positive");
     }
+    if (has_base_seen) {
+      if (t.rows[i].size() < 5) {
+        fail(path, "line " + std::to_string(t.line_numbers[i]) + ": expected x,y,z,r,base_seen");
+      }
+      const std::string& b = t.rows[i][4];
+      if (b != "0" && b != "1") {
+        fail(path, "line " + std::to_string(t.line_numbers[i]) + ": base_seen must be 0 or 1");
+      }
+      tr.base_seen = b == "1";
+    }
     trunks.push_back(tr);
   }
   if (trunks.empty()) fail(path, "no trunks (expected rows x,y,z,r)");
@@ -426,8 +438,10 @@ Trunks readTrunkCsv(const std::string& path) {
 
 void writeTrunkCsv(const std::string& path, const Trunks& trunks) {
   auto os = openForWrite(path);
-  os << "x,y,z,r\n";
-  for (const auto& t : trunks) os << t.x << ',' << t.y << ',' << t.z << ',' << t.r << '\n';
+  os << "x,y,z,r,base_seen\n";
+  for (const auto& t : trunks) {
+    os << t.x << ',' << t.y << ',' << t.z << ',' << t.r << ',' << (t.base_seen ? 1 : 0) << '\n';
+  }
   closeChecked(os, path);
 }
 

@@ -80,6 +80,7 @@ Trunks cleanTrunks(const Trunks& in) {
     Trunk& t = out[slot[r]];
     t.r += in[i].r;
     t.z += in[i].z;
+    t.base_seen = t.base_seen && in[i].base_seen;
     ++count[slot[r]];
   }
   for (size_t i = 0; i < out.size(); ++i) {
@@ -152,7 +153,7 @@ void finishDescriptor(Descriptor& d, const DescriptorParams& params) {
 // ---- wire format helpers ---------------------------------------------------------------------
 
 constexpr uint32_t kMagic = 0x46495444;  // "DTIF" little endian
-constexpr uint16_t kVersion = 1;
+constexpr uint16_t kVersion = 2;         // 2: base_seen bits
 
 /// FNV-1a: detects truncated or flipped bytes (the radio link and files both corrupt data).
 uint32_t fnv1a(const uint8_t* p, size_t n) {
@@ -322,6 +323,7 @@ Descriptor buildDescriptor(const Trunks& input, const DescriptorParams& params) 
 //   u32 magic, u16 version, u16 flags(bit0 valid), u32 payload bytes, u32 FNV-1a of payload
 //   payload: str robot, i64 submap_id, f64 stamp, str invalid_reason,
 //            f64 origin x, y, z; u16 n_trunks; n x (f32 dx, dy, dz, r);
+//            ceil(n / 8) bytes of base_seen bits (trunk i: byte i / 8, bit i % 8);
 //            u32 n_faces; n x u16[3] canonical vertex indices;
 //            u8 n_edge_bins, bins x u8; u8 n_radius_bins, bins x u8  (value * 255, rounded)
 std::vector<uint8_t> encodeDescriptor(const Descriptor& d) {
@@ -347,6 +349,12 @@ std::vector<uint8_t> encodeDescriptor(const Descriptor& d) {
     w.put<float>(static_cast<float>(t.y - oy));
     w.put<float>(static_cast<float>(t.z - oz));
     w.put<float>(static_cast<float>(t.r));
+  }
+  for (size_t i = 0; i < d.trunks.size(); i += 8) {
+    uint8_t bits = 0;
+    for (size_t b = 0; b < 8 && i + b < d.trunks.size(); ++b)
+      bits |= static_cast<uint8_t>(d.trunks[i + b].base_seen ? 1u << b : 0u);
+    w.put<uint8_t>(bits);
   }
   w.put<uint32_t>(static_cast<uint32_t>(d.triangles.size()));
   for (const Triangle& t : d.triangles) {
@@ -397,6 +405,11 @@ Descriptor decodeDescriptor(const std::vector<uint8_t>& bytes, const DescriptorP
     t.z = oz + r.get<float>();
     t.r = r.get<float>();
     if (!finiteTrunk(t)) throw std::runtime_error("descriptor has a non-finite trunk");
+  }
+  for (size_t i = 0; i < d.trunks.size(); i += 8) {
+    const uint8_t bits = r.get<uint8_t>();
+    for (size_t b = 0; b < 8 && i + b < d.trunks.size(); ++b)
+      d.trunks[i + b].base_seen = (bits >> b) & 1u;
   }
   const uint32_t nf = r.get<uint32_t>();
   if (static_cast<uint64_t>(nf) * 6 > r.remaining()) {

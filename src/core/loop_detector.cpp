@@ -1,6 +1,7 @@
 // Descriptor database, loop query and false-loop verification.
 #include "dtif/core/loop_detector.h"
 
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -26,6 +27,10 @@ constexpr double kRollPitchVar = (0.5 * M_PI / 180.0) * (0.5 * M_PI / 180.0);
 /// millimetre certainty (trunk centres are only fitted to ~1-2 cm).
 constexpr double kMinXyVar = 0.02 * 0.02;
 constexpr double kMinZVar = 0.03 * 0.03;
+/// t_z with no seen stem base on both sides: a guess of a few metres [m^2].
+constexpr double kUnobservedZVar = 3.0 * 3.0;
+/// Roll/pitch fitted to seen stem bases (VerifierParams::tilt_min_pairs): (0.15 deg)^2.
+constexpr double kFittedTiltVar = (0.15 * M_PI / 180.0) * (0.15 * M_PI / 180.0);
 constexpr double kMinYawVar = (0.1 * M_PI / 180.0) * (0.1 * M_PI / 180.0);
 
 using P2 = Eigen::Vector2d;
@@ -103,6 +108,96 @@ std::vector<std::pair<int, int>> mutualPairs(const std::vector<P2>& pq, const st
     if (nq[i] >= 0 && nc[nq[i]] == static_cast<int>(i)) out.emplace_back(i, nq[i]);
   }
   return out;
+}
+
+/// Elevation (and, with enough well-spread pairs, residual roll/pitch) of `T` from the pairs
+/// whose stem bases were both seen; all pairs vote only when none was. A robust (Tukey) fit of
+/// dz = t_z + a x + b y over the pairs, x, y the query trunk in the candidate frame; the plane's
+/// slopes are the small rotation left between the two gravity estimates.
+/// Returns the RMS elevation residual over the pairs used [m]; `z_pairs` receives the number of
+/// seen-base pairs (0: t_z is a guess), `tilted` whether roll/pitch were fitted.
+double refineElevation(const Descriptor& q, const Descriptor& c,
+                       const std::vector<std::pair<int, int>>& pairs, const VerifierParams& params,
+                       Pose* T, int* z_pairs, bool* tilted) {
+  constexpr double kPi = 3.14159265358979323846;
+  std::vector<std::pair<int, int>> use;
+  for (const auto& [i, j] : pairs)
+    if (q.trunks[i].base_seen && c.trunks[j].base_seen) use.emplace_back(i, j);
+  const bool seen = !use.empty();
+  *z_pairs = static_cast<int>(use.size());
+  *tilted = false;
+  if (!seen) use = pairs;
+  if (use.empty()) return 0.0;
+  const auto rmsZ = [&]() {
+    double sz = 0.0;
+    for (const auto& [i, j] : use) {
+      const Eigen::Vector3d p = *T * Eigen::Vector3d(q.trunks[i].x, q.trunks[i].y, q.trunks[i].z);
+      sz += (c.trunks[j].z - p.z()) * (c.trunks[j].z - p.z());
+    }
+    return std::sqrt(sz / static_cast<double>(use.size()));
+  };
+  std::vector<Eigen::Vector2d> xy;
+  std::vector<double> dz;
+  for (const auto& [i, j] : use) {
+    const Eigen::Vector3d p = *T * Eigen::Vector3d(q.trunks[i].x, q.trunks[i].y, q.trunks[i].z);
+    xy.push_back(p.head<2>());
+    dz.push_back(c.trunks[j].z - p.z());
+  }
+  std::vector<double> sorted = dz;
+  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+  const double median = sorted[sorted.size() / 2];
+  T->translation().z() += median;
+
+  if (!seen || params.tilt_min_pairs <= 0 || static_cast<int>(use.size()) < params.tilt_min_pairs)
+    return rmsZ();
+  Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+  for (const auto& p : xy) mean += p;
+  mean /= static_cast<double>(xy.size());
+  Eigen::Matrix2d cov = Eigen::Matrix2d::Zero();
+  for (const auto& p : xy) cov += (p - mean) * (p - mean).transpose();
+  cov /= static_cast<double>(xy.size());
+  const double spread = std::sqrt(
+      std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(cov).eigenvalues().minCoeff()));
+  if (spread < params.tilt_min_spread_m) return rmsZ();
+  // IRLS with Tukey weights from the median start; c = 0.15 m (base estimates are cm-level,
+  // a wrong base is decimetres off).
+  constexpr double kTukeyC = 0.15;
+  Eigen::Vector3d s(median, 0.0, 0.0);  // dz = s0 + s1 (x - mean.x) + s2 (y - mean.y)
+  for (int it = 0; it < 10; ++it) {
+    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+    Eigen::Vector3d b = Eigen::Vector3d::Zero();
+    for (size_t k = 0; k < xy.size(); ++k) {
+      const Eigen::Vector3d J(1.0, xy[k].x() - mean.x(), xy[k].y() - mean.y());
+      const double r = dz[k] - J.dot(s);
+      const double u = r / kTukeyC;
+      if (std::abs(u) >= 1.0) continue;
+      const double w = (1.0 - u * u) * (1.0 - u * u);
+      A += w * J * J.transpose();
+      b += w * J * dz[k];
+    }
+    if (A.determinant() <= 1e-9) return rmsZ();
+    const Eigen::Vector3d next = A.ldlt().solve(b);
+    if (!next.allFinite()) return rmsZ();
+    const bool done = (next - s).norm() < 1e-7;
+    s = next;
+    if (done) break;
+  }
+  const double max_slope = std::tan(params.max_tilt_deg * kPi / 180.0);
+  if (std::hypot(s(1), s(2)) > max_slope) return rmsZ();
+  // z' = z - beta x + alpha y for a small rotation R_x(alpha) R_y(beta) about `mean`.
+  const double alpha = std::asin(std::clamp(s(2), -1.0, 1.0));
+  const double beta = -std::asin(std::clamp(s(1), -1.0, 1.0));
+  const Eigen::Matrix3d R_tilt = (Eigen::AngleAxisd(alpha, Eigen::Vector3d::UnitX()) *
+                                  Eigen::AngleAxisd(beta, Eigen::Vector3d::UnitY()))
+                                     .toRotationMatrix();
+  // Rotate about the pairs' centroid at its refined elevation, so t_z stays well conditioned.
+  Pose T_tilt = Pose::Identity();
+  const Eigen::Vector3d centre(mean.x(), mean.y(), 0.0);
+  T_tilt.linear() = R_tilt;
+  T_tilt.translation() = centre - R_tilt * centre + Eigen::Vector3d(0, 0, s(0) - median);
+  *T = T_tilt * *T;
+  *tilted = true;
+  return rmsZ();
 }
 
 /// Guided matching: re-associate every trunk by mutual nearest neighbour under the current
@@ -203,6 +298,10 @@ std::string VerifierParams::validate() const {
   }
   if (min_covisible < 0) err << "min_covisible must be >= 0; ";
   if (!(max_ambiguity >= 0.0 && max_ambiguity <= 1.0)) err << "max_ambiguity must be in [0, 1]; ";
+  if (tilt_min_pairs < 0) err << "tilt_min_pairs must be >= 0 (0: no tilt); ";
+  if (tilt_min_pairs > 0 && tilt_min_pairs < 4) err << "tilt_min_pairs must be 0 or >= 4; ";
+  if (!(tilt_min_spread_m >= 0.0)) err << "tilt_min_spread_m must be >= 0; ";
+  if (!(max_tilt_deg > 0.0 && max_tilt_deg <= 10.0)) err << "max_tilt_deg must be in (0, 10]; ";
   return err.str();
 }
 
@@ -248,7 +347,8 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
   v.ambiguity = std::max(amb_yaw, amb_t);
   if (v.ambiguity > params.max_ambiguity) return reject("ambiguous");
 
-  const Refined ref = guidedRefine(q, c, est.T_c_q, params.match_radius_m);
+  Refined ref = guidedRefine(q, c, est.T_c_q, params.match_radius_m);
+  ref.rms_z = refineElevation(q, c, ref.pairs, params, &ref.T, &v.z_pairs, &v.tilt_fitted);
   v.T_c_q = ref.T;
   v.pairs = ref.pairs;
   v.rms_xy_m = ref.rms_xy;
@@ -341,8 +441,11 @@ std::optional<LoopClosure> matchPair(const Descriptor& q, const Descriptor& c,
   }
   lc.covariance.setZero();
   lc.covariance(0, 0) = lc.covariance(1, 1) = std::max(s2 / n, kMinXyVar);
-  lc.covariance(2, 2) = std::max(ver.rms_z_m * ver.rms_z_m / n, kMinZVar);
-  lc.covariance(3, 3) = lc.covariance(4, 4) = kRollPitchVar;
+  // No pair with both stem bases seen: t_z is extrapolated terrain, not a measurement.
+  lc.covariance(2, 2) = ver.z_pairs > 0
+                            ? std::max(ver.rms_z_m * ver.rms_z_m / ver.z_pairs, kMinZVar)
+                            : kUnobservedZVar;
+  lc.covariance(3, 3) = lc.covariance(4, 4) = ver.tilt_fitted ? kFittedTiltVar : kRollPitchVar;
   lc.covariance(5, 5) = std::max(lever2 > 0 ? s2 / lever2 : 1.0, kMinYawVar);
   return lc;
 }

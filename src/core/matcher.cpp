@@ -125,6 +125,7 @@ std::vector<Correspondence> buildCorrespondences(const Descriptor& query,
     const Trunk& b = candidate.trunks[cr.ic];
     cr.pq = Eigen::Vector3d(a.x, a.y, a.z);
     cr.pc = Eigen::Vector3d(b.x, b.y, b.z);
+    cr.z_ok = a.base_seen && b.base_seen;
     cr.strong = s;
     cr.weak = w;
     cr.w = 1.0 + params.alpha_s * std::log1p(s) + params.alpha_w * std::log1p(w);  // Eq. (3.9)

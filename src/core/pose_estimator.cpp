@@ -355,12 +355,16 @@ PoseEstimate estimatePose(const std::vector<Correspondence>& corrs,
   est.inliers_T = inl_t;
   if (est.inliers_T.empty()) return est;
 
-  // Eq. (3.17): weighted TLS elevation over I_T.
+  // Eq. (3.17): weighted TLS elevation over I_T. Only pairs whose stem bases were both seen
+  // measure it (a hidden base is extrapolated terrain); with none of those, all of I_T vote.
   std::vector<Eigen::Vector2d> dz;
   std::vector<double> wz;
-  for (int i : est.inliers_T) {
-    dz.emplace_back(corrs[i].pc.z() - corrs[i].pq.z(), 0.0);
-    wz.push_back(w[i]);
+  for (int pass = 0; pass < 2 && dz.empty(); ++pass) {
+    for (int i : est.inliers_T) {
+      if (pass == 0 && !corrs[i].z_ok) continue;
+      dz.emplace_back(corrs[i].pc.z() - corrs[i].pq.z(), 0.0);
+      wz.push_back(w[i]);
+    }
   }
   const Location lz = tlsLocation(dz, wz, params.beta_z_m);
 
@@ -368,16 +372,18 @@ PoseEstimate estimatePose(const std::vector<Correspondence>& corrs,
   est.T_c_q = Pose::Identity();
   est.T_c_q.linear() = rotZ(est.yaw_rad);
   est.T_c_q.translation() = Eigen::Vector3d(loc.t.x(), loc.t.y(), lz.t.x());
-  double sxy = 0.0, sz = 0.0;
+  double sxy = 0.0, sz = 0.0, nz = 0.0;
+  const bool any_z_ok =
+      std::any_of(est.inliers_T.begin(), est.inliers_T.end(), [&](int i) { return corrs[i].z_ok; });
   for (int i : est.inliers_T) {
     const Eigen::Vector3d r = corrs[i].pc - est.T_c_q * corrs[i].pq;
     sxy += r.head<2>().squaredNorm();
-    sz += r.z() * r.z();
+    if (corrs[i].z_ok || !any_z_ok) sz += r.z() * r.z(), nz += 1.0;
     est.inlier_weight += w[i];
   }
   const double n = static_cast<double>(est.inliers_T.size());
   est.rms_xy_m = std::sqrt(sxy / n);
-  est.rms_z_m = std::sqrt(sz / n);
+  est.rms_z_m = std::sqrt(sz / nz);
   est.ok = true;
   return est;
 }

@@ -450,47 +450,133 @@ TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorPara
     std::vector<uint32_t> fill(gstart.begin(), gstart.end() - 1);
     for (size_t i = 0; i < n; ++i) gorder[fill[pcell[i]]++] = static_cast<uint32_t>(i);
   }
-  // Low percentile of each cell.
+  // Ground points of each cell. The MID-360 looks no lower than -7 deg, so near the path and
+  // downhill the ground is often not seen at all, and the lowest points of a cell are then the
+  // lowest hits on a stem or a shrub. A point counts as ground only in an "open" sub-column:
+  // one with nothing between kOpenGap and kOpenTop above its lowest point (a stem, a shrub or
+  // a log fills that space). The cell value is a low percentile of those points.
+  constexpr double kSubCellM = 0.25, kGroundBand = 0.3, kOpenGap = 0.3, kOpenTop = 1.5;
+  // A ground cell is mostly open: the cone-shaped cut of the lower field-of-view limit through
+  // stems, shrubs and saplings leaves scattered open sub-columns, seen ground fills the cell.
+  constexpr double kMinOpenFraction = 0.75;
+  // Steepest terrain step between neighbouring cells (25 deg slopes plus roughness) [m/m].
+  constexpr double kMaxGroundStepPerCell = 1.0;
+  // Stem points: within this of the fitted circle [m]. A seen base: the stem's lowest point
+  // within kMaxBaseGapM of the ground estimate [m].
+  constexpr double kStemShellM = 0.08, kMaxBaseGapM = 0.5;
+  const int ns = std::max(1, static_cast<int>(std::lround(g / kSubCellM)));
+  const double sub = g / ns;
   std::vector<float> cell_low(gcells, std::numeric_limits<float>::quiet_NaN());
-  std::vector<uint32_t> cell_count(gcells, 0);
+  std::vector<uint32_t> cell_count(gcells, 0);  // ground points of the cell
+  std::vector<char> cell_any(gcells, 0);        // the cell holds any point
   {
-    std::vector<float> zs;
+    std::vector<float> zs, smin(static_cast<size_t>(ns) * ns);
+    std::vector<char> sopen(smin.size());
+    std::vector<int> sidx;
     for (size_t c = 0; c < gcells; ++c) {
       const uint32_t b = gstart[c], e = gstart[c + 1];
       if (b == e) continue;
-      zs.resize(e - b);
-      for (uint32_t k = b; k < e; ++k) zs[k - b] = Z[gorder[k]];
+      cell_any[c] = 1;
+      const double x0 = minx + static_cast<double>(c % gnx) * g;
+      const double y0 = miny + static_cast<double>(c / gnx) * g;
+      std::fill(smin.begin(), smin.end(), std::numeric_limits<float>::infinity());
+      std::fill(sopen.begin(), sopen.end(), 1);
+      sidx.resize(e - b);
+      for (uint32_t k = b; k < e; ++k) {
+        const uint32_t i = gorder[k];
+        const int sx = std::clamp(static_cast<int>((X[i] - x0) / sub), 0, ns - 1);
+        const int sy = std::clamp(static_cast<int>((Y[i] - y0) / sub), 0, ns - 1);
+        const int s = sy * ns + sx;
+        sidx[k - b] = s;
+        smin[s] = std::min(smin[s], Z[i]);
+      }
+      for (uint32_t k = b; k < e; ++k) {
+        const int s = sidx[k - b];
+        const float dz = Z[gorder[k]] - smin[s];
+        if (dz > kOpenGap && dz <= kOpenTop) sopen[s] = 0;
+      }
+      zs.clear();
+      for (uint32_t k = b; k < e; ++k) {
+        const int s = sidx[k - b];
+        const float z = Z[gorder[k]];
+        if (sopen[s] && z - smin[s] <= kGroundBand) zs.push_back(z);
+      }
+      int nopen = 0;
+      for (size_t s = 0; s < smin.size(); ++s) nopen += sopen[s] && std::isfinite(smin[s]);
+      if (zs.size() < 3 || nopen < kMinOpenFraction * static_cast<double>(ns * ns)) continue;
       const size_t q = static_cast<size_t>(p.ground_percentile * (zs.size() - 1));
       std::nth_element(zs.begin(), zs.begin() + q, zs.end());
       cell_low[c] = zs[q];
-      cell_count[c] = e - b;
+      cell_count[c] = static_cast<uint32_t>(zs.size());
     }
   }
-  // Plane per occupied cell from the window of cell values.
-  const int half = std::max(1, static_cast<int>(std::lround(0.5 * p.ground_window_m / g)));
-  std::vector<Plane> cell_plane(gcells);
+  // Ground lies below everything: a "ground" cell higher than points next to it (a branch or a
+  // log top above a slope or hollow whose real ground was not seen) is no ground cell.
   {
-    std::vector<double> wx, wy, wz, ww;
+    std::vector<float> cell_min(gcells, std::numeric_limits<float>::infinity());
+    for (size_t c = 0; c < gcells; ++c)
+      for (uint32_t k = gstart[c]; k < gstart[c + 1]; ++k)
+        cell_min[c] = std::min(cell_min[c], Z[gorder[k]]);
+    const float max_step = static_cast<float>(kMaxGroundStepPerCell * g);
+    std::vector<uint32_t> keep = cell_count;
     for (int cy = 0; cy < gny; ++cy) {
       for (int cx = 0; cx < gnx; ++cx) {
         const size_t c = static_cast<size_t>(cy) * gnx + cx;
         if (cell_count[c] == 0) continue;
-        wx.clear(), wy.clear(), wz.clear(), ww.clear();
-        for (int dy = -half; dy <= half; ++dy) {
-          const int yy = cy + dy;
-          if (yy < 0 || yy >= gny) continue;
-          for (int dx = -half; dx <= half; ++dx) {
-            const int xx = cx + dx;
-            if (xx < 0 || xx >= gnx) continue;
-            const size_t cc = static_cast<size_t>(yy) * gnx + xx;
-            if (cell_count[cc] == 0) continue;
-            wx.push_back(dx * g), wy.push_back(dy * g), wz.push_back(cell_low[cc]);
-            // Sparse cells give a poor percentile; they count less.
-            ww.push_back(cell_count[cc] >= 5 ? 1.0 : 0.3);
+        for (int dy = -1; dy <= 1 && keep[c]; ++dy) {
+          for (int dx = -1; dx <= 1; ++dx) {
+            const int xx = cx + dx, yy = cy + dy;
+            if (xx < 0 || yy < 0 || xx >= gnx || yy >= gny) continue;
+            if (cell_low[c] - cell_min[static_cast<size_t>(yy) * gnx + xx] > max_step) {
+              keep[c] = 0;
+              break;
+            }
           }
         }
-        // Initial plane from all cells, then downweight cells above it: stems, shrubs and
-        // logs fill cells from above, never from below.
+      }
+    }
+    cell_count.swap(keep);
+  }
+  // Plane per occupied cell from the ground cells of the surrounding window. Where the window
+  // holds too few ground cells, a three times wider one extrapolates the terrain; the cell's
+  // ground then counts as not observed, and so does the base of a stem standing there.
+  const int half = std::max(1, static_cast<int>(std::lround(0.5 * p.ground_window_m / g)));
+  std::vector<Plane> cell_plane(gcells);
+  std::vector<char> cell_seen(gcells, 0);
+  {
+    std::vector<double> wx, wy, wz, ww;
+    auto gather = [&](int cx, int cy, int h) {
+      wx.clear(), wy.clear(), wz.clear(), ww.clear();
+      for (int dy = -h; dy <= h; ++dy) {
+        const int yy = cy + dy;
+        if (yy < 0 || yy >= gny) continue;
+        for (int dx = -h; dx <= h; ++dx) {
+          const int xx = cx + dx;
+          if (xx < 0 || xx >= gnx) continue;
+          const size_t cc = static_cast<size_t>(yy) * gnx + xx;
+          if (cell_count[cc] == 0) continue;
+          wx.push_back(dx * g), wy.push_back(dy * g), wz.push_back(cell_low[cc]);
+          // Sparse cells give a poor percentile; they count less.
+          ww.push_back(cell_count[cc] >= 5 ? 1.0 : 0.3);
+        }
+      }
+    };
+    constexpr size_t kMinGroundCells = 3;
+    for (int cy = 0; cy < gny; ++cy) {
+      for (int cx = 0; cx < gnx; ++cx) {
+        const size_t c = static_cast<size_t>(cy) * gnx + cx;
+        if (!cell_any[c]) continue;
+        gather(cx, cy, half);
+        cell_seen[c] = wx.size() >= kMinGroundCells;
+        if (!cell_seen[c]) gather(cx, cy, 3 * half);
+        if (wx.size() < kMinGroundCells) {
+          // No ground anywhere near: the lowest point of the cell is the best guess left.
+          float zmin = std::numeric_limits<float>::infinity();
+          for (uint32_t k = gstart[c]; k < gstart[c + 1]; ++k) zmin = std::min(zmin, Z[gorder[k]]);
+          cell_plane[c].a = zmin;
+          continue;
+        }
+        // Downweight cells above the plane: what is left of vegetation fills cells from above.
         cell_plane[c] =
             fitGroundPlane(wx.data(), wy.data(), wz.data(), ww.data(), wx.size(), 0.0, 0.0,
                            /*c_up=*/0.3, /*c_down=*/1.0, /*iterations=*/5);
@@ -704,6 +790,10 @@ TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorPara
       // (The paper's 0.44 m z error comes from a weaker base estimate, Sec. 4.B.)
       const double r_in = fit.r + p.base_ring_inner_m, r_out = fit.r + p.base_ring_outer_m;
       std::vector<double> bx, by, bz;
+      // Lowest point on the stem itself: a base counts as seen only if the stem is visible
+      // down to the ground (not hidden by shrubs or below the sensor's field of view).
+      const double r_stem2 = (fit.r + kStemShellM) * (fit.r + kStemShellM);
+      double stem_low = std::numeric_limits<double>::infinity();
       int gx0, gy0, gx1, gy1;
       gcellOf(fit.cx - r_out, fit.cy - r_out, &gx0, &gy0);
       gcellOf(fit.cx + r_out, fit.cy + r_out, &gx1, &gy1);
@@ -712,15 +802,20 @@ TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorPara
           const size_t c = static_cast<size_t>(gy) * gnx + gx;
           for (uint32_t k = gstart[c]; k < gstart[c + 1]; ++k) {
             const uint32_t i = gorder[k];
-            if (std::abs(H[i]) > p.base_max_dh_m) continue;
             const double dx = X[i] - fit.cx, dy = Y[i] - fit.cy;
             const double d2 = dx * dx + dy * dy;
+            if (d2 < r_stem2) stem_low = std::min(stem_low, static_cast<double>(Z[i]));
+            if (std::abs(H[i]) > p.base_max_dh_m) continue;
             if (d2 < r_in * r_in || d2 > r_out * r_out) continue;
             bx.push_back(X[i]), by.push_back(Y[i]), bz.push_back(Z[i]);
           }
         }
       }
       double z_base;
+      int cgx, cgy;
+      gcellOf(fit.cx, fit.cy, &cgx, &cgy);
+      const bool ground_seen = cell_seen[static_cast<size_t>(cgy) * gnx + cgx];
+      const bool ring_seen = bx.size() >= static_cast<size_t>(p.min_base_points);
       if (bx.size() >= static_cast<size_t>(p.min_base_points)) {
         const std::vector<double> w(bx.size(), 1.0);
         // Tighter than the grid: litter and grass sit on the ground surface, noise is cm.
@@ -731,6 +826,9 @@ TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorPara
         z_base = groundAt(fit.cx, fit.cy);
         ++st.ground_fallbacks;
       }
+      const bool base_seen = ground_seen && ring_seen && stem_low - z_base < kMaxBaseGapM &&
+                             z_base - stem_low < kMaxBaseGapM;
+      if (!base_seen) ++st.unseen_bases;
 #ifdef DTIF_EXTRACT_DEBUG
       fprintf(stderr, "ACC %.2f %.2f r %.3f inl %zu ratio %.2f arc %.0f rms %.4f band %zu\n",
               fit.cx + ox, fit.cy + oy, fit.r, fit.inliers, fit.inlier_ratio, fit.arc_deg,
@@ -741,6 +839,7 @@ TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorPara
       f.t.y = fit.cy + oy;
       f.t.z = z_base + oz;
       f.t.r = fit.r;
+      f.t.base_seen = base_seen;
       f.inliers = fit.inliers;
       found.push_back(f);
       removeInliers();

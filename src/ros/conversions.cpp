@@ -74,6 +74,7 @@ dtif_msgs::TrunkDescriptor toMsg(const Descriptor& d, const Pose& T_O_S,
     mt.y = static_cast<float>(t.y);
     mt.z = static_cast<float>(t.z);
     mt.r = static_cast<float>(t.r);
+    mt.base_seen = t.base_seen;
     m.trunks.push_back(mt);
   }
   m.faces.reserve(3 * d.triangles.size());
@@ -102,7 +103,7 @@ bool fromMsg(const dtif_msgs::TrunkDescriptor& msg, Descriptor* d, Pose* T_O_S,
     if (!finite(t.x) || !finite(t.y) || !finite(t.z) || !finite(t.r) || t.r < 0.0f) {
       return fail(error, "trunk " + std::to_string(i) + " is not finite or has a negative radius");
     }
-    out.trunks.push_back(Trunk{t.x, t.y, t.z, t.r});
+    out.trunks.push_back(Trunk{t.x, t.y, t.z, t.r, t.base_seen != 0});
   }
   if (msg.faces.size() % 3 != 0) return fail(error, "faces is not a list of triples");
   const size_t n = out.trunks.size();

@@ -27,7 +27,8 @@ int runExtract(const Args& args) {
             << ext.stats.input_points << "\n"
             << "  trunks: " << ext.trunks.size() << " (candidates " << ext.stats.candidates
             << ", rejected fit " << ext.stats.rejected_fit << ", leaning "
-            << ext.stats.rejected_lean << ", duplicates " << ext.stats.duplicates << ")\n"
+            << ext.stats.rejected_lean << ", duplicates " << ext.stats.duplicates
+            << ", bases not seen " << ext.stats.unseen_bases << ")\n"
             << "  Delaunay faces: " << d.triangles.size() << "\n"
             << "  descriptor: "
             << (d.valid ? "valid" : "excluded from retrieval: " + d.invalid_reason) << ", "

@@ -196,10 +196,16 @@ TEST_F(DatasetTest, TrunkCsvWithAndWithoutHeader) {
   ASSERT_EQ(b.size(), 1u);
   EXPECT_DOUBLE_EQ(b[0].z, 0.5);
 
-  writeTrunkCsv((dir_ / "c.csv").string(), a);
+  Trunks a2 = a;
+  a2[1].base_seen = false;
+  writeTrunkCsv((dir_ / "c.csv").string(), a2);
   const Trunks c = readTrunkCsv((dir_ / "c.csv").string());
   ASSERT_EQ(c.size(), 2u);
   EXPECT_DOUBLE_EQ(c[0].x, 1.0);
+  EXPECT_TRUE(c[0].base_seen);
+  EXPECT_FALSE(c[1].base_seen);  // the optional base_seen column round-trips
+  writeFile("g.csv", "x,y,z,r,base_seen\n1,2,0.5,0.2,yes\n");
+  EXPECT_THROW(readTrunkCsv((dir_ / "g.csv").string()), DatasetError);
 
   writeFile("d.csv", "x,y,z,r\n1,2,0.5,-0.2\n");
   EXPECT_THROW(readTrunkCsv((dir_ / "d.csv").string()), DatasetError);

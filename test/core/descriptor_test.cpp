@@ -145,8 +145,14 @@ TEST(Descriptor, WireRoundTripSmallAndExact) {
   std::mt19937 rng(3);
   Trunks t = test::randomStand(rng, 40, 40, 500);
   for (Trunk& x : t) x.x += 312000.0, x.y += 5096000.0;  // UTM-like offsets
+  for (size_t i = 0; i < t.size(); ++i) t[i].base_seen = (i * 7) % 3 != 0;
   Descriptor d = buildDescriptor(t, DescriptorParams{});
+  while (d.trunks.size() % 8 == 0) {
+    t.pop_back();
+    d = buildDescriptor(t, DescriptorParams{});
+  }
   ASSERT_TRUE(d.valid);
+  ASSERT_NE(d.trunks.size() % 8, 0u);  // the last byte of base_seen bits is partial
   d.robot = "robot_b";
   d.submap_id = 42;
   d.stamp = 1234.5;
@@ -164,6 +170,7 @@ TEST(Descriptor, WireRoundTripSmallAndExact) {
     EXPECT_NEAR(e.trunks[i].x, d.trunks[i].x, 1e-3);  // float32 offsets: mm at 50 m
     EXPECT_NEAR(e.trunks[i].y, d.trunks[i].y, 1e-3);
     EXPECT_NEAR(e.trunks[i].r, d.trunks[i].r, 1e-6);
+    EXPECT_EQ(e.trunks[i].base_seen, d.trunks[i].base_seen) << "trunk " << i;
   }
   ASSERT_EQ(e.triangles.size(), d.triangles.size());
   for (size_t i = 0; i < d.triangles.size(); ++i) {

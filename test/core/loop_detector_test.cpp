@@ -91,6 +91,109 @@ TEST(LoopDetector, RecoversOverlappingPairsInRandomStands) {
   EXPECT_LT(sum_z / accepted, 0.1);
 }
 
+double rotationErrorDeg(const Pose& a, const Pose& b) {
+  return Eigen::AngleAxisd(a.linear().transpose() * b.linear()).angle() * 180.0 / M_PI;
+}
+
+Pose tilted(const Pose& T, double roll_deg, double pitch_deg) {
+  Pose out = T;
+  out.linear() =
+      T.linear() * (Eigen::AngleAxisd(roll_deg * M_PI / 180.0, Eigen::Vector3d::UnitX()) *
+                    Eigen::AngleAxisd(pitch_deg * M_PI / 180.0, Eigen::Vector3d::UnitY()))
+                       .toRotationMatrix();
+  return out;
+}
+
+/// Hidden stem bases (sensor's lower field-of-view limit, occlusion): the extractor flags them
+/// and reports extrapolated terrain, too high. Here the query saw half its bases too high (it
+/// walked downhill), the candidate a fifth. Elevation must come from seen bases only.
+TEST(LoopDetector, ElevationComesFromSeenBasesOnly) {
+  std::mt19937 rng(77);
+  std::uniform_real_distribution<double> u01(0.0, 1.0), lift(0.5, 3.0);
+  auto hide = [&](Descriptor* d, double share, bool flag) {
+    for (Trunk& t : d->trunks) {
+      if (u01(rng) >= share) continue;
+      t.z += lift(rng);
+      t.base_seen = !flag;
+    }
+  };
+  const LoopDetectorParams params;
+  for (const bool flag : {true, false}) {
+    std::vector<PairCase> cases = overlappingPairs(30, 99);
+    int accepted = 0, unobserved = 0;
+    double sum_z = 0.0, max_z = 0.0;
+    for (PairCase& pc : cases) {
+      hide(&pc.q, 0.5, flag);
+      hide(&pc.c, 0.2, flag);
+      PoseEstimate est;
+      Verification ver;
+      const auto lc = matchPair(pc.q, pc.c, params, &est, &ver);
+      if (!lc) continue;
+      const double ez = std::fabs(lc->T_c_q.translation().z() - pc.T_c_q.translation().z());
+      if (ver.z_pairs == 0) {
+        // Nothing to measure t_z with: the loop must say so in its covariance.
+        EXPECT_GE(lc->covariance(2, 2), 1.0);
+        ++unobserved;
+        continue;
+      }
+      ++accepted;
+      sum_z += ez;
+      max_z = std::max(max_z, ez);
+    }
+    std::printf(
+        "[ info ] hidden bases %s: accepted %d/%zu (+%d without a seen base pair), z error "
+        "mean %.3f max %.3f m\n",
+        flag ? "flagged" : "unflagged", accepted, cases.size(), unobserved, sum_z / accepted,
+        max_z);
+    ASSERT_GE(accepted, 20);
+    if (flag) {
+      EXPECT_LE(unobserved, 3);
+      EXPECT_LT(sum_z / accepted, 0.05);
+      EXPECT_LT(max_z, 0.2);
+    } else {
+      EXPECT_GT(sum_z / accepted, 0.2);  // the control: unflagged, they corrupt t_z
+    }
+  }
+}
+
+/// Submaps are gravity-aligned only up to the odometry's residual roll/pitch; the refinement
+/// fits what is left from the seen stem bases (tilt_min_pairs = 0: the paper's 4-DoF model).
+TEST(LoopDetector, FitsResidualTiltFromSeenBases) {
+  for (const int min_pairs : {8, 0}) {
+    LoopDetectorParams params;
+    params.verification.tilt_min_pairs = min_pairs;
+    std::mt19937 rng(5);
+    std::uniform_real_distribution<double> yaw(-M_PI, M_PI), tilt(-0.5, 0.5);
+    test::ObservationNoise nz;
+    nz.z_sigma_m = 0.02;
+    int accepted = 0;
+    double sum_rot = 0.0, sum_z = 0.0;
+    for (int i = 0; i < 30; ++i) {
+      const Trunks world = test::randomStand(rng, 100, 100, 600);
+      const Eigen::Vector2d cc(50, 50), qc(56, 47);
+      const Pose T_w_c = tilted(poseXyYaw(cc.x(), cc.y(), 0.5, yaw(rng)), tilt(rng), tilt(rng));
+      const Pose T_w_q = tilted(poseXyYaw(qc.x(), qc.y(), -0.3, yaw(rng)), tilt(rng), tilt(rng));
+      const Descriptor c = describe(observe(rng, world, cc, T_w_c, nz), "a", 0, 0.0);
+      const Descriptor q = describe(observe(rng, world, qc, T_w_q, nz), "b", 1, 0.0);
+      const Pose T_c_q = T_w_c.inverse() * T_w_q;
+      const auto lc = matchPair(q, c, params);
+      if (!lc) continue;
+      ++accepted;
+      sum_rot += rotationErrorDeg(lc->T_c_q, T_c_q);
+      sum_z += std::fabs(lc->T_c_q.translation().z() - T_c_q.translation().z());
+    }
+    std::printf("[ info ] tilt_min_pairs %d: accepted %d/30, rotation error %.3f deg, z %.3f m\n",
+                min_pairs, accepted, sum_rot / accepted, sum_z / accepted);
+    ASSERT_GE(accepted, 25);
+    if (min_pairs > 0) {
+      EXPECT_LT(sum_rot / accepted, 0.15);
+      EXPECT_LT(sum_z / accepted, 0.05);
+    } else {
+      EXPECT_GT(sum_rot / accepted, 0.25);  // relative tilt of up to 1 deg left uncorrected
+    }
+  }
+}
+
 TEST(LoopDetector, Exact180DegreesAndUtmScaleCoordinates) {
   std::mt19937 rng(180);
   const Trunks world = test::randomStand(rng, 80, 80, 600);

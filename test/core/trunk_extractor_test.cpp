@@ -40,14 +40,16 @@ class Plot {
       }
   }
 
-  void addStem(const Stem& s, double height = 6.0, double noise = 0.01, double step = 0.04) {
+  // Stem surface from h0 above the ground (h0 > 0: its foot is hidden) up to `height`.
+  void addStem(const Stem& s, double height = 6.0, double noise = 0.01, double step = 0.04,
+               double h0 = 0.0) {
     std::normal_distribution<double> nz(0.0, noise);
     const double dth = step / s.r;
     const double half = 0.5 * s.arc_deg * kPi / 180.0, face = s.facing_deg * kPi / 180.0;
     for (double th = face - half; th < face + half; th += dth) {
       const double px = s.x + s.r * std::cos(th), py = s.y + s.r * std::sin(th);
       const double gz = groundZ(px, py);
-      for (double h = 0.0; h < height; h += step) {
+      for (double h = h0; h < height; h += step) {
         const double rr = s.r + nz(rng_);
         push(s.x + rr * std::cos(th), s.y + rr * std::sin(th), gz + h + nz(rng_));
       }
@@ -219,6 +221,41 @@ TEST(TrunkExtractor, FindsStemsOnSteep25DegreeSlope) {
   for (const Stem& st : kStems) plot.addStem(st);
   const auto res = extractTrunks(plot.cloud, TrunkExtractorParams());
   expectStems(plot, kStems, res.trunks, 0.02, 0.01, 0.05);
+}
+
+TEST(TrunkExtractor, SeenBasesAreMeasuredHiddenBasesAreFlagged) {
+  // A helmet MID-360 sees no lower than -7 deg: on one side of this plot the ground was never
+  // hit and the stems show only from 1.0 m above it (as if cut by the field-of-view cone).
+  Plot plot(0.12, 0.05, 21);
+  plot.addGround(-10, -0.5, -10, 10, 0.1, 0.02);
+  const std::vector<Stem> seen = {
+      {-6.0, -5.0, 0.12}, {-2.0, 4.0, 0.20}, {-7.0, 6.0, 0.25}, {-3.5, -1.0, 0.18}};
+  const std::vector<Stem> hidden = {{3.0, -3.0, 0.30}, {6.0, 5.0, 0.16}, {7.5, -7.0, 0.35}};
+  for (const Stem& s : seen) plot.addStem(s);
+  for (const Stem& s : hidden) plot.addStem(s, 8.0, 0.01, 0.04, /*h0=*/1.0);
+  const auto res = extractTrunks(plot.cloud, TrunkExtractorParams());
+  for (const Stem& s : seen) {
+    const int k = nearest(res.trunks, s.x, s.y, 0.3);
+    ASSERT_GE(k, 0) << "stem at " << s.x << "," << s.y << " not found";
+    EXPECT_TRUE(res.trunks[k].base_seen) << "stem at " << s.x << "," << s.y;
+    EXPECT_NEAR(res.trunks[k].z, plot.groundZ(s.x, s.y), 0.05) << "stem " << s.x << "," << s.y;
+  }
+  int flagged = 0;
+  for (const Stem& s : hidden) {
+    const int k = nearest(res.trunks, s.x, s.y, 0.5);
+    if (k < 0) continue;  // not finding a stem without its foot is acceptable
+    EXPECT_FALSE(res.trunks[k].base_seen) << "stem at " << s.x << "," << s.y;
+    ++flagged;
+  }
+  EXPECT_GE(flagged, 2);  // stems without their foot are still found, but flagged
+  EXPECT_EQ(res.stats.unseen_bases, static_cast<size_t>(flagged));
+  // Every trunk of the sloped plots above has its base seen.
+  Plot full(0.30, 0.10, 1);
+  full.addGround(-10, 10, -10, 10, 0.1, 0.02);
+  for (const Stem& s : kStems) full.addStem(s);
+  const auto all = extractTrunks(full.cloud, TrunkExtractorParams());
+  EXPECT_EQ(all.stats.unseen_bases, 0u);
+  for (const Trunk& t : all.trunks) EXPECT_TRUE(t.base_seen);
 }
 
 TEST(TrunkExtractor, PartiallyVisibleStemsKeepTheirRadius) {

@@ -63,7 +63,9 @@ TEST(PoseConversion, RejectsNaNAndZeroQuaternionNormalisesOthers) {
 }
 
 TEST(DescriptorConversion, RoundTripRebuildsTriangles) {
-  Descriptor d = buildDescriptor(forest(25, 7), DescriptorParams());
+  Trunks trunks = forest(25, 7);
+  for (size_t i = 0; i < trunks.size(); i += 3) trunks[i].base_seen = false;
+  Descriptor d = buildDescriptor(trunks, DescriptorParams());
   d.robot = "alpha";
   d.submap_id = 42;
   d.stamp = 1234.5;
@@ -89,6 +91,7 @@ TEST(DescriptorConversion, RoundTripRebuildsTriangles) {
     EXPECT_NEAR(back.trunks[i].y, d.trunks[i].y, 1e-5);
     EXPECT_NEAR(back.trunks[i].z, d.trunks[i].z, 1e-5);
     EXPECT_NEAR(back.trunks[i].r, d.trunks[i].r, 1e-6);
+    EXPECT_EQ(back.trunks[i].base_seen, d.trunks[i].base_seen) << "trunk " << i;
   }
   ASSERT_EQ(back.triangles.size(), d.triangles.size());
   for (size_t i = 0; i < d.triangles.size(); ++i) {

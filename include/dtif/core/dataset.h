@@ -61,7 +61,8 @@ void writeDatasetTables(const Dataset& ds);
 /// Writes a cloud as binary-compressed PCD to <ds.root>/<rec.file>, creating folders.
 void writeSubmapCloud(const Dataset& ds, const SubmapRecord& rec, const Cloud& cloud);
 
-/// Trunk-map CSV `x,y,z,r` (header optional; extra columns ignored). Throws DatasetError.
+/// Trunk-map CSV `x,y,z,r` (header optional; extra columns ignored, except a fifth column named
+/// `base_seen` (0/1) in the header, which dtif extract writes). Throws DatasetError.
 Trunks readTrunkCsv(const std::string& path);
 void writeTrunkCsv(const std::string& path, const Trunks& trunks);
 

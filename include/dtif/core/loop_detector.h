@@ -27,6 +27,13 @@ struct VerifierParams {
   /// Runner-up hypothesis (another yaw > 10 deg away, or another translation mode) with more
   /// than this share of the best one's support: ambiguous (repetitive stand), rejected [0..1].
   double max_ambiguity = 0.5;
+  /// Residual roll/pitch: submaps are gravity-aligned only up to the odometry's tilt error
+  /// (a few tenths of a degree). With at least this many refined pairs whose stem bases were
+  /// both seen, the refinement fits the tilt to their elevations; 0 keeps the paper's 4-DoF
+  /// model (Eq. 3.1).
+  int tilt_min_pairs = 8;
+  double tilt_min_spread_m = 4.0;  ///< the pairs' horizontal spread (smaller std dev) at least [m]
+  double max_tilt_deg = 2.0;       ///< a larger fitted tilt is not trusted; 4-DoF kept [deg]
 
   std::string validate() const;
 
@@ -40,6 +47,9 @@ struct VerifierParams {
     v("min_covisible_ratio", min_covisible_ratio);
     v("min_covisible", min_covisible);
     v("max_ambiguity", max_ambiguity);
+    v("tilt_min_pairs", tilt_min_pairs);
+    v("tilt_min_spread_m", tilt_min_spread_m);
+    v("max_tilt_deg", max_tilt_deg);
   }
 };
 
@@ -97,12 +107,14 @@ struct Verification {
   Pose T_c_q = Pose::Identity();           ///< pose after guided refinement (the one verified)
   std::vector<std::pair<int, int>> pairs;  ///< mutual nearest trunk pairs under T_c_q
   double rms_xy_m = 0.0;                   ///< RMS horizontal residual of pairs [m]
-  double rms_z_m = 0.0;                    ///< RMS elevation residual of pairs [m]
-  std::string reason;                      ///< why rejected (empty when accepted)
-  double covisible_ratio = 0.0;            ///< co-located share of trunks inside the other's hull
-  int covisible = 0;                       ///< co-located trunks (both directions)
-  double ambiguity = 0.0;  ///< runner-up / best support (max of yaw and translation)
-  double score = 0.0;      ///< covisible_ratio x inlier weight share
+  double rms_z_m = 0.0;                    ///< RMS elevation residual of the z pairs [m]
+  int z_pairs = 0;  ///< pairs with both stem bases seen, which fixed t_z (0: t_z unobserved)
+  bool tilt_fitted = false;      ///< residual roll/pitch estimated from those pairs
+  std::string reason;            ///< why rejected (empty when accepted)
+  double covisible_ratio = 0.0;  ///< co-located share of trunks inside the other's hull
+  int covisible = 0;             ///< co-located trunks (both directions)
+  double ambiguity = 0.0;        ///< runner-up / best support (max of yaw and translation)
+  double score = 0.0;            ///< covisible_ratio x inlier weight share
 };
 
 /// Verifies T_c_q (from estimatePose on corrs) between query q and candidate c. The pose is

@@ -46,9 +46,10 @@ struct Correspondence {
   int ic = -1;  ///< candidate trunk index n
   Eigen::Vector3d pq = Eigen::Vector3d::Zero();
   Eigen::Vector3d pc = Eigen::Vector3d::Zero();
-  double w = 1.0;  ///< omega_mn, Eq. (3.9)
-  int strong = 0;  ///< E^s_mn
-  int weak = 0;    ///< E^w_mn
+  double w = 1.0;    ///< omega_mn, Eq. (3.9)
+  bool z_ok = true;  ///< both stem bases were seen: the pair constrains the elevation
+  int strong = 0;    ///< E^s_mn
+  int weak = 0;      ///< E^w_mn
 };
 
 struct MatchStats {

@@ -42,7 +42,7 @@ struct PoseEstimate {
   std::vector<int> inliers_T;     ///< I_T: subset of I_R consistent with t_xy
   double inlier_weight = 0.0;     ///< sum of omega_k over I_T
   double rms_xy_m = 0.0;          ///< RMS horizontal residual over I_T [m]
-  double rms_z_m = 0.0;           ///< RMS elevation residual over I_T [m]
+  double rms_z_m = 0.0;           ///< RMS elevation residual over I_T (seen bases) [m]
   // Hypothesis distinctiveness, for verification in repetitive stands:
   double yaw_consensus = 0.0;          ///< weighted TIM consensus at the best yaw
   double yaw_runner_up = 0.0;          ///< best consensus at yaws > 10 deg away from it

@@ -96,6 +96,7 @@ struct TrunkExtractionStats {
   size_t rejected_arc = 0;      ///< fits dropped for too little arc coverage (part of rejected_fit)
   size_t duplicates = 0;        ///< trunks dropped as duplicates
   size_t ground_fallbacks = 0;  ///< trunks whose base came from the grid, not the ring
+  size_t unseen_bases = 0;      ///< trunks whose base was not observed (base_seen false)
 };
 
 struct TrunkExtractionResult {

@@ -14,6 +14,10 @@ struct Trunk {
   double y = 0.0;  ///< horizontal centre [m]
   double z = 0.0;  ///< stem base elevation (ground at the stem) [m]
   double r = 0.0;  ///< radius at breast height (1.3 m above the base) [m]
+  /// The ground around the stem was observed, so `z` is a measurement. False when the base
+  /// was hidden (occlusion, the sensor's lower field-of-view limit) and `z` is extrapolated
+  /// terrain: such trunks still constrain yaw and x, y, but not the elevation.
+  bool base_seen = true;
 };
 using Trunks = std::vector<Trunk>;
 
