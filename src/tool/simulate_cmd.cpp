@@ -4,6 +4,7 @@
 // optionally also as a rosbag of the raw frames (sim_bag.h) for replay into the nodelets.
 #include <iostream>
 #include <memory>
+#include <sstream>
 
 #include "commands.h"
 #include "dtif/core/sim_bag.h"
@@ -85,10 +86,20 @@ int runSimulate(const Args& args) {
     if (o.get("png")) std::cout << "  picture " << *o.get("png") << "\n";
     if (bag) {
       const auto& b = bag->stats();
+      std::ostringstream reduction;
+      if (bag_params.voxel_m > 0) {
+        reduction << bag_params.voxel_m << " m voxels, ";
+      } else {
+        reduction << "no voxels, ";
+      }
+      if (bag_params.max_points > 0) {
+        reduction << "at most " << bag_params.max_points << " points";
+      } else {
+        reduction << "no point limit";
+      }
       std::cout << "  bag " << *o.get("bag") << ": " << b.messages << " messages, " << b.bytes / 1e6
-                << " MB; cloud_registered (voxel " << bag_params.voxel_m << " m, at most "
-                << bag_params.max_points << " points) kept " << b.points_out << " of "
-                << b.points_in << " points; written in " << b.write_seconds << " s\n";
+                << " MB; cloud_registered (" << reduction.str() << ") kept " << b.points_out
+                << " of " << b.points_in << " points; written in " << b.write_seconds << " s\n";
     }
   }
   return 0;
