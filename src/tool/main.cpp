@@ -10,6 +10,11 @@ namespace {
 constexpr const char* kUsage =
     "usage: dtif <command> [options]\n"
     "  simulate <scene.yaml> --out <dataset_dir> [--seed N] [--png <file>] [--threads N]\n"
+    "           [--bag <file.bag> [--bag-voxel <m>] [--bag-max-points N]]\n"
+    "           --bag: also a rosbag (/<robot>/cloud_registered, /<robot>/Odometry, /tf) for\n"
+    "           roslaunch dtif demo_bag.launch; each cloud is voxel-filtered (default 0.1 m)\n"
+    "           and thinned evenly to at most N points (default 4000, about 64 kB); 0 turns\n"
+    "           either off (full rate: about 3 MB/s per robot for a 200k points/s scene)\n"
     "  extract  <cloud.pcd> [--out <trunks.csv>] [--config <params.yaml>]\n"
     "  register <query> <candidate> [--config <params.yaml>]  (PCD submaps or x,y,z,r CSVs)\n"
     "  eval     <dataset_dir> --out <dir> [--config <params.yaml>] [--unit-weights]\n";
