@@ -16,6 +16,8 @@
 #include <stdexcept>
 #include <utility>
 
+#include "dtif/core/trunk_extractor.h"
+
 namespace dtif {
 namespace {
 
@@ -254,6 +256,12 @@ Triangle makeCanonicalTriangle(const Trunks& trunks, int a, int b, int c) {
   return t;
 }
 
+Descriptor describeSubmap(const TrunkExtractionResult& extraction, const DescriptorParams& params) {
+  Descriptor d = buildDescriptor(extraction.trunks, params);
+  d.footprint = extraction.footprint;
+  return d;
+}
+
 Descriptor buildDescriptor(const Trunks& input, const DescriptorParams& params) {
   Descriptor d;
   const std::string perr = params.validate();
@@ -325,7 +333,8 @@ Descriptor buildDescriptor(const Trunks& input, const DescriptorParams& params) 
 //            f64 origin x, y, z; u16 n_trunks; n x (f32 dx, dy, dz, r);
 //            ceil(n / 8) bytes of base_seen bits (trunk i: byte i / 8, bit i % 8);
 //            u32 n_faces; n x u16[3] canonical vertex indices;
-//            u8 n_edge_bins, bins x u8; u8 n_radius_bins, bins x u8  (value * 255, rounded)
+//            u8 n_edge_bins, bins x u8; u8 n_radius_bins, bins x u8  (value * 255, rounded);
+//            f32 footprint cell (0: none) [, i32 x0, y0; u16 width, height; ceil(w h / 8) bytes]
 std::vector<uint8_t> encodeDescriptor(const Descriptor& d) {
   if (d.trunks.size() > 65535) throw std::runtime_error("descriptor has more than 65535 trunks");
   Writer w;
@@ -365,6 +374,18 @@ std::vector<uint8_t> encodeDescriptor(const Descriptor& d) {
     for (float x : *h) {
       w.put<uint8_t>(static_cast<uint8_t>(std::lround(std::clamp(x, 0.0f, 1.0f) * 255.0f)));
     }
+  }
+  const Footprint& f = d.footprint;
+  const bool has_footprint = f.cell_m > 0.0 && f.width > 0 && f.height > 0 && f.width <= 65535 &&
+                             f.height <= 65535 &&
+                             f.bits.size() == (static_cast<size_t>(f.width) * f.height + 7) / 8;
+  w.put<float>(has_footprint ? static_cast<float>(f.cell_m) : 0.0f);
+  if (has_footprint) {
+    w.put<int32_t>(f.x0);
+    w.put<int32_t>(f.y0);
+    w.put<uint16_t>(static_cast<uint16_t>(f.width));
+    w.put<uint16_t>(static_cast<uint16_t>(f.height));
+    for (uint8_t b : f.bits) w.put<uint8_t>(b);
   }
   Writer out;
   out.put<uint32_t>(kMagic);
@@ -435,6 +456,22 @@ Descriptor decodeDescriptor(const std::vector<uint8_t>& bytes, const DescriptorP
     }
     if (bins > 0 && total <= 0.0) throw std::runtime_error("descriptor histogram is empty");
     for (float& x : *h) x = static_cast<float>(x / total);  // undo the quantisation drift
+  }
+  const float cell = r.get<float>();
+  if (!(cell >= 0.0f) || !std::isfinite(cell)) throw std::runtime_error("bad footprint cell");
+  if (cell > 0.0f) {
+    Footprint& f = d.footprint;
+    f.cell_m = cell;
+    f.x0 = r.get<int32_t>();
+    f.y0 = r.get<int32_t>();
+    f.width = r.get<uint16_t>();
+    f.height = r.get<uint16_t>();
+    const size_t nbytes = (static_cast<size_t>(f.width) * f.height + 7) / 8;
+    if (f.width == 0 || f.height == 0 || nbytes > r.remaining()) {
+      throw std::runtime_error("descriptor footprint exceeds the payload");
+    }
+    f.bits.resize(nbytes);
+    for (uint8_t& b : f.bits) b = r.get<uint8_t>();
   }
   if (r.remaining() != 0) throw std::runtime_error("descriptor has trailing bytes");
   d.valid = (flags & 1) != 0;

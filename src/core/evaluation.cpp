@@ -128,7 +128,7 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
     // 1. Descriptor (timed: desc).
     auto t0 = std::chrono::steady_clock::now();
     const TrunkExtractionResult ext = extractTrunks(*cloud, params.trunk_extraction);
-    auto desc = std::make_shared<Descriptor>(buildDescriptor(ext.trunks, params.descriptor));
+    auto desc = std::make_shared<Descriptor>(describeSubmap(ext, params.descriptor));
     row.t_desc_ms = msSince(t0);
     desc->robot = rec.robot;
     desc->submap_id = rec.id;

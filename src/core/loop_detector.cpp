@@ -302,6 +302,7 @@ std::string VerifierParams::validate() const {
   if (tilt_min_pairs > 0 && tilt_min_pairs < 4) err << "tilt_min_pairs must be 0 or >= 4; ";
   if (!(tilt_min_spread_m >= 0.0)) err << "tilt_min_spread_m must be >= 0; ";
   if (!(max_tilt_deg > 0.0 && max_tilt_deg <= 10.0)) err << "max_tilt_deg must be in (0, 10]; ";
+  if (!(min_overlap >= 0.0 && min_overlap <= 1.0)) err << "min_overlap must be in [0, 1]; ";
   return err.str();
 }
 
@@ -379,6 +380,10 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
   v.covisible_ratio = inside > 0 ? static_cast<double>(matched) / inside : 0.0;
   if (matched < params.min_covisible) return reject("few co-visible trunks");
   if (v.covisible_ratio < params.min_covisible_ratio) return reject("low co-visibility");
+  // A correct alignment of two submaps that barely overlap is not a loop worth closing (and
+  // not one by the evaluation protocol): measure the overlap as DATASET.md defines it.
+  v.overlap = footprintOverlap(q.footprint, c.footprint, v.T_c_q);
+  if (v.overlap >= 0.0 && v.overlap < params.min_overlap) return reject("small overlap");
 
   double total_w = 0.0;
   for (const Correspondence& k : corrs) total_w += k.w;

@@ -229,7 +229,7 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
   void process(const ros_glue::AssembledSubmap& s, const std::string& frame) {
     const auto t0 = std::chrono::steady_clock::now();
     const TrunkExtractionResult r = extractTrunks(*s.cloud, extractor_params_);
-    Descriptor d = buildDescriptor(r.trunks, descriptor_params_);
+    Descriptor d = describeSubmap(r, descriptor_params_);
     d.robot = node_.robot;
     d.submap_id = s.id;
     d.stamp = s.stamp;

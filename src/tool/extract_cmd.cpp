@@ -19,7 +19,7 @@ int runExtract(const Args& args) {
   const auto t0 = std::chrono::steady_clock::now();
   const TrunkExtractionResult ext = extractTrunks(*cloud, params.trunk_extraction);
   const auto t1 = std::chrono::steady_clock::now();
-  const Descriptor d = buildDescriptor(ext.trunks, params.descriptor);
+  const Descriptor d = describeSubmap(ext, params.descriptor);
   const auto t2 = std::chrono::steady_clock::now();
   using Ms = std::chrono::duration<double, std::milli>;
 

@@ -20,9 +20,13 @@ bool endsWith(const std::string& s, const std::string& suffix) {
          s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
 
-Trunks loadTrunks(const std::string& path, const DtifParams& params) {
-  if (endsWith(path, ".csv")) return readTrunkCsv(path);
-  if (endsWith(path, ".pcd")) return extractTrunks(*loadPcd(path), params.trunk_extraction).trunks;
+/// A PCD submap gets its trunks and footprint extracted; a trunk map CSV has no footprint.
+Descriptor loadDescriptor(const std::string& path, const DtifParams& params) {
+  if (endsWith(path, ".csv")) return buildDescriptor(readTrunkCsv(path), params.descriptor);
+  if (endsWith(path, ".pcd")) {
+    return describeSubmap(extractTrunks(*loadPcd(path), params.trunk_extraction),
+                          params.descriptor);
+  }
   throw DatasetError(path + ": unknown input type (expected a .pcd submap or an x,y,z,r .csv)");
 }
 
@@ -35,10 +39,8 @@ int runRegister(const Args& args) {
   using Ms = std::chrono::duration<double, std::milli>;
 
   const auto t0 = std::chrono::steady_clock::now();
-  auto q = std::make_shared<Descriptor>(
-      buildDescriptor(loadTrunks(o.positional[0], params), params.descriptor));
-  auto c = std::make_shared<Descriptor>(
-      buildDescriptor(loadTrunks(o.positional[1], params), params.descriptor));
+  auto q = std::make_shared<Descriptor>(loadDescriptor(o.positional[0], params));
+  auto c = std::make_shared<Descriptor>(loadDescriptor(o.positional[1], params));
   const double desc_ms = Ms(std::chrono::steady_clock::now() - t0).count();
   q->robot = "query";
   c->robot = "candidate";

@@ -156,6 +156,10 @@ TEST(Descriptor, WireRoundTripSmallAndExact) {
   d.robot = "robot_b";
   d.submap_id = 42;
   d.stamp = 1234.5;
+  std::vector<std::pair<int64_t, int64_t>> cells;
+  for (int64_t k = 0; k < 3000; ++k) cells.emplace_back(312000 + (k * 37) % 80, 5096000 + k % 77);
+  d.footprint = makeFootprint(cells, 1.0);
+  ASSERT_GT(d.footprint.count(), 1000u);
   const std::vector<uint8_t> bytes = encodeDescriptor(d);
   std::printf("[ info ] %zu trunks, %zu faces -> %zu bytes\n", d.trunks.size(), d.triangles.size(),
               bytes.size());
@@ -178,6 +182,17 @@ TEST(Descriptor, WireRoundTripSmallAndExact) {
   }
   ASSERT_EQ(e.edge_hist.size(), d.edge_hist.size());
   for (size_t i = 0; i < d.edge_hist.size(); ++i) EXPECT_NEAR(e.edge_hist[i], d.edge_hist[i], 4e-3);
+  EXPECT_EQ(e.footprint.cell_m, d.footprint.cell_m);
+  EXPECT_EQ(e.footprint.x0, d.footprint.x0);
+  EXPECT_EQ(e.footprint.y0, d.footprint.y0);
+  EXPECT_EQ(e.footprint.width, d.footprint.width);
+  EXPECT_EQ(e.footprint.height, d.footprint.height);
+  EXPECT_EQ(e.footprint.bits, d.footprint.bits);
+  // Without a footprint (a trunk map) the descriptor says so in four bytes.
+  Descriptor plain = d;
+  plain.footprint = Footprint{};
+  EXPECT_EQ(encodeDescriptor(plain).size(), bytes.size() - 12 - d.footprint.bits.size());
+  EXPECT_TRUE(decodeDescriptor(encodeDescriptor(plain), DescriptorParams{}).footprint.empty());
 }
 
 TEST(Descriptor, DecodeRejectsMalformedBytes) {

@@ -194,6 +194,48 @@ TEST(LoopDetector, FitsResidualTiltFromSeenBases) {
   }
 }
 
+/// Footprints: a correct alignment of submaps sharing 20 % of their cells is no loop by
+/// DATASET.md (threshold 0.3), one sharing 60 % is.
+TEST(LoopDetector, RejectsCorrectAlignmentsOfBarelyOverlappingSubmaps) {
+  const LoopDetectorParams params;
+  const std::vector<PairCase> cases = overlappingPairs(12, 31);
+  int checked = 0;
+  for (const PairCase& base : cases) {
+    PairCase pc = base;
+    std::vector<std::pair<int64_t, int64_t>> c_cells;
+    for (int64_t y = -15; y < 15; ++y)
+      for (int64_t x = -15; x < 15; ++x) c_cells.emplace_back(x, y);
+    pc.c.footprint = makeFootprint(c_cells, 1.0);
+    // The query saw the same 30 m square shifted along the candidate's x by `shift`.
+    auto queryFootprint = [&](double shift) {
+      std::vector<std::pair<int64_t, int64_t>> cells;
+      const Pose T_q_c = pc.T_c_q.inverse();
+      for (int64_t y = -15; y < 15; ++y) {
+        for (int64_t x = -15; x < 15; ++x) {
+          const Eigen::Vector3d p = T_q_c * Eigen::Vector3d(x + 0.5 + shift, y + 0.5, 0.0);
+          cells.emplace_back(static_cast<int64_t>(std::floor(p.x())),
+                             static_cast<int64_t>(std::floor(p.y())));
+        }
+      }
+      return makeFootprint(cells, 1.0);
+    };
+    pc.q.footprint = Footprint{};
+    if (!matchPair(pc.q, pc.c, params)) continue;  // only pairs that match without footprints
+    ++checked;
+    pc.q.footprint = queryFootprint(12.0);
+    Verification ver;
+    const auto good = matchPair(pc.q, pc.c, params, nullptr, &ver);
+    EXPECT_TRUE(good.has_value()) << ver.reason;
+    EXPECT_NEAR(ver.overlap, 0.6, 0.05);
+    pc.q.footprint = queryFootprint(24.0);
+    const auto small = matchPair(pc.q, pc.c, params, nullptr, &ver);
+    EXPECT_FALSE(small.has_value());
+    EXPECT_EQ(ver.reason, "small overlap");
+    EXPECT_NEAR(ver.overlap, 0.2, 0.05);
+  }
+  EXPECT_GE(checked, 10);
+}
+
 TEST(LoopDetector, Exact180DegreesAndUtmScaleCoordinates) {
   std::mt19937 rng(180);
   const Trunks world = test::randomStand(rng, 80, 80, 600);

@@ -163,7 +163,7 @@ TEST(TrunkExtractor, VisitListsEveryKeyOnce) {
   std::vector<std::string> keys;
   auto v = [&](const char* k, auto&) { keys.push_back(k); };
   p.visit(v);
-  EXPECT_EQ(keys.size(), 28u);
+  EXPECT_EQ(keys.size(), 29u);
   std::sort(keys.begin(), keys.end());
   EXPECT_EQ(std::unique(keys.begin(), keys.end()), keys.end());
 }
@@ -256,6 +256,27 @@ TEST(TrunkExtractor, SeenBasesAreMeasuredHiddenBasesAreFlagged) {
   const auto all = extractTrunks(full.cloud, TrunkExtractorParams());
   EXPECT_EQ(all.stats.unseen_bases, 0u);
   for (const Trunk& t : all.trunks) EXPECT_TRUE(t.base_seen);
+}
+
+TEST(TrunkExtractor, FootprintHoldsWhatStandsAboveTheGround) {
+  Plot plot(0.0, 0.0, 8);
+  plot.addGround(-10, 10, -10, 10, 0.1, 0.02);
+  for (const Stem& s : kStems) plot.addStem(s);
+  TrunkExtractorParams params;
+  const auto res = extractTrunks(plot.cloud, params);
+  const Footprint& f = res.footprint;
+  ASSERT_FALSE(f.empty());
+  EXPECT_EQ(f.cell_m, params.footprint_cell_m);
+  for (const Stem& s : kStems) {
+    EXPECT_TRUE(
+        f.occupied(static_cast<int64_t>(std::floor(s.x)), static_cast<int64_t>(std::floor(s.y))))
+        << "stem " << s.x << "," << s.y;
+  }
+  // Bare ground (0-5 cm above its 5th percentile) is no part of it: only the stems' cells.
+  EXPECT_GE(f.count(), kStems.size());
+  EXPECT_LE(f.count(), 4 * kStems.size());
+  params.footprint_cell_m = 0.0;
+  EXPECT_TRUE(extractTrunks(plot.cloud, params).footprint.empty());
 }
 
 TEST(TrunkExtractor, PartiallyVisibleStemsKeepTheirRadius) {

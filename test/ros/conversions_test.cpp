@@ -66,6 +66,7 @@ TEST(DescriptorConversion, RoundTripRebuildsTriangles) {
   Trunks trunks = forest(25, 7);
   for (size_t i = 0; i < trunks.size(); i += 3) trunks[i].base_seen = false;
   Descriptor d = buildDescriptor(trunks, DescriptorParams());
+  d.footprint = makeFootprint({{-4, 2}, {-3, 2}, {7, 9}, {0, 0}}, 1.0);
   d.robot = "alpha";
   d.submap_id = 42;
   d.stamp = 1234.5;
@@ -103,6 +104,17 @@ TEST(DescriptorConversion, RoundTripRebuildsTriangles) {
   }
   EXPECT_EQ(back.edge_hist, d.edge_hist);
   EXPECT_EQ(back.radius_hist, d.radius_hist);
+  EXPECT_EQ(back.footprint.cell_m, 1.0);
+  EXPECT_EQ(back.footprint.x0, -4);
+  EXPECT_EQ(back.footprint.y0, 0);
+  EXPECT_EQ(back.footprint.bits, d.footprint.bits);
+  EXPECT_TRUE(back.footprint.occupied(7, 9));
+
+  // A bitmap that does not fit its size is rejected, not read past its end.
+  dtif_msgs::TrunkDescriptor bad = m;
+  bad.footprint_bits.pop_back();
+  EXPECT_FALSE(fromMsg(bad, &back, &T_back, &error));
+  EXPECT_NE(error.find("footprint"), std::string::npos) << error;
 }
 
 TEST(DescriptorConversion, RejectsBadMessages) {

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "dtif/core/footprint.h"
 #include "dtif/core/types.h"
 
 namespace dtif {
@@ -61,6 +62,9 @@ struct Descriptor {
   std::vector<float> radius_hist;   ///< h^r, normalised to sum 1 (empty if no trunks)
   bool valid = false;               ///< usable for retrieval
   std::string invalid_reason;       ///< why not, when !valid
+  /// Occupied cells at trunk height (from extraction; empty for trunk maps such as field
+  /// inventories). Lets verification measure the overlap of an aligned pair.
+  Footprint footprint;
 };
 
 /// Encodes one face canonically from trunk centres (Eq. 3.2) and radii (Eq. 3.3).
@@ -69,6 +73,10 @@ Triangle makeCanonicalTriangle(const Trunks& trunks, int a, int b, int c);
 /// Builds the descriptor of a trunk set. Pure; thread-safe. Too few trunks, collinear or
 /// duplicate trunks give an invalid descriptor with a reason, never an exception.
 Descriptor buildDescriptor(const Trunks& trunks, const DescriptorParams& params);
+
+struct TrunkExtractionResult;
+/// buildDescriptor on an extraction's trunks, with the extraction's footprint attached.
+Descriptor describeSubmap(const TrunkExtractionResult& extraction, const DescriptorParams& params);
 
 /// Compact wire encoding (what crosses the radio link): trunks as float32, faces as uint16
 /// indices, histograms as uint8 quantised. decode(encode(d)) reproduces d up to float32.

@@ -34,6 +34,9 @@ struct VerifierParams {
   int tilt_min_pairs = 8;
   double tilt_min_spread_m = 4.0;  ///< the pairs' horizontal spread (smaller std dev) at least [m]
   double max_tilt_deg = 2.0;       ///< a larger fitted tilt is not trusted; 4-DoF kept [deg]
+  /// Overlap of the aligned footprints (occupied cells at trunk height, DATASET.md's measure)
+  /// at least; pairs without footprints (trunk maps) skip the check [0..1].
+  double min_overlap = 0.3;
 
   std::string validate() const;
 
@@ -50,6 +53,7 @@ struct VerifierParams {
     v("tilt_min_pairs", tilt_min_pairs);
     v("tilt_min_spread_m", tilt_min_spread_m);
     v("max_tilt_deg", max_tilt_deg);
+    v("min_overlap", min_overlap);
   }
 };
 
@@ -110,6 +114,7 @@ struct Verification {
   double rms_z_m = 0.0;                    ///< RMS elevation residual of the z pairs [m]
   int z_pairs = 0;  ///< pairs with both stem bases seen, which fixed t_z (0: t_z unobserved)
   bool tilt_fitted = false;      ///< residual roll/pitch estimated from those pairs
+  double overlap = -1.0;         ///< overlap of the aligned footprints; -1 when not measured
   std::string reason;            ///< why rejected (empty when accepted)
   double covisible_ratio = 0.0;  ///< co-located share of trunks inside the other's hull
   int covisible = 0;             ///< co-located trunks (both directions)

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "dtif/core/footprint.h"
 #include "dtif/core/types.h"
 
 namespace dtif {
@@ -48,6 +49,8 @@ struct TrunkExtractorParams {
   int min_base_points = 8;              ///< ring points needed, else the grid ground is used
   int max_fits_per_candidate = 3;       ///< circles tried per candidate (trunks merged by
                                         ///< close spacing or undergrowth)
+  double footprint_cell_m = 1.0;        ///< cell of the submap's footprint (occupied cells of
+                                        ///< points 0.3-3 m above ground, DATASET.md); 0: none [m]
 
   /// Returns an empty string when the values are usable, else what is wrong.
   std::string validate() const;
@@ -82,6 +85,7 @@ struct TrunkExtractorParams {
     v("base_max_dh_m", base_max_dh_m);
     v("min_base_points", min_base_points);
     v("max_fits_per_candidate", max_fits_per_candidate);
+    v("footprint_cell_m", footprint_cell_m);
   }
 };
 
@@ -101,6 +105,7 @@ struct TrunkExtractionStats {
 
 struct TrunkExtractionResult {
   Trunks trunks;
+  Footprint footprint;  ///< where the submap saw anything at trunk height (verification overlap)
   TrunkExtractionStats stats;
 };
 

@@ -1,0 +1,89 @@
+// Footprints (occupied cells at trunk height) and their overlap under a pose, which
+// verification compares with DATASET.md's overlap threshold.
+#include "dtif/core/footprint.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+namespace dtif {
+namespace {
+
+using Cells = std::vector<std::pair<int64_t, int64_t>>;
+
+Cells rect(int64_t x0, int64_t y0, int64_t w, int64_t h) {
+  Cells c;
+  for (int64_t y = y0; y < y0 + h; ++y)
+    for (int64_t x = x0; x < x0 + w; ++x) c.emplace_back(x, y);
+  return c;
+}
+
+Pose shifted(double dx, double dy, double yaw = 0.0) {
+  Pose T = Pose::Identity();
+  T.linear() = rotZ(yaw);
+  T.translation() = Eigen::Vector3d(dx, dy, 0.0);
+  return T;
+}
+
+TEST(Footprint, CellsRoundTripThroughTheBitmap) {
+  Cells cells = rect(-3, 5, 7, 4);
+  cells.emplace_back(10, -2);  // an isolated cell widens the box
+  cells.emplace_back(-3, 5);   // duplicates are fine
+  const Footprint f = makeFootprint(cells, 1.0);
+  EXPECT_EQ(f.cell_m, 1.0);
+  EXPECT_EQ(f.x0, -3);
+  EXPECT_EQ(f.y0, -2);
+  EXPECT_EQ(f.width, 14);
+  EXPECT_EQ(f.height, 11);
+  EXPECT_EQ(f.count(), 29u);
+  EXPECT_TRUE(f.occupied(10, -2));
+  EXPECT_TRUE(f.occupied(3, 8));
+  EXPECT_FALSE(f.occupied(4, 8));
+  EXPECT_FALSE(f.occupied(-4, 5));     // left of the bitmap
+  EXPECT_FALSE(f.occupied(100, 100));  // far outside
+}
+
+TEST(Footprint, OverlapIsTheSharedShareOfTheSmallerFootprint) {
+  const Footprint c = makeFootprint(rect(0, 0, 20, 10), 1.0);  // 200 cells
+  const Footprint q = makeFootprint(rect(0, 0, 10, 10), 1.0);  // 100 cells
+  EXPECT_DOUBLE_EQ(footprintOverlap(q, c, Pose::Identity()), 1.0);
+  EXPECT_DOUBLE_EQ(footprintOverlap(q, c, shifted(15.0, 0.0)), 0.5);  // q cells 15..24
+  EXPECT_DOUBLE_EQ(footprintOverlap(q, c, shifted(0.0, 7.0)), 0.3);   // rows 7..9 shared
+  EXPECT_DOUBLE_EQ(footprintOverlap(q, c, shifted(40.0, 0.0)), 0.0);
+  // The query frame turned by 180 deg about the origin: cells land at negative x, y.
+  EXPECT_DOUBLE_EQ(footprintOverlap(q, c, shifted(10.0, 10.0, M_PI)), 1.0);
+  // Symmetric in the sense of the protocol: min(|q|, |c|) in the denominator.
+  EXPECT_DOUBLE_EQ(footprintOverlap(c, q, shifted(-15.0, 0.0)), 0.5);
+}
+
+TEST(Footprint, EmptyFootprintsAreNotMeasured) {
+  const Footprint none;
+  const Footprint c = makeFootprint(rect(0, 0, 5, 5), 1.0);
+  EXPECT_TRUE(none.empty());
+  EXPECT_EQ(footprintOverlap(none, c, Pose::Identity()), -1.0);
+  EXPECT_EQ(footprintOverlap(c, none, Pose::Identity()), -1.0);
+  EXPECT_TRUE(makeFootprint({}, 1.0).empty());
+  EXPECT_TRUE(makeFootprint(rect(0, 0, 2, 2), 0.0).empty());
+}
+
+TEST(Footprint, WideExtentsAreCoarsenedToStayWithinTheBudget) {
+  // Two clusters 1 km apart (stray points): the bitmap coarsens instead of growing.
+  Cells cells = rect(0, 0, 10, 10);
+  const Cells far = rect(1000, 0, 3, 3);
+  cells.insert(cells.end(), far.begin(), far.end());
+  const Footprint f = makeFootprint(cells, 1.0);
+  EXPECT_LE(f.width, kMaxFootprintSide);
+  EXPECT_LE(f.height, kMaxFootprintSide);
+  EXPECT_GT(f.cell_m, 1.0);
+  EXPECT_EQ(std::log2(f.cell_m), std::round(std::log2(f.cell_m)));  // powers of two
+  EXPECT_TRUE(f.occupied(0, 0));
+  EXPECT_TRUE(f.occupied(static_cast<int64_t>(std::floor(1001.0 / f.cell_m)), 0));
+  EXPECT_LE(f.bits.size(), static_cast<size_t>(kMaxFootprintSide * kMaxFootprintSide / 8));
+  // Negative indices coarsen by floor, so cells stay nested.
+  const Footprint g = makeFootprint({{-1, -1}, {-1000, 0}}, 1.0);
+  EXPECT_TRUE(g.occupied(static_cast<int64_t>(std::floor(-1.0 / g.cell_m)),
+                         static_cast<int64_t>(std::floor(-1.0 / g.cell_m))));
+}
+
+}  // namespace
+}  // namespace dtif
