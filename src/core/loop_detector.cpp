@@ -252,6 +252,90 @@ Refined guidedRefine(const Descriptor& q, const Descriptor& c, const Pose& T0, d
   return out;
 }
 
+/// Fit of a pose to the whole trunk sets: guided refinement from `T0`, then the Tukey-weighted
+/// count of the mutual pairs, sum of (1 - (d / radius)^2)^2. Trunk centres are fitted to a few
+/// cm, so a pose shifted or turned onto a neighbouring lattice site of a jittered plantation
+/// scores clearly lower than the true one even though it pairs as many trunks.
+struct Fit {
+  Pose T = Pose::Identity();
+  double score = 0.0;
+  double rms_xy = 0.0;  ///< of the refined pairs [m]
+};
+Fit fitPose(const Descriptor& q, const Descriptor& c, const Pose& T0, double radius) {
+  Fit f;
+  const Refined r = guidedRefine(q, c, T0, radius);
+  f.T = r.T;
+  f.rms_xy = r.rms_xy;
+  for (const auto& [i, j] : r.pairs) {
+    const Eigen::Vector2d d = (r.T * Eigen::Vector3d(q.trunks[i].x, q.trunks[i].y, 0.0)).head<2>() -
+                              Eigen::Vector2d(c.trunks[j].x, c.trunks[j].y);
+    const double u = d.squaredNorm() / (radius * radius);
+    if (u < 1.0) f.score += (1.0 - u) * (1.0 - u);
+  }
+  return f;
+}
+
+/// Repetitive stands: the hypothesis and its lattice neighbours (the pose shifted by the
+/// offsets from the candidate trunk at the query's centroid to its nearest trunks, and turned
+/// by 90, 180 and 270 deg about it) are all fitted to the full trunk sets; the best fit wins.
+/// Returns the winner and the runner-up's share of its score.
+std::pair<Fit, double> resolveByFit(const Descriptor& q, const Descriptor& c, const Pose& T0,
+                                    double radius) {
+  constexpr int kNeighbours = 8;
+  Eigen::Vector2d centroid = Eigen::Vector2d::Zero();
+  for (const Trunk& t : q.trunks) centroid += Eigen::Vector2d(t.x, t.y);
+  centroid /= static_cast<double>(q.trunks.size());
+  const Eigen::Vector2d anchor_q =
+      (T0 * Eigen::Vector3d(centroid.x(), centroid.y(), 0.0)).head<2>();
+  int anchor = 0;
+  double best_d = std::numeric_limits<double>::infinity();
+  for (size_t j = 0; j < c.trunks.size(); ++j) {
+    const double d = (Eigen::Vector2d(c.trunks[j].x, c.trunks[j].y) - anchor_q).squaredNorm();
+    if (d < best_d) best_d = d, anchor = static_cast<int>(j);
+  }
+  const Eigen::Vector2d a(c.trunks[anchor].x, c.trunks[anchor].y);
+  std::vector<std::pair<double, Eigen::Vector2d>> near;
+  for (size_t j = 0; j < c.trunks.size(); ++j) {
+    const Eigen::Vector2d o = Eigen::Vector2d(c.trunks[j].x, c.trunks[j].y) - a;
+    if (static_cast<int>(j) != anchor) near.emplace_back(o.squaredNorm(), o);
+  }
+  const size_t k = std::min<size_t>(kNeighbours, near.size());
+  std::partial_sort(near.begin(), near.begin() + k, near.end(),
+                    [](const auto& x, const auto& y) { return x.first < y.first; });
+  std::vector<Eigen::Vector2d> shifts{Eigen::Vector2d::Zero()};
+  for (size_t i = 0; i < k; ++i) shifts.push_back(near[i].second);
+
+  Fit best = fitPose(q, c, T0, radius);
+  std::vector<Fit> fits{best};
+  for (int turn = 0; turn < 4; ++turn) {
+    Pose R = Pose::Identity();  // turn about the anchor trunk
+    R.linear() = rotZ(turn * M_PI / 2.0);
+    R.translation() =
+        Eigen::Vector3d(a.x(), a.y(), 0.0) - R.linear() * Eigen::Vector3d(a.x(), a.y(), 0.0);
+    for (const Eigen::Vector2d& s : shifts) {
+      if (turn == 0 && s.isZero()) continue;
+      Pose S = Pose::Identity();
+      S.translation() = Eigen::Vector3d(s.x(), s.y(), 0.0);
+      fits.push_back(fitPose(q, c, S * R * T0, radius));
+    }
+  }
+  std::sort(fits.begin(), fits.end(), [](const Fit& x, const Fit& y) { return x.score > y.score; });
+  best = fits.front();
+  // The runner-up must be another pose, not the winner reached from a second start.
+  double runner = 0.0;
+  for (size_t i = 1; i < fits.size(); ++i) {
+    const Pose D = best.T.inverse() * fits[i].T;
+    const Eigen::Vector3d p = fits[i].T * Eigen::Vector3d(centroid.x(), centroid.y(), 0.0);
+    const Eigen::Vector3d pb = best.T * Eigen::Vector3d(centroid.x(), centroid.y(), 0.0);
+    const double dyaw = std::abs(std::atan2(D.linear()(1, 0), D.linear()(0, 0)));
+    if ((p - pb).head<2>().norm() > radius || dyaw > 5.0 * M_PI / 180.0) {
+      runner = fits[i].score;
+      break;
+    }
+  }
+  return {best, best.score > 0.0 ? runner / best.score : 1.0};
+}
+
 // ---- database file ----------------------------------------------------------------------------
 
 constexpr char kDbMagic[8] = {'D', 'T', 'I', 'F', 'D', 'B', '\0', '\0'};
@@ -303,6 +387,10 @@ std::string VerifierParams::validate() const {
   if (!(tilt_min_spread_m >= 0.0)) err << "tilt_min_spread_m must be >= 0; ";
   if (!(max_tilt_deg > 0.0 && max_tilt_deg <= 10.0)) err << "max_tilt_deg must be in (0, 10]; ";
   if (!(min_overlap >= 0.0 && min_overlap <= 1.0)) err << "min_overlap must be in [0, 1]; ";
+  if (!(max_fit_rms_m > 0.0)) err << "max_fit_rms_m must be > 0; ";
+  if (!(max_fit_ambiguity >= 0.0 && max_fit_ambiguity < 1.0)) {
+    err << "max_fit_ambiguity must be in [0, 1) (0: ambiguous hypotheses are rejected); ";
+  }
   return err.str();
 }
 
@@ -346,9 +434,20 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
   const double amb_t =
       est.translation_consensus > 0 ? est.translation_runner_up / est.translation_consensus : 1.0;
   v.ambiguity = std::max(amb_yaw, amb_t);
-  if (v.ambiguity > params.max_ambiguity) return reject("ambiguous");
+  Pose T_hyp = est.T_c_q;
+  if (v.ambiguity > params.max_ambiguity) {
+    // The correspondences alone cannot tell the lattice sites apart; the fit of all trunks can
+    // when the stand's irregularity exceeds the trunk-centre noise.
+    if (params.max_fit_ambiguity <= 0.0) return reject("ambiguous");
+    const auto [fit, ratio] = resolveByFit(q, c, est.T_c_q, params.match_radius_m);
+    v.fit_ambiguity = ratio;
+    if (ratio > params.max_fit_ambiguity) return reject("ambiguous");
+    // A wrong site of a jittered lattice pairs every trunk too, but only to the jitter.
+    if (fit.rms_xy > params.max_fit_rms_m) return reject("ambiguous");
+    T_hyp = fit.T;
+  }
 
-  Refined ref = guidedRefine(q, c, est.T_c_q, params.match_radius_m);
+  Refined ref = guidedRefine(q, c, T_hyp, params.match_radius_m);
   ref.rms_z = refineElevation(q, c, ref.pairs, params, &ref.T, &v.z_pairs, &v.tilt_fitted);
   v.T_c_q = ref.T;
   v.pairs = ref.pairs;
@@ -360,7 +459,7 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
   double shift = 0.0;
   for (const Trunk& t : q.trunks) {
     const Eigen::Vector3d p(t.x, t.y, t.z);
-    shift = std::max(shift, ((ref.T * p) - (est.T_c_q * p)).head<2>().norm());
+    shift = std::max(shift, ((ref.T * p) - (T_hyp * p)).head<2>().norm());
   }
   if (shift > params.match_radius_m) return reject("refinement diverged");
   if (static_cast<int>(ref.pairs.size()) < params.min_inliers) return reject("few inliers");

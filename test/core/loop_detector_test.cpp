@@ -272,6 +272,50 @@ TEST(LoopDetector, RejectsDisjointPlacesOfRandomStands) {
   EXPECT_EQ(false_accepts, 0) << "of " << tried;
 }
 
+/// The same places of a jittered plantation: the correspondences cannot tell the lattice sites
+/// apart (ambiguous), the fit of all trunks can. max_fit_ambiguity = 0 is the control.
+TEST(LoopDetector, ResolvesOverlappingPairsOfAPlantationGridByFit) {
+  for (const double max_fit : {0.7, 0.0}) {
+    LoopDetectorParams params;
+    params.verification.max_fit_ambiguity = max_fit;
+    std::mt19937 rng(123);
+    std::uniform_real_distribution<double> yaw(-M_PI, M_PI), off(3.0, 8.0), pos(40, 140);
+    int accepted = 0, wrong = 0, resolved = 0;
+    const int n = 30;
+    for (int i = 0; i < n; ++i) {
+      const Trunks world = test::plantation(rng, 180, 180, 3.0, 0.15);
+      const Eigen::Vector2d b(pos(rng), pos(rng));
+      const double a = yaw(rng);
+      const Eigen::Vector2d qc = b + off(rng) * Eigen::Vector2d(std::cos(a), std::sin(a));
+      const Pose T_w_c = poseXyYaw(b.x(), b.y(), 0.0, yaw(rng));
+      const Pose T_w_q = poseXyYaw(qc.x(), qc.y(), 0.0, yaw(rng));
+      const Descriptor c = describe(observe(rng, world, b, T_w_c), "b", 1, 0.0);
+      const Descriptor q = describe(observe(rng, world, qc, T_w_q), "a", 0, 0.0);
+      Verification ver;
+      const auto lc = matchPair(q, c, params, nullptr, &ver);
+      if (!lc) continue;
+      ++accepted;
+      resolved += ver.fit_ambiguity >= 0.0;
+      const Pose T_c_q = T_w_c.inverse() * T_w_q;
+      if (test::yawError(lc->T_c_q, T_c_q) > 0.3 * M_PI / 180.0 ||
+          (lc->T_c_q.translation() - T_c_q.translation()).head<2>().norm() > 0.15) {
+        ++wrong;
+      }
+    }
+    std::printf(
+        "[ info ] plantation, max_fit_ambiguity %.1f: accepted %d/%d (%d resolved by fit)\n",
+        max_fit, accepted, n, resolved);
+    EXPECT_EQ(wrong, 0);
+    if (max_fit > 0.0) {
+      EXPECT_GE(accepted, 2 * n / 3);
+      EXPECT_GE(resolved, n / 3);
+    } else {
+      EXPECT_EQ(resolved, 0);
+      EXPECT_LT(accepted, n / 2);
+    }
+  }
+}
+
 TEST(LoopDetector, RejectsDifferentPlacesOfAPlantationGrid) {
   // 3 m x 3 m grid, 0.15 m planting jitter, radii 15 +- 1 cm: every window looks alike up to
   // the jitter. Pairs of windows >= 33 m apart share no tree; each must be rejected.
@@ -293,7 +337,12 @@ TEST(LoopDetector, RejectsDifferentPlacesOfAPlantationGrid) {
     ++tried;
     PoseEstimate est;
     Verification ver;
-    if (matchPair(q, c, params, &est, &ver)) ++false_accepts;
+    if (matchPair(q, c, params, &est, &ver)) {
+      ++false_accepts;
+      std::printf(
+          "[ info ] false accept: fit ambiguity %.2f, rms %.3f m, pairs %zu, overlap %.2f\n",
+          ver.fit_ambiguity, ver.rms_xy_m, ver.pairs.size(), ver.overlap);
+    }
     if (est.ok) ++reached_pose;
     min_ambiguity = std::min(min_ambiguity, ver.ambiguity);
   }

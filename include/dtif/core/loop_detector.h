@@ -37,6 +37,11 @@ struct VerifierParams {
   /// Overlap of the aligned footprints (occupied cells at trunk height, DATASET.md's measure)
   /// at least; pairs without footprints (trunk maps) skip the check [0..1].
   double min_overlap = 0.3;
+  /// An ambiguous hypothesis (max_ambiguity) is refitted to all trunks together with its lattice
+  /// neighbours (shifted to the nearest trunks, turned by 90/180/270 deg); it is kept when the
+  /// runner-up fit scores at most this share of the best. 0: ambiguous is always rejected [0..1).
+  double max_fit_ambiguity = 0.7;
+  double max_fit_rms_m = 0.08;  ///< the fitted winner's RMS pair residual at most [m]
 
   std::string validate() const;
 
@@ -54,6 +59,8 @@ struct VerifierParams {
     v("tilt_min_spread_m", tilt_min_spread_m);
     v("max_tilt_deg", max_tilt_deg);
     v("min_overlap", min_overlap);
+    v("max_fit_ambiguity", max_fit_ambiguity);
+    v("max_fit_rms_m", max_fit_rms_m);
   }
 };
 
@@ -115,6 +122,7 @@ struct Verification {
   int z_pairs = 0;  ///< pairs with both stem bases seen, which fixed t_z (0: t_z unobserved)
   bool tilt_fitted = false;      ///< residual roll/pitch estimated from those pairs
   double overlap = -1.0;         ///< overlap of the aligned footprints; -1 when not measured
+  double fit_ambiguity = -1.0;   ///< runner-up / best lattice fit; -1 when not needed
   std::string reason;            ///< why rejected (empty when accepted)
   double covisible_ratio = 0.0;  ///< co-located share of trunks inside the other's hull
   int covisible = 0;             ///< co-located trunks (both directions)
