@@ -7,7 +7,9 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <functional>
 #include <iomanip>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <unordered_map>
@@ -92,6 +94,93 @@ std::unordered_set<int64_t> overlapCells(const Cloud& cloud_S, const Pose& T_W_S
   return cells;
 }
 
+DetectionRow trunkDetection(const Cloud& cloud_S, const Pose& T_W_S, const Trunks& trunks,
+                            const std::vector<StemRecord>& stems) {
+  constexpr double kMatchM = 0.5, kShellM = 0.05, kLowM = 0.5, kHighM = 2.5;
+  constexpr size_t kMinVisiblePoints = 10;
+  DetectionRow row;
+  row.trunks = trunks.size();
+  // Stems in S, bucketed in 1 m cells around where the submap has points.
+  const Pose T_S_W = T_W_S.inverse();
+  float minx = std::numeric_limits<float>::infinity(), maxx = -minx, miny = minx, maxy = -minx;
+  for (const auto& p : cloud_S) {
+    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) continue;
+    ++row.points;
+    minx = std::min(minx, p.x), maxx = std::max(maxx, p.x);
+    miny = std::min(miny, p.y), maxy = std::max(maxy, p.y);
+  }
+  struct S {
+    Eigen::Vector3d base;
+    double r;
+    size_t hits = 0;
+  };
+  std::vector<S> local;
+  std::unordered_map<int64_t, std::vector<int>> grid;
+  auto cellOf = [](double v) { return static_cast<int64_t>(std::floor(v)); };
+  for (const StemRecord& st : stems) {
+    const Eigen::Vector3d b = T_S_W * Eigen::Vector3d(st.x, st.y, st.z_base);
+    if (b.x() < minx - 1 || b.x() > maxx + 1 || b.y() < miny - 1 || b.y() > maxy + 1) continue;
+    grid[packCell(cellOf(b.x()), cellOf(b.y()))].push_back(static_cast<int>(local.size()));
+    local.push_back({b, 0.5 * st.dbh});
+  }
+  auto near = [&](double x, double y, const std::function<void(int)>& f) {
+    for (int64_t dx = -1; dx <= 1; ++dx)
+      for (int64_t dy = -1; dy <= 1; ++dy) {
+        const auto it = grid.find(packCell(cellOf(x) + dx, cellOf(y) + dy));
+        if (it != grid.end())
+          for (int k : it->second) f(k);
+      }
+  };
+  for (const auto& p : cloud_S) {
+    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) continue;
+    near(p.x, p.y, [&](int k) {
+      S& s = local[k];
+      const double h = p.z - s.base.z();
+      if (h < kLowM || h > kHighM) return;
+      if (std::hypot(p.x - s.base.x(), p.y - s.base.y()) <= s.r + kShellM) ++s.hits;
+    });
+  }
+  std::vector<char> found(local.size(), 0);
+  double sum_r = 0.0, sum_z = 0.0;
+  for (const Trunk& t : trunks) {
+    int best = -1;
+    double bd = kMatchM;
+    near(t.x, t.y, [&](int k) {
+      const double d = std::hypot(t.x - local[k].base.x(), t.y - local[k].base.y());
+      if (d < bd) bd = d, best = k;
+    });
+    if (best < 0) continue;
+    ++row.trunks_on_stems;
+    found[best] = 1;
+    sum_r += std::abs(t.r - local[best].r);
+    if (t.base_seen) {
+      ++row.bases_seen;
+      sum_z += std::abs(t.z - local[best].base.z());
+    }
+  }
+  for (size_t k = 0; k < local.size(); ++k) {
+    if (local[k].hits < kMinVisiblePoints) continue;
+    ++row.visible_stems;
+    row.visible_found += found[k];
+  }
+  if (row.trunks_on_stems) row.radius_mae_m = sum_r / static_cast<double>(row.trunks_on_stems);
+  if (row.bases_seen) row.base_mae_m = sum_z / static_cast<double>(row.bases_seen);
+  return row;
+}
+
+void writeDetectionCsv(const std::string& path, const std::vector<DetectionRow>& rows) {
+  std::ofstream os(path);
+  os << "submap,points,visible_stems,trunks,trunks_on_stems,visible_found,bases_seen,"
+        "radius_mae_m,base_mae_m\n";
+  for (const DetectionRow& r : rows) {
+    os << r.submap << ',' << r.points << ',' << r.visible_stems << ',' << r.trunks << ','
+       << r.trunks_on_stems << ',' << r.visible_found << ',' << r.bases_seen << ','
+       << r.radius_mae_m << ',' << r.base_mae_m << '\n';
+  }
+  os.flush();
+  if (!os) throw DatasetError(path + ": write failed");
+}
+
 double cellOverlap(const std::unordered_set<int64_t>& a, const std::unordered_set<int64_t>& b) {
   if (a.empty() || b.empty()) return 0.0;
   const auto& small = a.size() < b.size() ? a : b;
@@ -134,6 +223,10 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
     desc->submap_id = rec.id;
     desc->stamp = rec.stamp;
     row.trunks = ext.trunks.size();
+    if (!ds.stems.empty()) {
+      result.detection.push_back(trunkDetection(*cloud, T_W_q, ext.trunks, ds.stems));
+      result.detection.back().submap = rec.id;
+    }
     row.invalid_reason = desc->invalid_reason;
     bytes_sum += static_cast<double>(encodeDescriptor(*desc).size());
 

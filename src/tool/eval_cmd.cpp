@@ -3,6 +3,7 @@
 // effective parameters (params.yaml) into the output folder.
 #include <filesystem>
 #include <fstream>
+#include <iomanip>
 #include <iostream>
 
 #include "commands.h"
@@ -46,6 +47,24 @@ int runEval(const Args& args) {
     if (!t || !p) throw DatasetError(*out + ": write failed");
   }
   std::cout << "dataset " << ds.root << ": " << res.summary.submaps << " submaps\n" << table;
+  if (!res.detection.empty()) {
+    writeDetectionCsv((dir / "detection.csv").string(), res.detection);
+    double pts = 0, vis = 0, tr = 0, on = 0, found = 0, seen = 0, r_sum = 0, z_sum = 0;
+    for (const DetectionRow& d : res.detection) {
+      pts += d.points, vis += d.visible_stems, tr += d.trunks, on += d.trunks_on_stems;
+      found += d.visible_found, seen += d.bases_seen;
+      r_sum += d.radius_mae_m * d.trunks_on_stems, z_sum += d.base_mae_m * d.bases_seen;
+    }
+    const double n = static_cast<double>(res.detection.size());
+    std::cout << std::fixed << std::setprecision(1)
+              << "trunks vs stems.csv, per submap: " << pts / n << " points, " << vis / n
+              << " visible stems, " << tr / n << " trunks (" << on / n << " on stems), "
+              << (vis > 0 ? 100.0 * found / vis : 0.0) << " % of visible stems found; radius MAE "
+              << std::setprecision(3) << (on > 0 ? r_sum / on : 0.0) << " m; "
+              << std::setprecision(1) << (on > 0 ? 100.0 * seen / on : 0.0)
+              << " % bases seen, their z MAE " << std::setprecision(3)
+              << (seen > 0 ? z_sum / seen : 0.0) << " m (detection.csv)\n";
+  }
   return 0;
 }
 

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -65,6 +66,40 @@ Cloud squareScene(double side, double g) {
     }
   }
   return c;
+}
+
+TEST(Detection, CountsVisibleStemsFoundTrunksAndTheirErrors) {
+  // Flat ground at z = -1.7 in S; S is W shifted by (100, 50) and turned by 90 deg.
+  Pose T_W_S = Pose::Identity();
+  T_W_S.linear() = rotZ(M_PI / 2);
+  T_W_S.translation() = Eigen::Vector3d(100.0, 50.0, 0.0);
+  Cloud c = squareScene(12.0, -1.7);
+  // Stems in S: (2, 1) r 0.2 and (-3, 4) r 0.15 visible; (4, -4) r 0.1 has no points.
+  auto ring = [&](double x, double y, double r) {
+    for (double h = 0.0; h < 3.0; h += 0.05)
+      for (double a = 0.0; a < 2 * M_PI; a += 0.2)
+        c.push_back(pcl::PointXYZ(x + r * std::cos(a), y + r * std::sin(a), -1.7 + h));
+  };
+  ring(2.0, 1.0, 0.2);
+  ring(-3.0, 4.0, 0.15);
+  std::vector<StemRecord> stems;
+  for (const auto& [x, y, r] : std::vector<std::array<double, 3>>{
+           {2.0, 1.0, 0.2}, {-3.0, 4.0, 0.15}, {4.0, -4.0, 0.1}, {40.0, 40.0, 0.3}}) {
+    const Eigen::Vector3d w = T_W_S * Eigen::Vector3d(x, y, -1.7);
+    stems.push_back({static_cast<int64_t>(stems.size()), w.x(), w.y(), w.z(), 2.0 * r});
+  }
+  Trunks trunks = {{2.05, 1.0, -1.6, 0.22, true},   // on stem 0: dr 0.02, dz 0.1
+                   {-3.0, 4.1, -1.0, 0.15, false},  // on stem 1, base not seen
+                   {0.0, -5.0, -1.7, 0.2, true}};   // no stem there: a false trunk
+  const DetectionRow d = trunkDetection(c, T_W_S, trunks, stems);
+  EXPECT_EQ(d.points, c.size());
+  EXPECT_EQ(d.visible_stems, 2u);  // the point-less and the far stem are not visible
+  EXPECT_EQ(d.trunks, 3u);
+  EXPECT_EQ(d.trunks_on_stems, 2u);
+  EXPECT_EQ(d.visible_found, 2u);
+  EXPECT_EQ(d.bases_seen, 1u);
+  EXPECT_NEAR(d.radius_mae_m, 0.01, 1e-9);
+  EXPECT_NEAR(d.base_mae_m, 0.1, 1e-9);
 }
 
 TEST(Overlap, CountsOnlyTheBandAboveTheLocalGround) {

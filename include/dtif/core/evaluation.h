@@ -65,10 +65,32 @@ struct EvalSummary {
   double descriptor_bytes_mean = 0;
 };
 
+/// Trunk extraction of one submap against the ground-truth stems (stems.csv); an extra output
+/// of eval (detection.csv), not part of DATASET.md's protocol.
+struct DetectionRow {
+  int64_t submap = -1;
+  size_t points = 0;           ///< finite points of the submap
+  size_t visible_stems = 0;    ///< stems with >= 10 points on them 0.5-2.5 m above their base
+  size_t trunks = 0;           ///< trunks extracted
+  size_t trunks_on_stems = 0;  ///< trunks within 0.5 m of a stem (the rest are false trunks)
+  size_t visible_found = 0;    ///< visible stems with a trunk within 0.5 m
+  size_t bases_seen = 0;       ///< trunks on stems whose base was seen (base_seen)
+  double radius_mae_m = 0.0;   ///< mean |r - dbh / 2| over trunks on stems [m]
+  double base_mae_m = 0.0;     ///< mean |z - z_base| over trunks on stems with seen bases [m]
+};
+
+/// Matches `trunks` (in S) to the stems (in W) under the ground-truth pose.
+DetectionRow trunkDetection(const Cloud& cloud_S, const Pose& T_W_S, const Trunks& trunks,
+                            const std::vector<StemRecord>& stems);
+
 struct EvalResult {
   std::vector<EvalRow> rows;
   EvalSummary summary;
+  std::vector<DetectionRow> detection;  ///< per submap; empty without stems.csv
 };
+
+/// detection.csv: one row per submap, the fields of DetectionRow. Throws DatasetError.
+void writeDetectionCsv(const std::string& path, const std::vector<DetectionRow>& rows);
 
 /// Runs the protocol. progress(i, n) is called after each submap. Throws DatasetError when
 /// ground truth is missing or a cloud cannot be read.
