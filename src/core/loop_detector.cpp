@@ -388,6 +388,7 @@ std::string VerifierParams::validate() const {
   if (!(max_tilt_deg > 0.0 && max_tilt_deg <= 10.0)) err << "max_tilt_deg must be in (0, 10]; ";
   if (!(min_overlap >= 0.0 && min_overlap <= 1.0)) err << "min_overlap must be in [0, 1]; ";
   if (!(max_fit_rms_m > 0.0)) err << "max_fit_rms_m must be > 0; ";
+  if (min_z_pairs < 0) err << "min_z_pairs must be >= 0; ";
   if (!(max_fit_ambiguity >= 0.0 && max_fit_ambiguity < 1.0)) {
     err << "max_fit_ambiguity must be in [0, 1) (0: ambiguous hypotheses are rejected); ";
   }
@@ -463,6 +464,7 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
   }
   if (shift > params.match_radius_m) return reject("refinement diverged");
   if (static_cast<int>(ref.pairs.size()) < params.min_inliers) return reject("few inliers");
+  if (v.z_pairs < params.min_z_pairs) return reject("elevation unobserved");
   if (ref.rms_xy > params.max_rms_xy_m) return reject("large residual");
 
   // Co-visibility: after alignment, trunks of one submap inside the other's footprint (convex

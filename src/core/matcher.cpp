@@ -2,6 +2,7 @@
 #include "dtif/core/matcher.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <sstream>
@@ -14,6 +15,64 @@ namespace {
 inline bool consistent(float a, float b, double rel, double abs_tol) {
   const double diff = std::fabs(static_cast<double>(a) - b);
   return diff <= abs_tol || diff <= rel * std::max(a, b);
+}
+
+/// A triangle to match and whether it is a Delaunay face (the paper's primitive).
+struct MatchTriangle {
+  Triangle t;
+  bool delaunay = true;
+};
+
+/// Delaunay faces plus, with k > 0, every triangle of a trunk and two of its k nearest
+/// neighbours (deduplicated), sorted by longest edge like Descriptor::triangles. Computed from the
+/// trunks on both sides, so nothing extra crosses the radio link.
+std::vector<MatchTriangle> matchTriangles(const Descriptor& d, int k) {
+  std::vector<MatchTriangle> out;
+  if (k <= 0 || d.trunks.size() < 3) {
+    for (const Triangle& t : d.triangles) out.push_back({t, true});
+    return out;
+  }
+  const int n = static_cast<int>(d.trunks.size());
+  const int kk = std::min(k, n - 1);
+  std::vector<std::array<int, 3>> keys;
+  keys.reserve(d.triangles.size() + static_cast<size_t>(n) * kk * (kk - 1) / 2);
+  auto key = [](int a, int b, int c) {
+    std::array<int, 3> t{a, b, c};
+    std::sort(t.begin(), t.end());
+    return t;
+  };
+  for (const Triangle& t : d.triangles) keys.push_back(key(t.v[0], t.v[1], t.v[2]));
+  std::vector<std::pair<double, int>> nn;
+  for (int i = 0; i < n; ++i) {
+    nn.clear();
+    for (int j = 0; j < n; ++j) {
+      if (j == i) continue;
+      nn.emplace_back(std::hypot(d.trunks[i].x - d.trunks[j].x, d.trunks[i].y - d.trunks[j].y), j);
+    }
+    std::partial_sort(nn.begin(), nn.begin() + kk, nn.end());
+    for (int a = 0; a < kk; ++a)
+      for (int b = a + 1; b < kk; ++b) keys.push_back(key(i, nn[a].second, nn[b].second));
+  }
+  const size_t n_delaunay = d.triangles.size();
+  std::vector<std::array<int, 3>> faces(keys.begin(), keys.begin() + n_delaunay);
+  std::sort(faces.begin(), faces.end());
+  std::sort(keys.begin(), keys.end());
+  keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+  out.reserve(keys.size());
+  for (const auto& t : keys) {
+    const Triangle tri = makeCanonicalTriangle(d.trunks, t[0], t[1], t[2]);
+    if (tri.len[2] <= 1e-3) continue;  // collinear or duplicate trunks
+    // Thin slivers: their shortest edge tells nothing reliable about the correspondence.
+    const double s = 0.5 * (tri.len[0] + tri.len[1] + tri.len[2]);
+    const double area2 = s * (s - tri.len[0]) * (s - tri.len[1]) * (s - tri.len[2]);
+    const bool face = std::binary_search(faces.begin(), faces.end(), t);
+    if (!face && (area2 <= 0.0 || std::sqrt(area2) < 0.05 * tri.len[0] * tri.len[0])) continue;
+    out.push_back({tri, face});
+  }
+  std::stable_sort(out.begin(), out.end(), [](const MatchTriangle& a, const MatchTriangle& b) {
+    return a.t.len[0] < b.t.len[0];
+  });
+  return out;
 }
 
 }  // namespace
@@ -38,6 +97,9 @@ std::string MatcherParams::validate() const {
   if (!(alpha_w >= 0.0 && std::isfinite(alpha_s))) err << "alpha_s, alpha_w must be >= 0; ";
   if (!(alpha_s > alpha_w)) err << "alpha_s must exceed alpha_w (Eq. 3.9); ";
   if (max_correspondences < 2) err << "max_correspondences must be >= 2; ";
+  if (neighbour_triangles < 0 || neighbour_triangles > 12) {
+    err << "neighbour_triangles must be in [0, 12]; ";
+  }
   return err.str();
 }
 
@@ -66,6 +128,8 @@ std::vector<Correspondence> buildCorrespondences(const Descriptor& query,
   }
   const size_t nq = query.trunks.size(), nc = candidate.trunks.size();
   if (nq == 0 || nc == 0 || query.triangles.empty() || candidate.triangles.empty()) return out;
+  const std::vector<MatchTriangle> tq = matchTriangles(query, params.neighbour_triangles);
+  const std::vector<MatchTriangle> tc = matchTriangles(candidate, params.neighbour_triangles);
 
   // Eq. (3.5): support matrices, flat |Vq| x |Vc| (submaps hold tens to a few hundred trunks).
   // The touched list lets the final scan visit only non-zero entries.
@@ -77,9 +141,9 @@ std::vector<Correspondence> buildCorrespondences(const Descriptor& query,
     if (m[k] < 65535) ++m[k];
   };
 
-  const auto& tc = candidate.triangles;
   const double rel = params.edge_rel_tol, abs_tol = params.edge_abs_tol_m;
-  for (const Triangle& q : query.triangles) {
+  for (const MatchTriangle& mq : tq) {
+    const Triangle& q = mq.t;
     // Triangles are sorted by len[0]; Cons_l on e1 bounds l_c to [lo, hi], so a binary search
     // finds the only candidate triangles whose longest edge can be consistent. A pair whose
     // longest edges disagree could still give weak support through e2/e3 in Alg. 1; dtif drops
@@ -88,9 +152,9 @@ std::vector<Correspondence> buildCorrespondences(const Descriptor& query,
     const double lo = std::min(l - abs_tol, l * (1.0 - rel));
     const double hi = std::max(l + abs_tol, l / (1.0 - rel));
     auto first = std::lower_bound(tc.begin(), tc.end(), lo,
-                                  [](const Triangle& t, double v) { return t.len[0] < v; });
-    for (auto it = first; it != tc.end() && it->len[0] <= hi; ++it) {
-      const Triangle& c = *it;
+                                  [](const MatchTriangle& t, double v) { return t.t.len[0] < v; });
+    for (auto it = first; it != tc.end() && it->t.len[0] <= hi; ++it) {
+      const Triangle& c = it->t;
       ++st.triangle_pairs;
       // Eq. (3.4): chi_a for the three canonical edges.
       int mask = 0, count = 0;
@@ -105,7 +169,9 @@ std::vector<Correspondence> buildCorrespondences(const Descriptor& query,
       }
       if (count == 3) {
         for (int b = 0; b < 3; ++b) bump(es, q.v[b], c.v[b]);  // Eq. (3.6)
-      } else if (count > 0) {
+      } else if (count > 0 && mq.delaunay && it->delaunay) {
+        // Neighbour triangles share their edges many times over: their partial matches would
+        // pile up weak support on every edge; only Delaunay faces give weak support (Eq. 3.7).
         for (int a = 0; a < 3; ++a) {  // Eq. (3.7)
           if (!(mask & (1 << a))) continue;
           bump(ew, q.v[kEdgeEnds[a][0]], c.v[kEdgeEnds[a][0]]);

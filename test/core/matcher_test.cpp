@@ -70,7 +70,8 @@ TEST(Matcher, HandMadeCanonicalOrder) {
 TEST(Matcher, HandMadeStrongAndWeakSupportCounts) {
   HandCase h;
   MatcherParams p;
-  p.weak_support_min = 0;  // keep every pair with any support to read E^w back
+  p.neighbour_triangles = 0;  // the paper's Alg. 1 on the Delaunay faces
+  p.weak_support_min = 0;     // keep every pair with any support to read E^w back
   MatchStats st;
   const auto corrs = buildCorrespondences(h.q, h.c, p, &st);
   EXPECT_EQ(st.triangle_pairs, 2u);  // both candidate faces have a 5 m longest edge
@@ -99,6 +100,7 @@ TEST(Matcher, WeakSupportThresholdIsStrict) {
   // Eq. (3.8): E^w > tau_w. With tau_w = 1 only (q1, c3) with E^w = 2 survives of the weak ones.
   HandCase h;
   MatcherParams p;
+  p.neighbour_triangles = 0;
   p.weak_support_min = 1;
   auto corrs = buildCorrespondences(h.q, h.c, p);
   EXPECT_EQ(corrs.size(), 4u);
@@ -118,6 +120,7 @@ TEST(Matcher, RadiusInconsistencyTurnsStrongIntoWeak) {
     h.c.triangles.push_back(makeCanonicalTriangle(h.c.trunks, f[0], f[1], f[2]));
   }
   MatcherParams p;
+  p.neighbour_triangles = 0;
   p.weak_support_min = 0;
   const auto corrs = buildCorrespondences(h.q, h.c, p);
   // Edges touching position 2 (e1, e3) fail; only e2 (positions 0, 1) verifies.
@@ -188,6 +191,7 @@ TEST(Matcher, IndexedMatcherEqualsNaiveReferenceOnRandomStands) {
     const Descriptor c = buildDescriptor(
         test::observe(rng, world, {32, 28}, test::poseXyYaw(30, 30, 0, -2.0)), DescriptorParams{});
     MatcherParams p;
+    p.neighbour_triangles = 0;  // the reference visits the Delaunay faces
     p.weak_support_min = 0;
     p.max_correspondences = 1000000;
     p.min_edge_hist_sim = 0;
@@ -211,12 +215,45 @@ TEST(Matcher, IndexedMatcherEqualsNaiveReferenceOnRandomStands) {
 TEST(Matcher, MaxCorrespondencesKeepsTheHeaviest) {
   HandCase h;
   MatcherParams p;
+  p.neighbour_triangles = 0;
   p.weak_support_min = 0;
   p.max_correspondences = 2;
   const auto corrs = buildCorrespondences(h.q, h.c, p);
   ASSERT_EQ(corrs.size(), 2u);
   EXPECT_EQ(corrs[0].strong, 1);
   EXPECT_EQ(corrs[1].strong, 1);
+}
+
+/// Two submaps that share only part of their trunks share few Delaunay faces (a trunk seen by
+/// one of them only changes its neighbours' faces) but many nearest-neighbour triangles.
+TEST(Matcher, NeighbourTrianglesFindCorrectPairsWhenFewTrunksAreShared) {
+  std::mt19937 rng(41);
+  test::ObservationNoise nz;
+  nz.miss_ratio = 0.45;  // each side misses 45 %: ~30 % of the detections are shared
+  int correct[2] = {0, 0}, wrong[2] = {0, 0};
+  for (int trial = 0; trial < 10; ++trial) {
+    const Trunks world = test::randomStand(rng, 60, 60, 700);
+    const Pose T_w_q = test::poseXyYaw(25, 25, 0, 1.0), T_w_c = test::poseXyYaw(30, 30, 0, -2.0);
+    const Descriptor q =
+        buildDescriptor(test::observe(rng, world, {25, 25}, T_w_q, nz), DescriptorParams{});
+    const Descriptor c =
+        buildDescriptor(test::observe(rng, world, {32, 28}, T_w_c, nz), DescriptorParams{});
+    const Pose T_c_q = T_w_c.inverse() * T_w_q;
+    for (int k : {0, 1}) {
+      MatcherParams p;
+      p.neighbour_triangles = k ? 4 : 0;
+      for (const Correspondence& m : buildCorrespondences(q, c, p)) {
+        const bool ok = ((T_c_q * m.pq) - m.pc).head<2>().norm() < 0.3;
+        (ok ? correct : wrong)[k]++;
+      }
+    }
+  }
+  std::printf("[ info ] correct/wrong pairs: Delaunay only %d/%d, with neighbour triangles %d/%d\n",
+              correct[0], wrong[0], correct[1], wrong[1]);
+  EXPECT_GE(correct[1], 1.4 * correct[0]);
+  // More evidence, not more noise: the share of correct pairs does not drop much.
+  EXPECT_GT(static_cast<double>(correct[1]) / (correct[1] + wrong[1]),
+            0.95 * static_cast<double>(correct[0]) / std::max(1, correct[0] + wrong[0]));
 }
 
 TEST(Matcher, ParamsValidate) {

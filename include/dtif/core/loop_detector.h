@@ -42,6 +42,9 @@ struct VerifierParams {
   /// runner-up fit scores at most this share of the best. 0: ambiguous is always rejected [0..1).
   double max_fit_ambiguity = 0.7;
   double max_fit_rms_m = 0.08;  ///< the fitted winner's RMS pair residual at most [m]
+  /// Refined pairs whose stem bases were both seen at least: fewer leave t_z a guess (one wrong
+  /// base decides it), and the loop is rejected rather than reported with a wrong elevation.
+  int min_z_pairs = 2;
 
   std::string validate() const;
 
@@ -61,6 +64,7 @@ struct VerifierParams {
     v("min_overlap", min_overlap);
     v("max_fit_ambiguity", max_fit_ambiguity);
     v("max_fit_rms_m", max_fit_rms_m);
+    v("min_z_pairs", min_z_pairs);
   }
 };
 

@@ -22,6 +22,11 @@ struct MatcherParams {
   double alpha_s = 1.0;              ///< alpha_s of Eq. (3.9)
   double alpha_w = 0.25;             ///< alpha_w of Eq. (3.9); alpha_s > alpha_w
   int max_correspondences = 400;     ///< keep the heaviest K pairs at most
+  /// Beyond the paper: besides the Delaunay faces, also match every triangle of a trunk and two
+  /// of its k nearest neighbours (k = this). Two submaps that share only part of their trunks
+  /// share few Delaunay faces (a trunk seen by one only changes them) but many such triangles.
+  /// 0: Delaunay faces only, as in the paper.
+  int neighbour_triangles = 4;
 
   std::string validate() const;
 
@@ -37,6 +42,7 @@ struct MatcherParams {
     v("alpha_s", alpha_s);
     v("alpha_w", alpha_w);
     v("max_correspondences", max_correspondences);
+    v("neighbour_triangles", neighbour_triangles);
   }
 };
 
