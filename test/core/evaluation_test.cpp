@@ -9,20 +9,14 @@
 #include <random>
 #include <sstream>
 
+#include "test_utils.h"
+
 namespace dtif {
 namespace {
 
 constexpr double kDeg = M_PI / 180.0;
 
-Pose makePose(double x, double y, double z, double roll, double pitch, double yaw) {
-  Pose T = Pose::Identity();
-  T.translation() = Eigen::Vector3d(x, y, z);
-  T.linear() = (Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) *
-                Eigen::AngleAxisd(pitch, Eigen::Vector3d::UnitY()) *
-                Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitX()))
-                   .toRotationMatrix();
-  return T;
-}
+using test::makePose;
 
 TEST(PoseError, ZeroForIdenticalPoses) {
   const Pose T = makePose(1, 2, 3, 0.1, -0.2, 2.5);

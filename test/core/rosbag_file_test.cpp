@@ -10,6 +10,7 @@
 #include <functional>
 
 #include "dtif/core/rosbag_writer.h"
+#include "test_utils.h"
 
 namespace dtif {
 namespace {
@@ -17,10 +18,7 @@ namespace {
 namespace fs = std::filesystem;
 
 fs::path tempDir(const std::string& name) {
-  const fs::path p = fs::temp_directory_path() / ("dtif_rosbag_file_test_" + name);
-  fs::remove_all(p);
-  fs::create_directories(p);
-  return p;
+  return test::freshTempDir("dtif_rosbag_file_test_" + name);
 }
 
 std::string errorOf(const std::function<void()>& f) {

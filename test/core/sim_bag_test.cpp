@@ -8,16 +8,15 @@
 #include <filesystem>
 #include <limits>
 
+#include "test_utils.h"
+
 namespace dtif {
 namespace {
 
 namespace fs = std::filesystem;
 
 fs::path tempDir(const std::string& name) {
-  const fs::path p = fs::temp_directory_path() / ("dtif_sim_bag_test_" + name);
-  fs::remove_all(p);
-  fs::create_directories(p);
-  return p;
+  return test::freshTempDir("dtif_sim_bag_test_" + name);
 }
 
 TEST(SimBag, VoxelFilterAveragesPerVoxelInFirstSeenOrder) {

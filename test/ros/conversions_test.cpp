@@ -10,6 +10,7 @@
 #include <random>
 
 #include "dtif/core/descriptor.h"
+#include "test_utils.h"
 
 namespace dtif {
 namespace ros_glue {
@@ -17,15 +18,7 @@ namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
-Pose makePose(double x, double y, double z, double roll, double pitch, double yaw) {
-  Pose T = Pose::Identity();
-  T.linear() = (Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) *
-                Eigen::AngleAxisd(pitch, Eigen::Vector3d::UnitY()) *
-                Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitX()))
-                   .toRotationMatrix();
-  T.translation() = Eigen::Vector3d(x, y, z);
-  return T;
-}
+using test::makePose;
 
 // A fixed-seed trunk map with plausible spacing (about 4 m) and radii.
 Trunks forest(int n, unsigned seed) {

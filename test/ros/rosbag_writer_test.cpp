@@ -25,6 +25,7 @@
 #include "dtif/ros/conversions.h"
 #include "dtif/ros/submap_assembler.h"
 #include "dtif_test/test_config.h"
+#include "test_utils.h"
 
 namespace dtif {
 namespace {
@@ -32,21 +33,10 @@ namespace {
 namespace fs = std::filesystem;
 
 fs::path tempDir(const std::string& name) {
-  const fs::path p = fs::temp_directory_path() / ("dtif_rosbag_writer_test_" + name);
-  fs::remove_all(p);
-  fs::create_directories(p);
-  return p;
+  return test::freshTempDir("dtif_rosbag_writer_test_" + name);
 }
 
-Pose makePose(double x, double y, double z, double roll, double pitch, double yaw) {
-  Pose T = Pose::Identity();
-  T.linear() = (Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) *
-                Eigen::AngleAxisd(pitch, Eigen::Vector3d::UnitY()) *
-                Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitX()))
-                   .toRotationMatrix();
-  T.translation() = Eigen::Vector3d(x, y, z);
-  return T;
-}
+using test::makePose;
 
 ros::Time toRos(bag::Time t) { return ros::Time(t.sec, t.nsec); }
 

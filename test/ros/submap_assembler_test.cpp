@@ -6,21 +6,15 @@
 #include <cmath>
 #include <optional>
 
+#include "test_utils.h"
+
 namespace dtif {
 namespace ros_glue {
 namespace {
 
 using Status = SubmapAssembler::Status;
 
-Pose bodyPose(double x, double y, double z, double roll, double pitch, double yaw) {
-  Pose T = Pose::Identity();
-  T.linear() = (Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) *
-                Eigen::AngleAxisd(pitch, Eigen::Vector3d::UnitY()) *
-                Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitX()))
-                   .toRotationMatrix();
-  T.translation() = Eigen::Vector3d(x, y, z);
-  return T;
-}
+using test::makePose;
 
 Cloud cloudOf(std::initializer_list<Eigen::Vector3f> pts) {
   Cloud c;
@@ -29,7 +23,7 @@ Cloud cloudOf(std::initializer_list<Eigen::Vector3f> pts) {
 }
 
 TEST(GravityAlignedPose, KeepsPositionAndYawDropsRollPitch) {
-  const Pose T_O_S = gravityAlignedPose(bodyPose(3, 4, 1, 0.1, -0.05, 0.8));
+  const Pose T_O_S = gravityAlignedPose(makePose(3, 4, 1, 0.1, -0.05, 0.8));
   EXPECT_TRUE(T_O_S.translation().isApprox(Eigen::Vector3d(3, 4, 1)));
   EXPECT_NEAR(T_O_S.rotation()(2, 2), 1.0, 1e-12);  // z up
   const Eigen::Vector3d x = T_O_S.rotation().col(0);
@@ -42,7 +36,7 @@ TEST(SubmapAssembler, WindowsCloudsIntoTheAnchorFrame) {
   SubmapAssembler a(p, 5);
   const double yaw = M_PI / 2;
   for (int i = 0; i <= 30; ++i) {
-    ASSERT_EQ(a.addOdometry(10.0 + 0.1 * i, bodyPose(2.0 + 0.1 * i, 0, 0, 0, 0, yaw)), Status::kOk);
+    ASSERT_EQ(a.addOdometry(10.0 + 0.1 * i, makePose(2.0 + 0.1 * i, 0, 0, 0, 0, yaw)), Status::kOk);
   }
   std::optional<AssembledSubmap> done;
   // Anchor at t = 10.0: sensor at (2, 0, 0) facing +y. A point at O (2, 1, 0.5) is 1 m ahead.
