@@ -2,9 +2,11 @@
 //               [--bag <file.bag>] [--bag-voxel <m>] [--bag-max-points N]
 // Simulates a forest survey (config/scenes/*.yaml) and writes it as a dataset (DATASET.md),
 // optionally also as a rosbag of the raw frames (sim_bag.h) for replay into the nodelets.
+#include <filesystem>
 #include <iostream>
 #include <memory>
 #include <sstream>
+#include <stdexcept>
 
 #include "commands.h"
 #include "dtif/core/sim_bag.h"
@@ -66,7 +68,14 @@ int runSimulate(const Args& args) {
   }
   const sim::SceneParams scene = sim::loadSceneYaml(o.positional[0]);
   std::unique_ptr<sim::BagFrameSink> bag;
-  if (o.get("bag")) bag = std::make_unique<sim::BagFrameSink>(*o.get("bag"), bag_params);
+  if (const auto path = o.get("bag")) {
+    // Like --out, the bag's folder is created when missing.
+    const std::filesystem::path parent = std::filesystem::path(*path).parent_path();
+    std::error_code ec;
+    if (!parent.empty()) std::filesystem::create_directories(parent, ec);
+    if (ec) throw std::runtime_error(parent.string() + ": cannot create folder: " + ec.message());
+    bag = std::make_unique<sim::BagFrameSink>(*path, bag_params);
+  }
   const sim::DatasetRunResult r =
       sim::simulateDataset(scene, seed, *out, bag.get(), o.get("png").value_or(""), threads);
   if (bag) bag->close();
