@@ -67,14 +67,25 @@ int runRegister(const Args& args) {
   const double loop_ms = Ms(std::chrono::steady_clock::now() - t1).count();
   std::cout << std::fixed << std::setprecision(3) << "time: descriptors " << desc_ms << " ms, loop "
             << loop_ms << " ms (solver " << qs.solver_ms << " ms)\n";
+  // The pair once more through matchPair, for the verification's details and reason.
+  PoseEstimate est;
+  Verification ver;
+  matchPair(*q, *c, params.loop, &est, &ver);
   if (!loop) {
     std::cout << "result: no verified registration (screened in: " << qs.screened_in
-              << ", reached pose estimation: " << qs.matched << ")\n";
+              << ", reached pose estimation: " << qs.matched << ")"
+              << (qs.screened_in > 0 && !ver.reason.empty() ? ": " + ver.reason : std::string())
+              << "\n";
     return 1;
   }
   const Eigen::Vector3d t = loop->T_c_q.translation();
   const double yaw = std::atan2(loop->T_c_q.rotation()(1, 0), loop->T_c_q.rotation()(0, 0));
   std::cout << "result: registered, inliers " << loop->inliers << ", score " << loop->score << "\n"
+            << "verification: overlap "
+            << (ver.overlap >= 0.0 ? std::to_string(ver.overlap)
+                                   : std::string("n/a (no footprint)"))
+            << ", seen-base pairs " << ver.z_pairs << ", roll/pitch "
+            << (ver.tilt_fitted ? "fitted" : "from gravity alignment") << "\n"
             << "T_c_q: x " << t.x() << " m, y " << t.y() << " m, z " << t.z() << " m, yaw "
             << yaw * 180.0 / M_PI << " deg\n"
             << std::setprecision(6) << loop->T_c_q.matrix() << "\n";
