@@ -471,6 +471,7 @@ TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorPara
   std::vector<float> cell_low(gcells, std::numeric_limits<float>::quiet_NaN());
   std::vector<uint32_t> cell_count(gcells, 0);  // ground points of the cell
   std::vector<char> cell_any(gcells, 0);        // the cell holds any point
+  std::vector<float> cell_min(gcells, std::numeric_limits<float>::infinity());  // lowest point
   {
     std::vector<float> zs, smin(static_cast<size_t>(ns) * ns);
     std::vector<char> sopen(smin.size());
@@ -504,7 +505,10 @@ TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorPara
         if (sopen[s] && z - smin[s] <= kGroundBand) zs.push_back(z);
       }
       int nopen = 0;
-      for (size_t s = 0; s < smin.size(); ++s) nopen += sopen[s] && std::isfinite(smin[s]);
+      for (size_t s = 0; s < smin.size(); ++s) {
+        nopen += sopen[s] && std::isfinite(smin[s]);
+        cell_min[c] = std::min(cell_min[c], smin[s]);
+      }
       if (zs.size() < 3 || nopen < kMinOpenFraction * static_cast<double>(ns * ns)) continue;
       const size_t q = static_cast<size_t>(p.ground_percentile * (zs.size() - 1));
       std::nth_element(zs.begin(), zs.begin() + q, zs.end());
@@ -515,10 +519,6 @@ TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorPara
   // Ground lies below everything: a "ground" cell higher than points next to it (a branch or a
   // log top above a slope or hollow whose real ground was not seen) is no ground cell.
   {
-    std::vector<float> cell_min(gcells, std::numeric_limits<float>::infinity());
-    for (size_t c = 0; c < gcells; ++c)
-      for (uint32_t k = gstart[c]; k < gstart[c + 1]; ++k)
-        cell_min[c] = std::min(cell_min[c], Z[gorder[k]]);
     const float max_step = static_cast<float>(kMaxGroundStepPerCell * g);
     std::vector<uint32_t> keep = cell_count;
     for (int cy = 0; cy < gny; ++cy) {
@@ -573,9 +573,7 @@ TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorPara
         if (!cell_seen[c]) gather(cx, cy, 3 * half);
         if (wx.size() < kMinGroundCells) {
           // No ground anywhere near: the lowest point of the cell is the best guess left.
-          float zmin = std::numeric_limits<float>::infinity();
-          for (uint32_t k = gstart[c]; k < gstart[c + 1]; ++k) zmin = std::min(zmin, Z[gorder[k]]);
-          cell_plane[c].a = zmin;
+          cell_plane[c].a = cell_min[c];
           continue;
         }
         // Downweight cells above the plane: what is left of vegetation fills cells from above.
@@ -878,7 +876,7 @@ TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorPara
       gcellOf(fit.cx, fit.cy, &cgx, &cgy);
       const bool ground_seen = cell_seen[static_cast<size_t>(cgy) * gnx + cgx];
       const bool ring_seen = bx.size() >= static_cast<size_t>(p.min_base_points);
-      if (bx.size() >= static_cast<size_t>(p.min_base_points)) {
+      if (ring_seen) {
         const std::vector<double> w(bx.size(), 1.0);
         // Tighter than the grid: litter and grass sit on the ground surface, noise is cm.
         const Plane pl = fitGroundPlane(bx.data(), by.data(), bz.data(), w.data(), bx.size(),
