@@ -87,7 +87,7 @@ void coLocated(const std::vector<P2>& a, const std::vector<P2>& b, double radius
 struct Refined {
   Pose T = Pose::Identity();
   std::vector<std::pair<int, int>> pairs;
-  double rms_xy = 0.0, rms_z = 0.0;
+  double rms_xy = 0.0;  ///< of the pairs [m]; the elevation is refineElevation's
 };
 
 /// Mutually nearest trunk pairs within `radius` under T_c_q.
@@ -119,7 +119,6 @@ std::vector<std::pair<int, int>> mutualPairs(const std::vector<P2>& pq, const st
 double refineElevation(const Descriptor& q, const Descriptor& c,
                        const std::vector<std::pair<int, int>>& pairs, const VerifierParams& params,
                        Pose* T, int* z_pairs, bool* tilted) {
-  constexpr double kPi = 3.14159265358979323846;
   std::vector<std::pair<int, int>> use;
   for (const auto& [i, j] : pairs)
     if (q.trunks[i].base_seen && c.trunks[j].base_seen) use.emplace_back(i, j);
@@ -182,7 +181,7 @@ double refineElevation(const Descriptor& q, const Descriptor& c,
     s = next;
     if (done) break;
   }
-  const double max_slope = std::tan(params.max_tilt_deg * kPi / 180.0);
+  const double max_slope = std::tan(params.max_tilt_deg * M_PI / 180.0);
   if (std::hypot(s(1), s(2)) > max_slope) return rmsZ();
   // z' = z - beta x + alpha y for a small rotation R_x(alpha) R_y(beta) about `mean`.
   const double alpha = std::asin(std::clamp(s(2), -1.0, 1.0));
@@ -202,7 +201,7 @@ double refineElevation(const Descriptor& q, const Descriptor& c,
 
 /// Guided matching: re-associate every trunk by mutual nearest neighbour under the current
 /// pose, then solve Eq. (3.11) by least squares on those pairs (2-D Procrustes for yaw and
-/// t_xy, median for t_z); a few rounds until the pairs stop changing.
+/// t_xy; t_z is refineElevation's); a few rounds until the pairs stop changing.
 Refined guidedRefine(const Descriptor& q, const Descriptor& c, const Pose& T0, double radius) {
   Refined out;
   out.T = T0;
@@ -224,31 +223,25 @@ Refined guidedRefine(const Descriptor& q, const Descriptor& c, const Pose& T0, d
     mq /= pairs.size();
     mc /= pairs.size();
     double sc = 0.0, ss = 0.0;
-    std::vector<double> dz;
     for (const auto& [i, j] : pairs) {
       const Eigen::Vector2d a = Eigen::Vector2d(q.trunks[i].x, q.trunks[i].y) - mq, b = pc[j] - mc;
       sc += a.dot(b);
       ss += a.x() * b.y() - a.y() * b.x();
-      dz.push_back(c.trunks[j].z - q.trunks[i].z);
     }
     const double yaw = std::atan2(ss, sc);
-    std::nth_element(dz.begin(), dz.begin() + dz.size() / 2, dz.end());
+    const double t_z = out.T.translation().z();  // refineElevation fixes it
     out.T = Pose::Identity();
     out.T.linear() = rotZ(yaw);
     const Eigen::Vector2d t = mc - Eigen::Rotation2Dd(yaw).toRotationMatrix() * mq;
-    out.T.translation() = Eigen::Vector3d(t.x(), t.y(), dz[dz.size() / 2]);
+    out.T.translation() = Eigen::Vector3d(t.x(), t.y(), t_z);
   }
-  double sxy = 0.0, sz = 0.0;
+  double sxy = 0.0;
   for (const auto& [i, j] : out.pairs) {
     const Eigen::Vector3d r = Eigen::Vector3d(c.trunks[j].x, c.trunks[j].y, c.trunks[j].z) -
                               out.T * Eigen::Vector3d(q.trunks[i].x, q.trunks[i].y, q.trunks[i].z);
     sxy += r.head<2>().squaredNorm();
-    sz += r.z() * r.z();
   }
-  if (!out.pairs.empty()) {
-    out.rms_xy = std::sqrt(sxy / out.pairs.size());
-    out.rms_z = std::sqrt(sz / out.pairs.size());
-  }
+  if (!out.pairs.empty()) out.rms_xy = std::sqrt(sxy / out.pairs.size());
   return out;
 }
 
@@ -305,8 +298,7 @@ std::pair<Fit, double> resolveByFit(const Descriptor& q, const Descriptor& c, co
   std::vector<Eigen::Vector2d> shifts{Eigen::Vector2d::Zero()};
   for (size_t i = 0; i < k; ++i) shifts.push_back(near[i].second);
 
-  Fit best = fitPose(q, c, T0, radius);
-  std::vector<Fit> fits{best};
+  std::vector<Fit> fits{fitPose(q, c, T0, radius)};
   for (int turn = 0; turn < 4; ++turn) {
     Pose R = Pose::Identity();  // turn about the anchor trunk
     R.linear() = rotZ(turn * M_PI / 2.0);
@@ -320,7 +312,7 @@ std::pair<Fit, double> resolveByFit(const Descriptor& q, const Descriptor& c, co
     }
   }
   std::sort(fits.begin(), fits.end(), [](const Fit& x, const Fit& y) { return x.score > y.score; });
-  best = fits.front();
+  const Fit& best = fits.front();
   // The runner-up must be another pose, not the winner reached from a second start.
   double runner = 0.0;
   for (size_t i = 1; i < fits.size(); ++i) {
@@ -449,11 +441,10 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
   }
 
   Refined ref = guidedRefine(q, c, T_hyp, params.match_radius_m);
-  ref.rms_z = refineElevation(q, c, ref.pairs, params, &ref.T, &v.z_pairs, &v.tilt_fitted);
+  v.rms_z_m = refineElevation(q, c, ref.pairs, params, &ref.T, &v.z_pairs, &v.tilt_fitted);
   v.T_c_q = ref.T;
   v.pairs = ref.pairs;
   v.rms_xy_m = ref.rms_xy;
-  v.rms_z_m = ref.rms_z;
   // The refinement must stay near the hypothesis: a jump means it locked onto other trunks.
   // Measured on the query's own trunks (the raw translation swings with the yaw when the
   // coordinates are far from the origin, e.g. UTM).
