@@ -376,9 +376,7 @@ std::vector<uint8_t> encodeDescriptor(const Descriptor& d) {
     }
   }
   const Footprint& f = d.footprint;
-  const bool has_footprint = f.cell_m > 0.0 && f.width > 0 && f.height > 0 && f.width <= 65535 &&
-                             f.height <= 65535 &&
-                             f.bits.size() == (static_cast<size_t>(f.width) * f.height + 7) / 8;
+  const bool has_footprint = f.wellFormed();
   w.put<float>(has_footprint ? static_cast<float>(f.cell_m) : 0.0f);
   if (has_footprint) {
     w.put<int32_t>(f.x0);

@@ -13,6 +13,11 @@ size_t Footprint::count() const {
   return n;
 }
 
+bool Footprint::wellFormed() const {
+  return cell_m > 0.0 && std::isfinite(cell_m) && width > 0 && height > 0 && width <= 65535 &&
+         height <= 65535 && bits.size() == (static_cast<size_t>(width) * height + 7) / 8;
+}
+
 bool Footprint::occupied(int64_t ix, int64_t iy) const {
   const int64_t cx = ix - x0, cy = iy - y0;
   if (cx < 0 || cy < 0 || cx >= width || cy >= height) return false;

@@ -86,7 +86,7 @@ dtif_msgs::TrunkDescriptor toMsg(const Descriptor& d, const Pose& T_O_S,
   m.valid = d.valid;
   m.invalid_reason = d.invalid_reason;
   const Footprint& f = d.footprint;
-  if (f.cell_m > 0.0 && f.width > 0 && f.height > 0 && f.width <= 65535 && f.height <= 65535) {
+  if (f.wellFormed()) {
     m.footprint_cell_m = static_cast<float>(f.cell_m);
     m.footprint_x0 = f.x0;
     m.footprint_y0 = f.y0;
@@ -144,17 +144,15 @@ bool fromMsg(const dtif_msgs::TrunkDescriptor& msg, Descriptor* d, Pose* T_O_S,
     return fail(error, "footprint_cell_m is not finite or negative");
   }
   if (msg.footprint_cell_m > 0.0f) {
-    const size_t bytes = (static_cast<size_t>(msg.footprint_width) * msg.footprint_height + 7) / 8;
-    if (msg.footprint_width == 0 || msg.footprint_height == 0 ||
-        msg.footprint_bits.size() != bytes) {
-      return fail(error, "footprint bitmap does not match its width x height");
-    }
     out.footprint.cell_m = msg.footprint_cell_m;
     out.footprint.x0 = msg.footprint_x0;
     out.footprint.y0 = msg.footprint_y0;
     out.footprint.width = msg.footprint_width;
     out.footprint.height = msg.footprint_height;
     out.footprint.bits = msg.footprint_bits;
+    if (!out.footprint.wellFormed()) {
+      return fail(error, "footprint bitmap does not match its width x height");
+    }
   }
   Pose T = Pose::Identity();
   std::string pose_error;

@@ -21,6 +21,8 @@ struct Footprint {
   std::vector<uint8_t> bits;  ///< row-major; cell (x0 + k % width, y0 + k / width) is bit k
 
   bool empty() const { return cell_m <= 0.0 || count() == 0; }
+  /// A cell size, a size that fits the wire formats (16-bit sides) and a bitmap of that size.
+  bool wellFormed() const;
   size_t count() const;                         ///< occupied cells
   bool occupied(int64_t ix, int64_t iy) const;  ///< false outside the bitmap
 };
