@@ -56,40 +56,93 @@ PoseError poseError(const Pose& T_gt, const Pose& T_est) {
   return e;
 }
 
-std::unordered_set<int64_t> overlapCells(const Cloud& cloud_S, const Pose& T_W_S) {
-  std::unordered_set<int64_t> cells;
-  if (cloud_S.empty()) return cells;
-  // Local ground per 2 m tile (in S): 5th percentile of z inside the 6 m window around it.
-  std::unordered_map<int64_t, std::vector<float>> tile_z;
+std::vector<std::pair<int64_t, int64_t>> trunkHeightCells(const Cloud& cloud_S, const Pose& T_F_S,
+                                                          double cell_m,
+                                                          size_t max_ground_samples) {
+  std::vector<std::pair<int64_t, int64_t>> out;
   auto tileOf = [](float v) { return static_cast<int64_t>(std::floor(v / kTileM)); };
+  int64_t tx0 = std::numeric_limits<int64_t>::max(), ty0 = tx0;
+  int64_t tx1 = std::numeric_limits<int64_t>::min(), ty1 = tx1;
+  size_t n = 0;
   for (const auto& p : cloud_S) {
     if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) continue;
-    tile_z[packCell(tileOf(p.x), tileOf(p.y))].push_back(p.z);
+    ++n;
+    tx0 = std::min(tx0, tileOf(p.x)), tx1 = std::max(tx1, tileOf(p.x));
+    ty0 = std::min(ty0, tileOf(p.y)), ty1 = std::max(ty1, tileOf(p.y));
   }
-  std::unordered_map<int64_t, float> ground;
-  std::vector<float> window;
-  for (const auto& kv : tile_z) {
-    const int64_t tx = kv.first >> 32;
-    const int64_t ty = static_cast<int32_t>(kv.first & 0xffffffffLL);
+  if (n == 0 || !(cell_m > 0.0)) return out;
+  // Tiles by a dense index over the cloud's extent; a cloud spread over kilometres (stray
+  // points) falls back to a hash map, so the result never depends on the extent.
+  const double tw = static_cast<double>(tx1 - tx0) + 1.0, th = static_cast<double>(ty1 - ty0) + 1.0;
+  const bool dense = tw * th <= 4e6;
+  std::unordered_map<int64_t, int> sparse;
+  auto tileIndex = [&](int64_t tx, int64_t ty, bool insert) -> int {
+    if (dense) {
+      if (tx < tx0 || tx > tx1 || ty < ty0 || ty > ty1) return -1;
+      return static_cast<int>((ty - ty0) * static_cast<int64_t>(tw) + (tx - tx0));
+    }
+    const auto it = sparse.find(packCell(tx, ty));
+    if (it != sparse.end()) return it->second;
+    if (!insert) return -1;
+    const int id = static_cast<int>(sparse.size());
+    sparse.emplace(packCell(tx, ty), id);
+    return id;
+  };
+  // Local ground per 2 m tile (in S): 5th percentile of z inside the 6 m window around it.
+  std::vector<std::vector<float>> tile_z(dense ? static_cast<size_t>(tw * th) : 0);
+  const size_t stride = max_ground_samples > 0 ? std::max<size_t>(1, n / max_ground_samples) : 1;
+  std::vector<std::pair<int64_t, int64_t>> tiles;  // coordinates of each index (sparse case)
+  size_t k = 0;
+  for (const auto& p : cloud_S) {
+    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) continue;
+    if (k++ % stride != 0) continue;
+    const int id = tileIndex(tileOf(p.x), tileOf(p.y), true);
+    if (static_cast<size_t>(id) >= tile_z.size()) {
+      tile_z.resize(id + 1);
+      tiles.emplace_back(tileOf(p.x), tileOf(p.y));
+    }
+    tile_z[id].push_back(p.z);
+  }
+  std::vector<float> ground(tile_z.size(), std::numeric_limits<float>::quiet_NaN()), window;
+  for (size_t id = 0; id < tile_z.size(); ++id) {
+    const int64_t tx =
+        dense ? tx0 + static_cast<int64_t>(id % static_cast<size_t>(tw)) : tiles[id].first;
+    const int64_t ty =
+        dense ? ty0 + static_cast<int64_t>(id / static_cast<size_t>(tw)) : tiles[id].second;
     window.clear();
     for (int64_t dx = -kWindowTiles; dx <= kWindowTiles; ++dx) {
       for (int64_t dy = -kWindowTiles; dy <= kWindowTiles; ++dy) {
-        const auto it = tile_z.find(packCell(tx + dx, ty + dy));
-        if (it != tile_z.end()) window.insert(window.end(), it->second.begin(), it->second.end());
+        const int o = tileIndex(tx + dx, ty + dy, false);
+        if (o >= 0) window.insert(window.end(), tile_z[o].begin(), tile_z[o].end());
       }
     }
-    const size_t k = static_cast<size_t>(kGroundPct * static_cast<double>(window.size() - 1));
-    std::nth_element(window.begin(), window.begin() + k, window.end());
-    ground[kv.first] = window[k];
+    if (window.empty()) continue;
+    const size_t q = static_cast<size_t>(kGroundPct * static_cast<double>(window.size() - 1));
+    std::nth_element(window.begin(), window.begin() + q, window.end());
+    ground[id] = window[q];
   }
-  const Eigen::Isometry3f T = T_W_S.cast<float>();
+  const Eigen::Isometry3f T = T_F_S.cast<float>();
   for (const auto& p : cloud_S) {
     if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) continue;
-    const float h = p.z - ground[packCell(tileOf(p.x), tileOf(p.y))];
+    const int id = tileIndex(tileOf(p.x), tileOf(p.y), false);
+    // No samples in the window (only when subsampling): no ground to measure from.
+    if (id < 0 || !std::isfinite(ground[id])) continue;
+    const float h = p.z - ground[id];
     if (h < kMinAboveM || h > kMaxAboveM) continue;
     const Eigen::Vector3f w = T * Eigen::Vector3f(p.x, p.y, p.z);
-    cells.insert(packCell(static_cast<int64_t>(std::floor(w.x() / kCellM)),
-                          static_cast<int64_t>(std::floor(w.y() / kCellM))));
+    const std::pair<int64_t, int64_t> cell(static_cast<int64_t>(std::floor(w.x() / cell_m)),
+                                           static_cast<int64_t>(std::floor(w.y() / cell_m)));
+    if (out.empty() || out.back() != cell) out.push_back(cell);  // neighbours share cells
+  }
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
+std::unordered_set<int64_t> overlapCells(const Cloud& cloud_S, const Pose& T_W_S) {
+  std::unordered_set<int64_t> cells;
+  for (const auto& [ix, iy] : trunkHeightCells(cloud_S, T_W_S, kCellM)) {
+    cells.insert(packCell(ix, iy));
   }
   return cells;
 }

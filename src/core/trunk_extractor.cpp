@@ -15,6 +15,8 @@
 #include <random>
 #include <sstream>
 
+#include "dtif/core/evaluation.h"
+
 namespace dtif {
 namespace {
 
@@ -599,64 +601,13 @@ TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorPara
     H[i] = static_cast<float>(Z[i] - (pl.a + pl.b * (X[i] - x0) + pl.c * (Y[i] - y0)));
   }
 
-  // --- Footprint: occupied cells of points 0.3-3.0 m above the local ground, with the ground
-  // exactly as DATASET.md's overlap defines it (5th percentile of z in the 6 m window around
-  // each 2 m tile), so verification's overlap is the protocol's. The percentile is taken on
-  // an even subsample of at most kFootSamples points.
+  // --- Footprint: DATASET.md's overlap cells of this submap in S, so verification measures
+  // an aligned pair's overlap as the protocol does (percentiles on a subsample: it is timed).
   if (p.footprint_cell_m > 0.0) {
-    constexpr double kTileM = 2.0, kPct = 0.05;
-    constexpr float kFootLow = 0.3f, kFootHigh = 3.0f;
     constexpr size_t kFootSamples = 200000;
-    const double fc = p.footprint_cell_m;
-    const int tnx = static_cast<int>(std::floor((maxx - minx) / kTileM)) + 1;
-    const int tny = static_cast<int>(std::floor((maxy - miny) / kTileM)) + 1;
-    const auto fx0 = static_cast<int64_t>(std::floor((minx + ox) / fc));
-    const auto fy0 = static_cast<int64_t>(std::floor((miny + oy) / fc));
-    const int64_t fw = static_cast<int64_t>(std::floor((maxx + ox) / fc)) - fx0 + 1;
-    const int64_t fh = static_cast<int64_t>(std::floor((maxy + oy) / fc)) - fy0 + 1;
-    // Dense grids over the cloud's extent; a cloud spread over more than a few km (stray
-    // points) gets no footprint rather than a huge allocation.
-    if (static_cast<double>(tnx) * tny <= 4e6 && static_cast<double>(fw) * fh <= 4e6) {
-      auto tileOf = [&](size_t i) {
-        const int tx = std::min(tnx - 1, static_cast<int>((X[i] - minx) / kTileM));
-        const int ty = std::min(tny - 1, static_cast<int>((Y[i] - miny) / kTileM));
-        return static_cast<size_t>(ty) * tnx + tx;
-      };
-      const size_t stride = std::max<size_t>(1, n / kFootSamples);
-      std::vector<std::vector<float>> tile_z(static_cast<size_t>(tnx) * tny);
-      for (size_t i = 0; i < n; i += stride) tile_z[tileOf(i)].push_back(Z[i]);
-      std::vector<float> tile_ground(tile_z.size(), 0.0f), window;
-      for (int ty = 0; ty < tny; ++ty) {
-        for (int tx = 0; tx < tnx; ++tx) {
-          window.clear();
-          for (int dy = -1; dy <= 1; ++dy) {
-            for (int dx = -1; dx <= 1; ++dx) {
-              const int xx = tx + dx, yy = ty + dy;
-              if (xx < 0 || yy < 0 || xx >= tnx || yy >= tny) continue;
-              const auto& v = tile_z[static_cast<size_t>(yy) * tnx + xx];
-              window.insert(window.end(), v.begin(), v.end());
-            }
-          }
-          if (window.empty()) continue;
-          const auto k = static_cast<size_t>(kPct * static_cast<double>(window.size() - 1));
-          std::nth_element(window.begin(), window.begin() + k, window.end());
-          tile_ground[static_cast<size_t>(ty) * tnx + tx] = window[k];
-        }
-      }
-      std::vector<char> hit(static_cast<size_t>(fw * fh), 0);
-      for (size_t i = 0; i < n; ++i) {
-        const float h = Z[i] - tile_ground[tileOf(i)];
-        if (h < kFootLow || h > kFootHigh) continue;
-        const int64_t ix = static_cast<int64_t>(std::floor((X[i] + ox) / fc)) - fx0;
-        const int64_t iy = static_cast<int64_t>(std::floor((Y[i] + oy) / fc)) - fy0;
-        hit[static_cast<size_t>(std::clamp<int64_t>(iy, 0, fh - 1) * fw +
-                                std::clamp<int64_t>(ix, 0, fw - 1))] = 1;
-      }
-      std::vector<std::pair<int64_t, int64_t>> cells;
-      for (int64_t k = 0; k < fw * fh; ++k)
-        if (hit[static_cast<size_t>(k)]) cells.emplace_back(fx0 + k % fw, fy0 + k / fw);
-      result.footprint = makeFootprint(cells, fc);
-    }
+    result.footprint =
+        makeFootprint(trunkHeightCells(cloud, Pose::Identity(), p.footprint_cell_m, kFootSamples),
+                      p.footprint_cell_m);
   }
 
   // --- Vertical-continuity voxel columns in the slab (paper Sec. 3.B: "high-density voxel

@@ -30,8 +30,17 @@ struct PoseError {
 /// residual t_est - t_gt.
 PoseError poseError(const Pose& T_gt, const Pose& T_est);
 
+/// DATASET.md's overlap cells: the cells (side `cell_m`, in frame F) of a submap's points
+/// 0.3-3.0 m above its local ground, the local ground of each 2 m tile of S being the 5th
+/// percentile of z in the 6 m window around it. `max_ground_samples` > 0 takes the percentiles
+/// on an even subsample of at most that many points (the descriptor's footprint, timed);
+/// 0 uses every point (the evaluation). Sorted, unique.
+std::vector<std::pair<int64_t, int64_t>> trunkHeightCells(const Cloud& cloud_S, const Pose& T_F_S,
+                                                          double cell_m,
+                                                          size_t max_ground_samples = 0);
+
 /// Occupied 1 m x 1 m cells in W of a submap's points 0.3-3.0 m above its local ground
-/// (DATASET.md). Cell keys pack (ix, iy).
+/// (DATASET.md), trunkHeightCells on every point. Cell keys pack (ix, iy).
 std::unordered_set<int64_t> overlapCells(const Cloud& cloud_S, const Pose& T_W_S);
 
 /// |A cap B| / min(|A|, |B|); 0 when either is empty.
