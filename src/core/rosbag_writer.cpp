@@ -88,16 +88,27 @@ void putPose(std::string* out, const Pose& T) {
   for (double v : {t.x(), t.y(), t.z(), q.x(), q.y(), q.z(), q.w()}) put<double>(out, v);
 }
 
-const char* definition(MessageType type) {
+/// Type name, MD5 sum and full definition of each message type, in one place.
+struct MessageInfo {
+  const char* type;
+  const char* md5;
+  const char* definition;
+};
+const MessageInfo& info(MessageType type) {
+  static const MessageInfo kInfo[] = {
+      {defs::kPointCloud2Type, defs::kPointCloud2Md5, defs::kPointCloud2Definition},
+      {defs::kOdometryType, defs::kOdometryMd5, defs::kOdometryDefinition},
+      {defs::kTfMessageType, defs::kTfMessageMd5, defs::kTfMessageDefinition}};
   switch (type) {
     case MessageType::kPointCloud2:
-      return defs::kPointCloud2Definition;
+      return kInfo[0];
     case MessageType::kOdometry:
-      return defs::kOdometryDefinition;
+      return kInfo[1];
     case MessageType::kTfMessage:
-      return defs::kTfMessageDefinition;
+      return kInfo[2];
   }
-  return "";
+  static const MessageInfo kNone{"", "", ""};
+  return kNone;
 }
 
 std::string errnoText() { return std::strerror(errno); }
@@ -123,29 +134,9 @@ Time Time::fromSec(double t) {
   return r;
 }
 
-const char* typeName(MessageType type) {
-  switch (type) {
-    case MessageType::kPointCloud2:
-      return defs::kPointCloud2Type;
-    case MessageType::kOdometry:
-      return defs::kOdometryType;
-    case MessageType::kTfMessage:
-      return defs::kTfMessageType;
-  }
-  return "";
-}
+const char* typeName(MessageType type) { return info(type).type; }
 
-const char* md5sum(MessageType type) {
-  switch (type) {
-    case MessageType::kPointCloud2:
-      return defs::kPointCloud2Md5;
-    case MessageType::kOdometry:
-      return defs::kOdometryMd5;
-    case MessageType::kTfMessage:
-      return defs::kTfMessageMd5;
-  }
-  return "";
-}
+const char* md5sum(MessageType type) { return info(type).md5; }
 
 void serializePointCloud2(const Header& header, const std::vector<Eigen::Vector3f>& points,
                           const std::vector<float>& intensity, std::string* out) {
@@ -271,7 +262,7 @@ struct RosbagWriter::Impl {
   std::string connectionRecord(const Connection& c) const {
     const Fields conn_header = {
         {"callerid", c.callerid},   {"latching", "0"},
-        {"md5sum", md5sum(c.type)}, {"message_definition", definition(c.type)},
+        {"md5sum", md5sum(c.type)}, {"message_definition", info(c.type).definition},
         {"topic", c.topic},         {"type", typeName(c.type)}};
     std::string r;
     putRecord(&r,
