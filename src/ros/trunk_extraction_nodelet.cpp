@@ -196,6 +196,7 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
       s.id = next_submap_id_++ + node_.first_submap_id;
     }
     s.stamp = stamp;
+    s.end_stamp = stamp;
     enqueue(std::move(s), frame);
   }
 
@@ -240,6 +241,7 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
                   d.valid ? "" : ", invalid: ", d.invalid_reason.c_str());
     boost::shared_ptr<dtif_msgs::TrunkDescriptor> msg(
         new dtif_msgs::TrunkDescriptor(ros_glue::toMsg(d, s.T_O_S, frame)));
+    msg->data_end.fromSec(s.end_stamp);
     descriptor_pub_.publish(boost::shared_ptr<const dtif_msgs::TrunkDescriptor>(msg));
     if (trunks_pub_.getNumSubscribers() > 0) {
       boost::shared_ptr<visualization_msgs::MarkerArray> markers(
