@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <iostream>
 #include <map>
+#include <sstream>
 
 #include "commands.h"
 #include "options.h"
@@ -90,17 +91,20 @@ int runScore(const Args& args) {
   std::cout << "(submap ids of the dataset; the nodelets number each robot's submaps apart)\n"
             << table;
   if (o.get("eval")) {
-    size_t only_eval = 0;
+    std::map<int64_t, const EvalRow*> online;
+    for (const EvalRow& r : res.rows) online[r.query] = &r;
+    std::ostringstream missed;
+    size_t n_missed = 0;
     for (const auto& [q, c] : offline) {
-      const EvalRow* r = nullptr;
-      for (const EvalRow& x : res.rows) {
-        if (x.query == q) r = &x;
-      }
-      if (!r || !r->accepted || *r->candidate != c) ++only_eval;
+      const auto it = online.find(q);
+      if (it != online.end() && it->second->accepted) continue;
+      missed << " " << name[q] << " " << q << " -> " << name[c] << " " << c;
+      ++n_missed;
     }
     std::cout << "same loops as dtif eval: " << same << " of " << res.summary.accepted
-              << " online and of " << offline.size() << " in eval (" << only_eval
-              << " eval loops not found online with the same candidate)\n";
+              << " online loops have eval's candidate, the others another true one; of eval's "
+              << offline.size() << " loops, " << n_missed << " not found online"
+              << (n_missed ? ":" : "") << missed.str() << "\n";
   }
 
   // Lag: from a submap's last cloud to its result, in ROS time (the bag's clock in a replay).
