@@ -98,7 +98,7 @@ int runScore(const Args& args) {
     for (const auto& [q, c] : offline) {
       const auto it = online.find(q);
       if (it != online.end() && it->second->accepted) continue;
-      missed << " " << name[q] << " " << q << " -> " << name[c] << " " << c;
+      missed << (n_missed ? ", " : " ") << name[q] << " " << q << " -> " << name[c] << " " << c;
       ++n_missed;
     }
     std::cout << "same loops as dtif eval: " << same << " of " << res.summary.accepted
