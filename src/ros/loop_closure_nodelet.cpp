@@ -220,8 +220,9 @@ class LoopClosureNodelet : public nodelet::Nodelet {
                  static_cast<long>(lc->candidate_id), lc->inliers, lc->score);
     if (candidate && marker_pub_.getNumSubscribers() > 0) {
       boost::shared_ptr<visualization_msgs::MarkerArray> markers(
-          new visualization_msgs::MarkerArray(ros_glue::loopMarkers(
-              *d, *candidate, *lc, meta.T_O_S, meta.odom_frame, msg.header.stamp)));
+          // Stamp 0: rviz uses the latest transform between odometry frames (as for trunks).
+          new visualization_msgs::MarkerArray(ros_glue::loopMarkers(*d, *candidate, *lc, meta.T_O_S,
+                                                                    meta.odom_frame, ros::Time())));
       marker_pub_.publish(boost::shared_ptr<const visualization_msgs::MarkerArray>(markers));
     }
     if (node_.publish_tf && node_.tf_rate_hz <= 0.0) publishTf();

@@ -243,11 +243,13 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
         new dtif_msgs::TrunkDescriptor(ros_glue::toMsg(d, s.T_O_S, frame)));
     msg->data_end.fromSec(s.end_stamp);
     descriptor_pub_.publish(boost::shared_ptr<const dtif_msgs::TrunkDescriptor>(msg));
+    // Markers and the cloud are in the odometry frame, where they do not move: stamp 0 lets
+    // rviz use the latest transform to another robot's frame, which exists only after the first
+    // loop between the two, i.e. after most submaps' stamps.
     if (trunks_pub_.getNumSubscribers() > 0) {
       boost::shared_ptr<visualization_msgs::MarkerArray> markers(
           new visualization_msgs::MarkerArray(ros_glue::trunkMarkers(
-              d, s.T_O_S, frame, node_.robot + "/submap_" + std::to_string(s.id),
-              msg->header.stamp)));
+              d, s.T_O_S, frame, node_.robot + "/submap_" + std::to_string(s.id), ros::Time())));
       trunks_pub_.publish(boost::shared_ptr<const visualization_msgs::MarkerArray>(markers));
     }
     if (node_.publish_submap_cloud && cloud_pub_.getNumSubscribers() > 0) {
@@ -256,7 +258,6 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
       pcl::transformPointCloud(*s.cloud, cloud_O, s.T_O_S.matrix().cast<float>());
       boost::shared_ptr<sensor_msgs::PointCloud2> cloud(new sensor_msgs::PointCloud2);
       pcl::toROSMsg(cloud_O, *cloud);
-      cloud->header.stamp = msg->header.stamp;
       cloud->header.frame_id = frame;
       cloud_pub_.publish(boost::shared_ptr<const sensor_msgs::PointCloud2>(cloud));
     }

@@ -102,9 +102,8 @@ int runScore(const Args& args) {
       ++n_missed;
     }
     std::cout << "same loops as dtif eval: " << same << " of " << res.summary.accepted
-              << " online loops have eval's candidate, the others another true one; of eval's "
-              << offline.size() << " loops, " << n_missed << " not found online"
-              << (n_missed ? ":" : "") << missed.str() << "\n";
+              << " online loops have eval's candidate; of eval's " << offline.size() << " loops, "
+              << n_missed << " not found online" << (n_missed ? ":" : "") << missed.str() << "\n";
   }
 
   // Lag: from a submap's last cloud to its result, in ROS time (the bag's clock in a replay).
