@@ -16,9 +16,7 @@ NAME="$(basename "${SCENE}" .yaml)"
 OUT="${DTIF_WS}/demo/${NAME}"
 
 dtif_build > "${DTIF_WS}/build.log" 2>&1 || { cat "${DTIF_WS}/build.log"; exit 1; }
-set +u  # catkin's setup script reads unset variables
-source "${DTIF_WS}/devel/setup.bash"
-set -u
+dtif_source_ws
 # The simulation is reused when this scene was already simulated by the same dtif binary with
 # the same bag options (a few minutes saved on a re-run); otherwise it is made anew.
 SIM_KEY="seed 1 ${DTIF_DEMO_BAG_ARGS:-}"
@@ -40,14 +38,13 @@ echo "dtif demo: 1. dtif eval on the dataset (results in ${OUT}/eval)"
 
 # 2. The ROS nodelets on the bag: a private master (other roscores on this machine are left
 # alone); the script plays the bag itself so that the last submaps can finish before shutdown.
-mapfile -t ROBOTS < <(tail -n +2 "${OUT}/dataset/submaps.csv" | cut -d, -f2 | awk '!seen[$0]++')
-PORT="$(/usr/bin/python3 -c 'import socket; s=socket.socket(); s.bind(("", 0)); print(s.getsockname()[1])')"
-export ROS_MASTER_URI="http://localhost:${PORT}"
+dtif_robots "${OUT}/dataset"
+dtif_private_master
 LOG="${OUT}/ros/loops.csv"
 mkdir -p "${OUT}/ros"
 echo "dtif demo: 2. roslaunch dtif demo_bag.launch (robots ${ROBOTS[*]}), rosbag play at rate" \
   "${RATE} (logs in ${OUT}/ros)"
-roslaunch -p "${PORT}" dtif demo_bag.launch play:=false headless:=true bond:=false \
+roslaunch -p "${DTIF_PORT}" dtif demo_bag.launch play:=false headless:=true bond:=false \
   robot1:="${ROBOTS[0]}" robot2:="${ROBOTS[1]:-}" robot3:="${ROBOTS[2]:-}" \
   loop_log:="${LOG}" > "${OUT}/ros/roslaunch.log" 2>&1 &
 LAUNCH_PID=$!

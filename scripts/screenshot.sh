@@ -3,7 +3,7 @@
 # rviz (rviz/dtif.rviz, the scene's robot names filled in, submap clouds shown) under Xvfb with
 # software OpenGL, roslaunch dtif demo_bag.launch on the scene's bag, a screenshot of the
 # virtual screen (ImageMagick's import) once the bag has played. Installs the Debian packages it
-# needs (rviz, xvfb, imagemagick) besides scripts/install_deps.sh's.
+# needs (rviz, xvfb, imagemagick) besides scripts/install_deps.sh's, through that script.
 # Usage: scripts/screenshot.sh [scene.yaml] [out.png]
 #   (default config/scenes/mixed.yaml, docs/demo_rviz.png; reuses scripts/demo.sh's bag)
 # Environment: DTIF_SHOT_RATE (replay rate, default 2).
@@ -15,29 +15,14 @@ RATE="${DTIF_SHOT_RATE:-2}"
 NAME="$(basename "${SCENE}" .yaml)"
 OUT="${DTIF_WS}/demo/${NAME}"
 
-PKGS=(rviz xvfb imagemagick libgl1-mesa-dri)
-missing=()
-for p in "${PKGS[@]}"; do
-  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
-done
-if [ ${#missing[@]} -gt 0 ]; then
-  SUDO=""
-  [ "$(id -u)" -eq 0 ] || SUDO="sudo"
-  echo "dtif screenshot: installing ${missing[*]}"
-  $SUDO apt-get update -q
-  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -q -o DPkg::Lock::Timeout=900 \
-    --no-install-recommends "${missing[@]}"
-fi
-
+bash "${DTIF_REPO}/scripts/install_deps.sh" rviz xvfb imagemagick libgl1-mesa-dri
 dtif_build > "${DTIF_WS}/build.log" 2>&1 || { cat "${DTIF_WS}/build.log"; exit 1; }
-set +u  # catkin's setup script reads unset variables
-source "${DTIF_WS}/devel/setup.bash"
-set -u
+dtif_source_ws
 if [ ! -f "${OUT}/${NAME}.bag" ] || [ ! -f "${OUT}/dataset/submaps.csv" ]; then
   rm -rf "${OUT}"
   "${DTIF_BIN}" simulate "${SCENE}" --out "${OUT}/dataset" --seed 1 --bag "${OUT}/${NAME}.bag"
 fi
-mapfile -t ROBOTS < <(tail -n +2 "${OUT}/dataset/submaps.csv" | cut -d, -f2 | awk '!seen[$0]++')
+dtif_robots "${OUT}/dataset"
 SHOT="${OUT}/screenshot"
 rm -rf "${SHOT}"
 mkdir -p "${SHOT}"
@@ -73,8 +58,8 @@ sed -e "s#robot1#${ROBOTS[0]}#g" -e "s#robot2#${ROBOTS[1]:-robot2}#g" \
 
 # A private X display and master; everything started here is stopped on exit.
 DISPLAY_NUM=$((90 + RANDOM % 100))
-PORT="$(/usr/bin/python3 -c 'import socket; s=socket.socket(); s.bind(("", 0)); print(s.getsockname()[1])')"
-export ROS_MASTER_URI="http://localhost:${PORT}" DISPLAY=":${DISPLAY_NUM}" LIBGL_ALWAYS_SOFTWARE=1
+dtif_private_master
+export DISPLAY=":${DISPLAY_NUM}" LIBGL_ALWAYS_SOFTWARE=1
 PIDS=()
 cleanup() {
   for ((i = ${#PIDS[@]} - 1; i >= 0; i--)); do kill -INT "${PIDS[i]}" 2>/dev/null || true; done
@@ -83,7 +68,7 @@ cleanup() {
 trap cleanup EXIT
 Xvfb "${DISPLAY}" -screen 0 1400x900x24 -nolisten tcp > "${SHOT}/xvfb.log" 2>&1 &
 PIDS+=($!)
-roslaunch -p "${PORT}" dtif demo_bag.launch play:=false headless:=false bond:=false \
+roslaunch -p "${DTIF_PORT}" dtif demo_bag.launch play:=false headless:=false bond:=false \
   robot1:="${ROBOTS[0]}" robot2:="${ROBOTS[1]:-}" robot3:="${ROBOTS[2]:-}" \
   publish_submap_cloud:=true rviz_config:="${SHOT}/demo.rviz" > "${SHOT}/roslaunch.log" 2>&1 &
 PIDS+=($!)
