@@ -39,8 +39,6 @@ const char* SubmapAssembler::describe(Status s) {
       return "duplicate stamp, message dropped";
     case Status::kOutOfOrder:
       return "stamp older than the previous message, message dropped";
-    case Status::kNoOdometry:
-      return "no odometry near the cloud's stamp, cloud dropped";
     case Status::kNoAnchorPose:
       return "no odometry at the finished window's centre, submap discarded";
     case Status::kOdometryGap:
@@ -139,8 +137,8 @@ SubmapAssembler::Status SubmapAssembler::addCloud(double stamp, const Cloud& clo
   }
   last_cloud_stamp_ = stamp;
   if (cloud_O.empty()) return Status::kEmptyCloud;
-  // Without odometry near it the cloud's O cannot be trusted (front end silent or restarted).
-  if (!poseAt(stamp)) return Status::kNoOdometry;
+  // The points are in O already: only the window's centre needs a pose, so a cloud that
+  // arrives before its odometry (another connection; a fast replay) is kept.
   if (!t0_) t0_ = stamp - params_.cloud_period_s;
   const int64_t k = windowOf(stamp);
   Status status = Status::kOk;

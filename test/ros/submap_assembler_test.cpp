@@ -132,19 +132,25 @@ TEST(SubmapAssembler, DropsDuplicateAndOutOfOrderStamps) {
   EXPECT_EQ(s->cloud->size(), 1u);
 }
 
-TEST(SubmapAssembler, NeedsOdometryAtCloudsAndAnchors) {
+TEST(SubmapAssembler, NeedsOdometryAtTheAnchorOnly) {
   SubmapAssemblerParams p;
   p.window_s = 1.0;
   SubmapAssembler a(p);
   std::optional<AssembledSubmap> done;
-  EXPECT_EQ(a.addCloud(1.0, cloudOf({{1, 1, 1}}), &done), Status::kNoOdometry);
-  EXPECT_EQ(a.addOdometry(2.0, Pose::Identity()), Status::kOk);
-  EXPECT_EQ(a.addCloud(3.0, cloudOf({{1, 1, 1}}), &done), Status::kNoOdometry);  // 1 s stale
-  EXPECT_EQ(a.addCloud(3.1, cloudOf({{1, 1, 1}}), &done), Status::kNoOdometry);
-  EXPECT_FALSE(a.flush());
-  // A window whose centre (3.8 + 0.5) has no odometry (the front end stopped) yields nothing.
-  EXPECT_EQ(a.addOdometry(3.9, Pose::Identity()), Status::kOk);  // a gap, but nothing open
-  EXPECT_EQ(a.addCloud(3.9, cloudOf({{1, 1, 1}}), &done), Status::kOk);
+  // Clouds are in O already: one that arrives before any odometry is kept. Window (0.9, 1.9].
+  EXPECT_EQ(a.addCloud(1.0, cloudOf({{1, 1, 1}}), &done), Status::kOk);
+  EXPECT_EQ(a.addOdometry(1.35, makePose(0, 0, 0, 0, 0, 0)), Status::kOk);
+  EXPECT_EQ(a.addOdometry(1.45, makePose(1, 0, 0, 0, 0, 0)), Status::kOk);
+  EXPECT_EQ(a.addCloud(1.9, cloudOf({{1, 1, 1}}), &done), Status::kOk);
+  ASSERT_TRUE(done);
+  EXPECT_DOUBLE_EQ(done->stamp, 1.4);
+  EXPECT_NEAR(done->T_O_S.translation().x(), 0.5, 1e-9);
+  EXPECT_EQ(done->cloud->size(), 2u);
+  // The front end stopped at 1.45: window (1.9, 2.9] has no pose at its centre and is dropped.
+  EXPECT_EQ(a.addCloud(2.0, cloudOf({{1, 1, 1}}), &done), Status::kOk);
+  EXPECT_EQ(a.addCloud(2.9, cloudOf({{1, 1, 1}}), &done), Status::kNoAnchorPose);
+  EXPECT_FALSE(done);
+  EXPECT_EQ(a.addCloud(3.0, cloudOf({{1, 1, 1}}), &done), Status::kOk);
   EXPECT_FALSE(a.flush());
 }
 

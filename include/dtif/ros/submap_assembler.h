@@ -25,7 +25,7 @@ struct SubmapAssemblerParams {
   double window_s = 10.0;           ///< submap length [s]
   double cloud_period_s = 0.1;      ///< time one cloud covers, ending at its stamp [s]
   double max_odom_gap_s = 0.5;      ///< odometry silence that discards the open submap [s]
-  double max_odom_age_s = 0.2;      ///< clouds and anchors need odometry this close in time [s]
+  double max_odom_age_s = 0.2;      ///< the anchor needs odometry this close in time [s]
   int max_submap_points = 3000000;  ///< further points of a window are dropped
 
   std::string validate() const;
@@ -57,7 +57,6 @@ class SubmapAssembler {
     kOk,
     kDuplicateStamp,  ///< same stamp as the previous message: dropped
     kOutOfOrder,      ///< older than the previous message: dropped
-    kNoOdometry,      ///< no odometry near the cloud's stamp: cloud dropped
     kNoAnchorPose,    ///< no odometry at the closed window's centre: that submap was discarded
     kOdometryGap,     ///< odometry was silent too long: the open submap was discarded
     kEmptyCloud,      ///< nothing to add
