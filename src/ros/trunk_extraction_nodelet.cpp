@@ -13,6 +13,7 @@
 #include <chrono>
 #include <condition_variable>
 #include <deque>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <pluginlib/class_list_macros.hpp>
@@ -112,10 +113,15 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
     return true;
   }
 
+  // One throttled warning per input and status (a macro's throttle is per call site, which would
+  // let one kind of bad input hide another). Called under mutex_.
   void report(ros_glue::SubmapAssembler::Status s, const char* what) {
-    using S = ros_glue::SubmapAssembler::Status;
-    if (s == S::kOk) return;
-    NODELET_WARN_THROTTLE(5.0, "%s: %s", what, ros_glue::SubmapAssembler::describe(s));
+    if (s == ros_glue::SubmapAssembler::Status::kOk) return;
+    const ros::WallTime now = ros::WallTime::now();
+    ros::WallTime& last = last_warning_[{what, static_cast<int>(s)}];
+    if (!last.isZero() && (now - last).toSec() < 5.0) return;
+    last = now;
+    NODELET_WARN("%s: %s", what, ros_glue::SubmapAssembler::describe(s));
   }
 
   void onOdometry(const nav_msgs::Odometry::ConstPtr& msg) {
@@ -268,8 +274,9 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
   TrunkExtractorParams extractor_params_;
   DescriptorParams descriptor_params_;
 
-  std::mutex mutex_;  // assembler_, odom_frame_, last_submap_stamp_, next_submap_id_
+  std::mutex mutex_;  // assembler_, odom_frame_, last_submap_stamp_, next_submap_id_, last_warning_
   std::unique_ptr<ros_glue::SubmapAssembler> assembler_;
+  std::map<std::pair<std::string, int>, ros::WallTime> last_warning_;
   std::string odom_frame_;
   double last_submap_stamp_ = -1.0;
   int64_t next_submap_id_ = 0;
