@@ -243,17 +243,121 @@ double cellOverlap(const std::unordered_set<int64_t>& a, const std::unordered_se
   return static_cast<double>(common) / static_cast<double>(small.size());
 }
 
-EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const EvalParams& eval,
-                         const std::function<void(size_t, size_t)>& progress) {
+namespace {
+
+using CellSets = std::vector<std::unordered_set<int64_t>>;
+
+// DATASET.md's ground truth: does some submap before i (file order) that i may be matched
+// with (not the same robot's within exclude_recent_s) form a true loop with it?
+bool hasTrueLoop(const Dataset& ds, const CellSets& cells, size_t i, double exclude_recent_s,
+                 const EvalParams& eval) {
+  const SubmapRecord& q = ds.submaps[i];
+  for (size_t j = 0; j < i; ++j) {
+    const SubmapRecord& c = ds.submaps[j];
+    if (c.robot == q.robot && std::fabs(c.stamp - q.stamp) < exclude_recent_s) continue;
+    if (cellOverlap(cells[i], cells[j]) >= eval.true_loop_overlap) return true;
+  }
+  return false;
+}
+
+// An accepted loop of query i with candidate j (file positions) and its estimate T_c_q, scored.
+void scoreAccepted(const Dataset& ds, const CellSets& cells, size_t i, size_t j, const Pose& T_c_q,
+                   const EvalParams& eval, EvalRow* row) {
+  row->accepted = true;
+  row->candidate = ds.submaps[j].id;
+  row->T_c_q_est = T_c_q;
+  const Pose T_c_q_gt =
+      ds.T_W_S.at(ds.submaps[j].id).inverse() * ds.T_W_S.at(ds.submaps[i].id);  // Eq. (4.2)
+  row->err = poseError(T_c_q_gt, T_c_q);
+  row->overlap = cellOverlap(cells[i], cells[j]);
+  row->true_loop = row->overlap >= eval.true_loop_overlap;
+  row->true_positive = row->true_loop && row->err->rot_deg <= eval.max_rot_err_deg &&
+                       row->err->trans_m <= eval.max_trans_err_m;
+}
+
+void checkGroundTruth(const Dataset& ds) {
   for (const auto& rec : ds.submaps) {
     if (!ds.T_W_S.count(rec.id)) {
       throw DatasetError(ds.root + "/ground_truth.csv: no ground truth for submap " +
                          std::to_string(rec.id) + " (evaluation needs every submap's T_W_S)");
     }
   }
+}
+
+// Counts, precision/recall, mean errors and RMSE of the rows; times averaged over the rows.
+EvalSummary summarize(const std::vector<EvalRow>& rows) {
+  EvalSummary s;
+  s.submaps = rows.size();
+  PoseError sum_all, sum_tp;
+  double sq_rot = 0.0, sq_trans = 0.0;
+  auto accumulate = [](PoseError& acc, const PoseError& e) {
+    acc.roll_deg += e.roll_deg;
+    acc.pitch_deg += e.pitch_deg;
+    acc.yaw_deg += e.yaw_deg;
+    acc.rot_deg += e.rot_deg;
+    acc.x_m += e.x_m;
+    acc.y_m += e.y_m;
+    acc.z_m += e.z_m;
+    acc.trans_m += e.trans_m;
+  };
+  auto scaled = [](PoseError e, double k) {
+    e.roll_deg *= k;
+    e.pitch_deg *= k;
+    e.yaw_deg *= k;
+    e.rot_deg *= k;
+    e.x_m *= k;
+    e.y_m *= k;
+    e.z_m *= k;
+    e.trans_m *= k;
+    return e;
+  };
+  for (const auto& r : rows) {
+    s.queries_with_loop += r.has_loop;
+    s.t_desc_ms += r.t_desc_ms;
+    s.t_loop_ms += r.t_loop_ms;
+    s.t_solver_ms += r.t_solver_ms;
+    if (!r.accepted) continue;
+    ++s.accepted;
+    accumulate(sum_all, *r.err);
+    sq_rot += r.err->rot_deg * r.err->rot_deg;
+    sq_trans += r.err->trans_m * r.err->trans_m;
+    if (r.true_positive) {
+      ++s.true_positives;
+      accumulate(sum_tp, *r.err);
+    }
+  }
+  s.false_positives = s.accepted - s.true_positives;
+  if (!rows.empty()) {
+    const double n = static_cast<double>(rows.size());
+    s.t_desc_ms /= n;
+    s.t_loop_ms /= n;
+    s.t_solver_ms /= n;
+  }
+  s.t_total_ms = s.t_desc_ms + s.t_loop_ms;
+  if (s.accepted > 0) {
+    const double k = 1.0 / static_cast<double>(s.accepted);
+    s.precision = static_cast<double>(s.true_positives) * k;
+    s.mean_err_all = scaled(sum_all, k);
+    s.rmse_rot_deg = std::sqrt(sq_rot * k);
+    s.rmse_trans_m = std::sqrt(sq_trans * k);
+  }
+  if (s.true_positives > 0) {
+    s.mean_err_tp = scaled(sum_tp, 1.0 / static_cast<double>(s.true_positives));
+  }
+  if (s.queries_with_loop > 0) {
+    s.recall = static_cast<double>(s.true_positives) / static_cast<double>(s.queries_with_loop);
+  }
+  return s;
+}
+
+}  // namespace
+
+EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const EvalParams& eval,
+                         const std::function<void(size_t, size_t)>& progress) {
+  checkGroundTruth(ds);
   EvalResult result;
   LoopDetector detector(params.loop);
-  std::vector<std::unordered_set<int64_t>> cells;
+  CellSets cells;
   cells.reserve(ds.submaps.size());
   double bytes_sum = 0.0;
   const size_t n = ds.submaps.size();
@@ -290,34 +394,17 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
     row.t_loop_ms = msSince(t0);
     row.t_solver_ms = qs.solver_ms;
 
-    // Ground truth: does any eligible earlier submap form a true loop with q?
-    for (size_t j = 0; j < i && !row.has_loop; ++j) {
-      const SubmapRecord& c = ds.submaps[j];
-      if (c.robot == rec.robot &&
-          std::fabs(c.stamp - rec.stamp) < params.loop.database.exclude_recent_s) {
-        continue;
-      }
-      row.has_loop = cellOverlap(cells[i], cells[j]) >= eval.true_loop_overlap;
-    }
-
+    row.has_loop = hasTrueLoop(ds, cells, i, params.loop.database.exclude_recent_s, eval);
     if (loop) {
-      row.accepted = true;
-      row.candidate = loop->candidate_id;
       row.inliers = loop->inliers;
       row.score = loop->score;
-      row.T_c_q_est = loop->T_c_q;
       size_t j = 0;
       while (j < i && ds.submaps[j].id != loop->candidate_id) ++j;
       if (j == i) {
         throw std::logic_error("loop detector returned an unknown candidate id " +
                                std::to_string(loop->candidate_id));
       }
-      const Pose T_c_q_gt = ds.T_W_S.at(loop->candidate_id).inverse() * T_W_q;  // Eq. (4.2)
-      row.err = poseError(T_c_q_gt, loop->T_c_q);
-      row.overlap = cellOverlap(cells[i], cells[j]);
-      row.true_loop = row.overlap >= eval.true_loop_overlap;
-      row.true_positive = row.true_loop && row.err->rot_deg <= eval.max_rot_err_deg &&
-                          row.err->trans_m <= eval.max_trans_err_m;
+      scoreAccepted(ds, cells, i, j, loop->T_c_q, eval, &row);
     }
 
     // 4. Insert q.
@@ -326,69 +413,79 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
     if (progress) progress(i + 1, n);
   }
 
-  // Summary.
-  EvalSummary& s = result.summary;
-  s.dataset = ds.root;
-  s.submaps = n;
-  PoseError sum_all, sum_tp;
-  double sq_rot = 0.0, sq_trans = 0.0;
-  auto accumulate = [](PoseError& acc, const PoseError& e) {
-    acc.roll_deg += e.roll_deg;
-    acc.pitch_deg += e.pitch_deg;
-    acc.yaw_deg += e.yaw_deg;
-    acc.rot_deg += e.rot_deg;
-    acc.x_m += e.x_m;
-    acc.y_m += e.y_m;
-    acc.z_m += e.z_m;
-    acc.trans_m += e.trans_m;
-  };
-  auto scaled = [](PoseError e, double k) {
-    e.roll_deg *= k;
-    e.pitch_deg *= k;
-    e.yaw_deg *= k;
-    e.rot_deg *= k;
-    e.x_m *= k;
-    e.y_m *= k;
-    e.z_m *= k;
-    e.trans_m *= k;
-    return e;
-  };
-  for (const auto& r : result.rows) {
-    s.queries_with_loop += r.has_loop;
-    s.t_desc_ms += r.t_desc_ms;
-    s.t_loop_ms += r.t_loop_ms;
-    s.t_solver_ms += r.t_solver_ms;
-    if (!r.accepted) continue;
-    ++s.accepted;
-    accumulate(sum_all, *r.err);
-    sq_rot += r.err->rot_deg * r.err->rot_deg;
-    sq_trans += r.err->trans_m * r.err->trans_m;
-    if (r.true_positive) {
-      ++s.true_positives;
-      accumulate(sum_tp, *r.err);
+  result.summary = summarize(result.rows);
+  result.summary.dataset = ds.root;
+  if (n > 0) result.summary.descriptor_bytes_mean = bytes_sum / static_cast<double>(n);
+  return result;
+}
+
+EvalResult scoreLoopLog(const Dataset& ds, const std::vector<LoopLogRow>& log,
+                        double exclude_recent_s, const EvalParams& eval,
+                        std::vector<std::string>* unmatched) {
+  checkGroundTruth(ds);
+  constexpr double kStampTolS = 1e-3;
+  auto find = [&](const std::string& robot, double stamp) -> std::optional<size_t> {
+    for (size_t i = 0; i < ds.submaps.size(); ++i) {
+      const SubmapRecord& r = ds.submaps[i];
+      if (r.robot == robot && std::fabs(r.stamp - stamp) <= kStampTolS) return i;
     }
+    return std::nullopt;
+  };
+  auto describe = [](const std::string& robot, int64_t id, double stamp) {
+    std::ostringstream os;
+    os << robot << "/" << id << " (stamp " << std::fixed << std::setprecision(3) << stamp << ")";
+    return os.str();
+  };
+  CellSets cells;
+  cells.reserve(ds.submaps.size());
+  for (const SubmapRecord& rec : ds.submaps) {
+    cells.push_back(overlapCells(*loadSubmapCloud(ds, rec), ds.T_W_S.at(rec.id)));
   }
-  s.false_positives = s.accepted - s.true_positives;
-  if (n > 0) {
-    s.t_desc_ms /= static_cast<double>(n);
-    s.t_loop_ms /= static_cast<double>(n);
-    s.t_solver_ms /= static_cast<double>(n);
-    s.descriptor_bytes_mean = bytes_sum / static_cast<double>(n);
+  EvalResult result;
+  result.rows.resize(ds.submaps.size());
+  std::vector<char> logged(ds.submaps.size(), 0);
+  double t_loop_sum = 0.0;
+  size_t queried = 0;
+  for (const LoopLogRow& l : log) {
+    const std::optional<size_t> i = find(l.query_robot, l.query_stamp);
+    if (!i) {
+      if (unmatched)
+        unmatched->push_back("query " + describe(l.query_robot, l.query_id, l.query_stamp));
+      continue;
+    }
+    if (logged[*i]) {
+      if (unmatched)
+        unmatched->push_back("repeated query " +
+                             describe(l.query_robot, l.query_id, l.query_stamp));
+      continue;
+    }
+    logged[*i] = 1;
+    ++queried;
+    t_loop_sum += l.t_loop_ms;
+    EvalRow& row = result.rows[*i];
+    row.t_loop_ms = l.t_loop_ms;
+    if (!l.accepted) continue;
+    const std::optional<size_t> j = find(l.candidate_robot, l.candidate_stamp);
+    if (!j) {
+      if (unmatched) {
+        unmatched->push_back("candidate " +
+                             describe(l.candidate_robot, l.candidate_id, l.candidate_stamp) +
+                             " of query " + describe(l.query_robot, l.query_id, l.query_stamp));
+      }
+      continue;
+    }
+    row.inliers = l.inliers;
+    row.score = l.score;
+    scoreAccepted(ds, cells, *i, *j, l.T_c_q, eval, &row);
   }
-  s.t_total_ms = s.t_desc_ms + s.t_loop_ms;
-  if (s.accepted > 0) {
-    const double k = 1.0 / static_cast<double>(s.accepted);
-    s.precision = static_cast<double>(s.true_positives) * k;
-    s.mean_err_all = scaled(sum_all, k);
-    s.rmse_rot_deg = std::sqrt(sq_rot * k);
-    s.rmse_trans_m = std::sqrt(sq_trans * k);
+  for (size_t i = 0; i < ds.submaps.size(); ++i) {
+    result.rows[i].query = ds.submaps[i].id;
+    result.rows[i].has_loop = hasTrueLoop(ds, cells, i, exclude_recent_s, eval);
   }
-  if (s.true_positives > 0) {
-    s.mean_err_tp = scaled(sum_tp, 1.0 / static_cast<double>(s.true_positives));
-  }
-  if (s.queries_with_loop > 0) {
-    s.recall = static_cast<double>(s.true_positives) / static_cast<double>(s.queries_with_loop);
-  }
+  result.summary = summarize(result.rows);
+  result.summary.dataset = ds.root;
+  result.summary.online = true;
+  result.summary.t_loop_ms = queried > 0 ? t_loop_sum / static_cast<double>(queried) : 0.0;
   return result;
 }
 
@@ -470,11 +567,15 @@ void writeSummaryJson(const std::string& path, const EvalSummary& s) {
   j["mean_err_tp"] = errJson(s.mean_err_tp);
   j["rmse_rot_deg"] = optJson(s.rmse_rot_deg);
   j["rmse_trans_m"] = optJson(s.rmse_trans_m);
-  j["time_ms"] = {{"desc", s.t_desc_ms},
+  // An online run's log has query times only.
+  const auto offline = [&](double v) {
+    return s.online ? nlohmann::json(nullptr) : nlohmann::json(v);
+  };
+  j["time_ms"] = {{"desc", offline(s.t_desc_ms)},
                   {"loop", s.t_loop_ms},
-                  {"solver", s.t_solver_ms},
-                  {"total", s.t_total_ms}};
-  j["descriptor_bytes_mean"] = s.descriptor_bytes_mean;
+                  {"solver", offline(s.t_solver_ms)},
+                  {"total", offline(s.t_total_ms)}};
+  j["descriptor_bytes_mean"] = offline(s.descriptor_bytes_mean);
   std::ofstream os(path);
   if (!os) throw DatasetError(path + ": cannot open file for writing");
   os << j.dump(2) << '\n';
@@ -485,6 +586,8 @@ void writeSummaryJson(const std::string& path, const EvalSummary& s) {
 std::string formatTable(const EvalSummary& s, const std::string& method) {
   const auto& e = s.mean_err_all;
   auto f = [&](double PoseError::*m) { return e ? fmt((*e).*m) : std::string("-"); };
+  // An online run's log has query times only.
+  auto offline = [&](double v) { return s.online ? std::nullopt : std::optional<double>(v); };
   std::ostringstream os;
   os << "| Method | Roll | Pitch | Yaw | Rot. | X | Y | Z | Trans. | RMSE-R | RMSE-T | Desc. ms"
         " | Loop ms | Total ms | Solver ms | Precision | Recall | TP/Acc./Loops | Bytes |\n"
@@ -493,10 +596,10 @@ std::string formatTable(const EvalSummary& s, const std::string& method) {
      << " | " << f(&PoseError::yaw_deg) << " | " << f(&PoseError::rot_deg) << " | "
      << f(&PoseError::x_m) << " | " << f(&PoseError::y_m) << " | " << f(&PoseError::z_m) << " | "
      << f(&PoseError::trans_m) << " | " << fmt(s.rmse_rot_deg) << " | " << fmt(s.rmse_trans_m)
-     << " | " << fmt(s.t_desc_ms) << " | " << fmt(s.t_loop_ms) << " | " << fmt(s.t_total_ms)
-     << " | " << fmt(s.t_solver_ms) << " | " << fmt(s.precision) << " | " << fmt(s.recall) << " | "
-     << s.true_positives << "/" << s.accepted << "/" << s.queries_with_loop << " | "
-     << fmt(s.descriptor_bytes_mean, 0) << " |\n";
+     << " | " << fmt(offline(s.t_desc_ms)) << " | " << fmt(s.t_loop_ms) << " | "
+     << fmt(offline(s.t_total_ms)) << " | " << fmt(offline(s.t_solver_ms)) << " | "
+     << fmt(s.precision) << " | " << fmt(s.recall) << " | " << s.true_positives << "/" << s.accepted
+     << "/" << s.queries_with_loop << " | " << fmt(offline(s.descriptor_bytes_mean), 0) << " |\n";
   os << "(errors in deg and m, averaged over all accepted loops as in the paper; " << s.submaps
      << " submaps)\n";
   return os.str();

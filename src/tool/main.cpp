@@ -1,4 +1,4 @@
-// dtif: the offline command-line tool (simulate, extract, register, eval).
+// dtif: the offline command-line tool (simulate, extract, register, eval, score).
 #include <cstring>
 #include <exception>
 #include <iostream>
@@ -17,7 +17,12 @@ constexpr const char* kUsage =
     "           either off (full rate: about 3 MB/s per robot for a 200k points/s scene)\n"
     "  extract  <cloud.pcd> [--out <trunks.csv>] [--config <params.yaml>]\n"
     "  register <query> <candidate> [--config <params.yaml>]  (PCD submaps or x,y,z,r CSVs)\n"
-    "  eval     <dataset_dir> --out <dir> [--config <params.yaml>] [--unit-weights]\n";
+    "  eval     <dataset_dir> --out <dir> [--config <params.yaml>] [--unit-weights]\n"
+    "  score    <dataset_dir> --loops <loop_log.csv> --out <dir> [--config <params.yaml>]\n"
+    "           [--eval <eval_out_dir>]: scores the loop log of the ROS nodelets on this\n"
+    "           dataset's bag against its ground truth (eval's metrics), lists the loops, "
+    "compares\n"
+    "           them with a dtif eval run and reports the lag of the results\n";
 
 }  // namespace
 
@@ -33,6 +38,7 @@ int main(int argc, char** argv) {
     if (cmd == "extract") return dtif::tool::runExtract(args);
     if (cmd == "register") return dtif::tool::runRegister(args);
     if (cmd == "eval") return dtif::tool::runEval(args);
+    if (cmd == "score") return dtif::tool::runScore(args);
     std::cerr << "dtif: unknown command '" << cmd << "'\n" << kUsage;
     return 2;
   } catch (const dtif::tool::UsageError& e) {
