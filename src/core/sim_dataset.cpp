@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
+#include <mutex>
 #include <sstream>
 
 #include "dtif/core/dataset.h"
@@ -81,26 +82,36 @@ class DatasetWriter : public SubmapSink {
     }
     cloud.width = static_cast<uint32_t>(cloud.size());
     cloud.height = 1;
+    // The heavy part (compressing the cloud, the overlap cells) runs in the caller's thread;
+    // only the bookkeeping is serialised.
     writeSubmapCloud(*ds_, rec, cloud);
-    records_.push_back(rec);
-    T_W_S_[sm.id] = sm.T_W_S;
     Entry e;
     e.id = sm.id;
     e.robot = sm.robot_index;
     e.stamp = sm.stamp;
     e.cells = overlapCells(sm, world_);
-    entries_.push_back(std::move(e));
     SubmapExtent ext;
     ext.robot_index = sm.robot_index;
     ext.T_W_S = sm.T_W_S;
     ext.min_S = Eigen::Vector2d(percentile(xs, 0.02), percentile(ys, 0.02));
     ext.max_S = Eigen::Vector2d(percentile(xs, 0.98), percentile(ys, 0.98));
-    extents_.push_back(ext);
+    std::lock_guard<std::mutex> lock(mutex_);
+    records_.push_back(rec);
+    T_W_S_[sm.id] = sm.T_W_S;
+    entries_.push_back(std::move(e));
+    extents_by_id_.emplace_back(sm.id, ext);
   }
 
+  /// After the last submap: everything in id order, whatever order the threads delivered.
   void finish() {
     std::sort(records_.begin(), records_.end(),
               [](const SubmapRecord& a, const SubmapRecord& b) { return a.id < b.id; });
+    std::sort(entries_.begin(), entries_.end(),
+              [](const Entry& a, const Entry& b) { return a.id < b.id; });
+    std::sort(extents_by_id_.begin(), extents_by_id_.end(),
+              [](const auto& a, const auto& b) { return a.first < b.first; });
+    extents_.clear();
+    for (const auto& [id, ext] : extents_by_id_) extents_.push_back(ext);
     ds_->submaps = records_;
     ds_->T_W_S = T_W_S_;
   }
@@ -140,8 +151,10 @@ class DatasetWriter : public SubmapSink {
   const World& world_;
   std::vector<SubmapRecord> records_;
   std::map<int64_t, Pose> T_W_S_;
+  std::mutex mutex_;  // guards the containers while submaps arrive
   std::vector<Entry> entries_;
-  std::vector<SubmapExtent> extents_;
+  std::vector<std::pair<int64_t, SubmapExtent>> extents_by_id_;
+  std::vector<SubmapExtent> extents_;  // in id order, after finish()
 };
 
 void prepareFolder(const std::string& dir) {

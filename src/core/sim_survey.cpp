@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
+#include <exception>
 #include <map>
 #include <mutex>
 #include <queue>
@@ -489,12 +490,14 @@ SimulationStats Simulator::run(FrameSink* frames, SubmapSink* submaps, int threa
   stats.branches = world_->cylinders().size() - world_->numLogs();
   double submap_points = 0.0;
 
-  // Shared state, guarded by `mutex`: results, sinks (calls serialised), in-order frame delivery.
+  // Shared state, guarded by `mutex`: results, the frame sink (calls serialised), in-order frame
+  // delivery, the first failure.
   std::mutex mutex;
   std::condition_variable delivered_cv;
   size_t next_task = 0;
   std::vector<int> next_window(trajectories_.size(), 0);  // oldest undelivered window per robot
   std::vector<std::map<int, std::vector<Frame>>> held(trajectories_.size());
+  std::exception_ptr failure;  // the first exception of a worker
 
   // Scans one window; per-thread scratch objects are reused across windows.
   auto scanWindow = [&](const WindowTask& task, World::RayScratch* scratch,
@@ -575,10 +578,6 @@ SimulationStats Simulator::run(FrameSink* frames, SubmapSink* submaps, int threa
       frame->T_W_B = tr.T_W_B[i_end];
     }
 
-    std::lock_guard<std::mutex> lock(mutex);
-    stats.frames += static_cast<size_t>(task.f_end - task.f_begin);
-    stats.rays += rays;
-    stats.returns += returns;
     if (is_submap) {
       Submap sm;
       sm.id = slot_id.at({r, task.window});
@@ -589,10 +588,15 @@ SimulationStats Simulator::run(FrameSink* frames, SubmapSink* submaps, int threa
       sm.T_W_S = T_W_S;
       sm.points = voxels->centroids();
       sm.raw_points = voxels->raw();
+      if (submaps) submaps->onSubmap(sm);  // concurrently: the sink synchronises itself
+      std::lock_guard<std::mutex> lock(mutex);
       stats.submaps++;
       submap_points += static_cast<double>(sm.points.size());
-      if (submaps) submaps->onSubmap(sm);
     }
+    std::lock_guard<std::mutex> lock(mutex);
+    stats.frames += static_cast<size_t>(task.f_end - task.f_begin);
+    stats.rays += rays;
+    stats.returns += returns;
     if (out_frames) {
       // Frames of one robot leave in time order: hold this window until its predecessors left.
       held[r][task.window] = std::move(*out_frames);
@@ -617,12 +621,23 @@ SimulationStats Simulator::run(FrameSink* frames, SubmapSink* submaps, int threa
         task = tasks[next_task++];
         // Every earlier window of this robot is already running or held, so this wait ends.
         if (frames) {
-          delivered_cv.wait(
-              lock, [&] { return task.window - next_window[task.robot] <= kMaxWindowsAhead; });
+          delivered_cv.wait(lock, [&] {
+            return failure || task.window - next_window[task.robot] <= kMaxWindowsAhead;
+          });
         }
+        if (failure) return;
       }
       window_frames.clear();
-      scanWindow(task, &scratch, &voxels, frames ? &window_frames : nullptr);
+      try {
+        scanWindow(task, &scratch, &voxels, frames ? &window_frames : nullptr);
+      } catch (...) {
+        // A sink failed (e.g. disk full): stop every worker, rethrow in the caller's thread.
+        std::lock_guard<std::mutex> lock(mutex);
+        if (!failure) failure = std::current_exception();
+        next_task = tasks.size();
+        delivered_cv.notify_all();
+        return;
+      }
     }
   };
 
@@ -633,6 +648,7 @@ SimulationStats Simulator::run(FrameSink* frames, SubmapSink* submaps, int threa
   for (int t = 1; t < n_threads; ++t) pool.emplace_back(worker);
   worker();
   for (auto& th : pool) th.join();
+  if (failure) std::rethrow_exception(failure);
   stats.mean_submap_points = stats.submaps ? submap_points / stats.submaps : 0.0;
   stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
   return stats;

@@ -9,8 +9,10 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <mutex>
 #include <set>
 #include <sstream>
+#include <stdexcept>
 
 #include "dtif/core/dataset.h"
 #include "dtif/core/params.h"
@@ -52,8 +54,12 @@ SceneParams liteScene() {
 double yawOf(const Eigen::Matrix3d& R) { return std::atan2(R(1, 0), R(0, 0)); }
 
 struct CollectSubmaps : SubmapSink {
+  std::mutex mutex;
   std::map<int64_t, Submap> submaps;
-  void onSubmap(const Submap& s) override { submaps[s.id] = s; }
+  void onSubmap(const Submap& s) override {
+    std::lock_guard<std::mutex> lock(mutex);
+    submaps[s.id] = s;
+  }
 };
 
 struct CollectFrames : FrameSink {
@@ -340,6 +346,25 @@ TEST(SimulatorDeterminism, FramesInTimeOrderPerRobotAnyThreads) {
     for (size_t i = 1; i < frames.size(); ++i) {
       EXPECT_NEAR(frames[i].first - frames[i - 1].first, 0.1, 1e-6) << robot << " frame " << i;
     }
+  }
+}
+
+// A sink that fails (disk full) in a worker thread: run() throws its error in the caller's
+// thread, and stops, instead of terminating the process.
+TEST(SimulatorDeterminism, SinkFailureReachesTheCaller) {
+  struct Failing : SubmapSink {
+    void onSubmap(const Submap&) override { throw std::runtime_error("disk full"); }
+  };
+  struct Frames : FrameSink {
+    void onFrame(const Frame&) override {}
+  };
+  SceneParams s = liteScene();
+  s.sensor.points_per_s = 2000;
+  Simulator sim(s, 5);
+  Failing failing;
+  Frames frames;
+  for (int threads : {1, 2, 3}) {
+    EXPECT_THROW(sim.run(&frames, &failing, threads), std::runtime_error) << threads;
   }
 }
 

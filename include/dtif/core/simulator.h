@@ -285,7 +285,9 @@ struct Submap {
   size_t raw_points = 0;                ///< returns before downsampling
 };
 
-/// Receives submaps. Calls are serialised; valid only during the call.
+/// Receives submaps, in any order and possibly concurrently from several threads (so that
+/// writing one overlaps scanning the next): implementations synchronise their own state. The
+/// submap is valid only during the call.
 class SubmapSink {
  public:
   virtual ~SubmapSink() = default;
