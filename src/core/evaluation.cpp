@@ -243,6 +243,89 @@ double cellOverlap(const std::unordered_set<int64_t>& a, const std::unordered_se
   return static_cast<double>(common) / static_cast<double>(small.size());
 }
 
+bool eligiblePair(const SubmapRecord& q, const SubmapRecord& c, double exclude_recent_s) {
+  return c.robot != q.robot || std::fabs(c.stamp - q.stamp) >= exclude_recent_s;
+}
+
+void scoreAcceptedLoop(const Pose& T_c_q_gt, const Pose& T_c_q_est, double overlap,
+                       const EvalParams& eval, EvalRow* row) {
+  row->accepted = true;
+  row->T_c_q_est = T_c_q_est;
+  row->err = poseError(T_c_q_gt, T_c_q_est);
+  row->overlap = overlap;
+  row->true_loop = overlap >= eval.true_loop_overlap;
+  row->true_positive = row->true_loop && row->err->rot_deg <= eval.max_rot_err_deg &&
+                       row->err->trans_m <= eval.max_trans_err_m;
+}
+
+EvalSummary summarizeRows(const std::vector<EvalRow>& rows, const std::string& dataset,
+                          double bytes_sum) {
+  EvalSummary s;
+  s.dataset = dataset;
+  const size_t n = rows.size();
+  s.submaps = n;
+  PoseError sum_all, sum_tp;
+  double sq_rot = 0.0, sq_trans = 0.0;
+  auto accumulate = [](PoseError& acc, const PoseError& e) {
+    acc.roll_deg += e.roll_deg;
+    acc.pitch_deg += e.pitch_deg;
+    acc.yaw_deg += e.yaw_deg;
+    acc.rot_deg += e.rot_deg;
+    acc.x_m += e.x_m;
+    acc.y_m += e.y_m;
+    acc.z_m += e.z_m;
+    acc.trans_m += e.trans_m;
+  };
+  auto scaled = [](PoseError e, double k) {
+    e.roll_deg *= k;
+    e.pitch_deg *= k;
+    e.yaw_deg *= k;
+    e.rot_deg *= k;
+    e.x_m *= k;
+    e.y_m *= k;
+    e.z_m *= k;
+    e.trans_m *= k;
+    return e;
+  };
+  for (const auto& r : rows) {
+    s.queries_with_loop += r.has_loop;
+    s.t_desc_ms += r.t_desc_ms;
+    s.t_loop_ms += r.t_loop_ms;
+    s.t_solver_ms += r.t_solver_ms;
+    if (!r.accepted) continue;
+    ++s.accepted;
+    accumulate(sum_all, *r.err);
+    sq_rot += r.err->rot_deg * r.err->rot_deg;
+    sq_trans += r.err->trans_m * r.err->trans_m;
+    if (r.true_positive) {
+      ++s.true_positives;
+      accumulate(sum_tp, *r.err);
+    }
+  }
+  s.false_positives = s.accepted - s.true_positives;
+  if (n > 0) {
+    s.t_desc_ms /= static_cast<double>(n);
+    s.t_loop_ms /= static_cast<double>(n);
+    s.t_solver_ms /= static_cast<double>(n);
+    s.descriptor_bytes_mean = bytes_sum / static_cast<double>(n);
+  }
+  s.t_total_ms = s.t_desc_ms + s.t_loop_ms;
+  if (s.accepted > 0) {
+    const double k = 1.0 / static_cast<double>(s.accepted);
+    s.precision = static_cast<double>(s.true_positives) * k;
+    s.mean_err_all = scaled(sum_all, k);
+    s.rmse_rot_deg = std::sqrt(sq_rot * k);
+    s.rmse_trans_m = std::sqrt(sq_trans * k);
+  }
+  if (s.true_positives > 0) {
+    s.mean_err_tp = scaled(sum_tp, 1.0 / static_cast<double>(s.true_positives));
+  }
+  if (s.queries_with_loop > 0) {
+    s.recall = static_cast<double>(s.true_positives) / static_cast<double>(s.queries_with_loop);
+  }
+  return s;
+}
+
 EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const EvalParams& eval,
                          const std::function<void(size_t, size_t)>& progress) {
   for (const auto& rec : ds.submaps) {
@@ -292,20 +375,14 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
 
     // Ground truth: does any eligible earlier submap form a true loop with q?
     for (size_t j = 0; j < i && !row.has_loop; ++j) {
-      const SubmapRecord& c = ds.submaps[j];
-      if (c.robot == rec.robot &&
-          std::fabs(c.stamp - rec.stamp) < params.loop.database.exclude_recent_s) {
-        continue;
-      }
+      if (!eligiblePair(rec, ds.submaps[j], params.loop.database.exclude_recent_s)) continue;
       row.has_loop = cellOverlap(cells[i], cells[j]) >= eval.true_loop_overlap;
     }
 
     if (loop) {
-      row.accepted = true;
       row.candidate = loop->candidate_id;
       row.inliers = loop->inliers;
       row.score = loop->score;
-      row.T_c_q_est = loop->T_c_q;
       size_t j = 0;
       while (j < i && ds.submaps[j].id != loop->candidate_id) ++j;
       if (j == i) {
@@ -313,11 +390,7 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
                                std::to_string(loop->candidate_id));
       }
       const Pose T_c_q_gt = ds.T_W_S.at(loop->candidate_id).inverse() * T_W_q;  // Eq. (4.2)
-      row.err = poseError(T_c_q_gt, loop->T_c_q);
-      row.overlap = cellOverlap(cells[i], cells[j]);
-      row.true_loop = row.overlap >= eval.true_loop_overlap;
-      row.true_positive = row.true_loop && row.err->rot_deg <= eval.max_rot_err_deg &&
-                          row.err->trans_m <= eval.max_trans_err_m;
+      scoreAcceptedLoop(T_c_q_gt, loop->T_c_q, cellOverlap(cells[i], cells[j]), eval, &row);
     }
 
     // 4. Insert q.
@@ -326,69 +399,7 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
     if (progress) progress(i + 1, n);
   }
 
-  // Summary.
-  EvalSummary& s = result.summary;
-  s.dataset = ds.root;
-  s.submaps = n;
-  PoseError sum_all, sum_tp;
-  double sq_rot = 0.0, sq_trans = 0.0;
-  auto accumulate = [](PoseError& acc, const PoseError& e) {
-    acc.roll_deg += e.roll_deg;
-    acc.pitch_deg += e.pitch_deg;
-    acc.yaw_deg += e.yaw_deg;
-    acc.rot_deg += e.rot_deg;
-    acc.x_m += e.x_m;
-    acc.y_m += e.y_m;
-    acc.z_m += e.z_m;
-    acc.trans_m += e.trans_m;
-  };
-  auto scaled = [](PoseError e, double k) {
-    e.roll_deg *= k;
-    e.pitch_deg *= k;
-    e.yaw_deg *= k;
-    e.rot_deg *= k;
-    e.x_m *= k;
-    e.y_m *= k;
-    e.z_m *= k;
-    e.trans_m *= k;
-    return e;
-  };
-  for (const auto& r : result.rows) {
-    s.queries_with_loop += r.has_loop;
-    s.t_desc_ms += r.t_desc_ms;
-    s.t_loop_ms += r.t_loop_ms;
-    s.t_solver_ms += r.t_solver_ms;
-    if (!r.accepted) continue;
-    ++s.accepted;
-    accumulate(sum_all, *r.err);
-    sq_rot += r.err->rot_deg * r.err->rot_deg;
-    sq_trans += r.err->trans_m * r.err->trans_m;
-    if (r.true_positive) {
-      ++s.true_positives;
-      accumulate(sum_tp, *r.err);
-    }
-  }
-  s.false_positives = s.accepted - s.true_positives;
-  if (n > 0) {
-    s.t_desc_ms /= static_cast<double>(n);
-    s.t_loop_ms /= static_cast<double>(n);
-    s.t_solver_ms /= static_cast<double>(n);
-    s.descriptor_bytes_mean = bytes_sum / static_cast<double>(n);
-  }
-  s.t_total_ms = s.t_desc_ms + s.t_loop_ms;
-  if (s.accepted > 0) {
-    const double k = 1.0 / static_cast<double>(s.accepted);
-    s.precision = static_cast<double>(s.true_positives) * k;
-    s.mean_err_all = scaled(sum_all, k);
-    s.rmse_rot_deg = std::sqrt(sq_rot * k);
-    s.rmse_trans_m = std::sqrt(sq_trans * k);
-  }
-  if (s.true_positives > 0) {
-    s.mean_err_tp = scaled(sum_tp, 1.0 / static_cast<double>(s.true_positives));
-  }
-  if (s.queries_with_loop > 0) {
-    s.recall = static_cast<double>(s.true_positives) / static_cast<double>(s.queries_with_loop);
-  }
+  result.summary = summarizeRows(result.rows, ds.root, bytes_sum);
   return result;
 }
 

@@ -488,7 +488,8 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
 
 std::optional<LoopClosure> matchPair(const Descriptor& q, const Descriptor& c,
                                      const LoopDetectorParams& params, PoseEstimate* est_out,
-                                     Verification* ver_out, QueryStats* stats) {
+                                     Verification* ver_out, QueryStats* stats,
+                                     const PoseSolver* solver) {
   auto t0 = Clock::now();
   const std::vector<Correspondence> corrs = buildCorrespondences(q, c, params.matcher);
   if (stats) stats->match_ms += msSince(t0);
@@ -502,7 +503,7 @@ std::optional<LoopClosure> matchPair(const Descriptor& q, const Descriptor& c,
   }
   if (stats) ++stats->matched;
   t0 = Clock::now();
-  const PoseEstimate est = estimatePose(corrs, params.pose);
+  const PoseEstimate est = solver && *solver ? (*solver)(corrs) : estimatePose(corrs, params.pose);
   if (stats) stats->solver_ms += msSince(t0);
   t0 = Clock::now();
   const Verification ver = verifyLoop(q, c, corrs, est, params.verification);
@@ -518,6 +519,7 @@ std::optional<LoopClosure> matchPair(const Descriptor& q, const Descriptor& c,
   lc.candidate_robot = c.robot;
   lc.candidate_id = c.submap_id;
   lc.T_c_q = ver.T_c_q;
+  lc.T_hypothesis = est.T_c_q;
   lc.inliers = static_cast<int>(ver.pairs.size());
   lc.score = ver.score;
   lc.inlier_pairs = ver.pairs;
@@ -596,7 +598,7 @@ std::optional<LoopClosure> LoopDetector::query(const Descriptor& q, QueryStats* 
 
   std::optional<LoopClosure> best;
   for (const Cand& cd : cands) {
-    auto lc = matchPair(q, *entries_[cd.index], params_, nullptr, nullptr, &st);
+    auto lc = matchPair(q, *entries_[cd.index], params_, nullptr, nullptr, &st, &solver_);
     if (lc && (!best || lc->score > best->score)) best = std::move(lc);
   }
   return best;
