@@ -13,6 +13,7 @@ int runSimulate(const Args& args);
 int runExtract(const Args& args);
 int runRegister(const Args& args);
 int runEval(const Args& args);
+int runBench(const Args& args);
 
 /// Thrown for bad command-line usage; main() prints it with the usage line.
 struct UsageError {

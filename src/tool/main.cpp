@@ -1,4 +1,4 @@
-// dtif: the offline command-line tool (simulate, extract, register, eval).
+// dtif: the offline command-line tool (simulate, extract, register, eval, bench).
 #include <cstring>
 #include <exception>
 #include <iostream>
@@ -17,7 +17,11 @@ constexpr const char* kUsage =
     "           either off (full rate: about 3 MB/s per robot for a 200k points/s scene)\n"
     "  extract  <cloud.pcd> [--out <trunks.csv>] [--config <params.yaml>]\n"
     "  register <query> <candidate> [--config <params.yaml>]  (PCD submaps or x,y,z,r CSVs)\n"
-    "  eval     <dataset_dir> --out <dir> [--config <params.yaml>] [--unit-weights]\n";
+    "  eval     <dataset_dir> --out <dir> [--config <params.yaml>] [--unit-weights]\n"
+    "  bench    <dataset_dir>... --out <dir> [--config <params.yaml>] [--back-ends a,b,...]\n"
+    "           [--no-front-ends] [--no-pr] [--no-scaling] [--scaling-sizes 10,20,...]\n"
+    "           dtif vs the paper's baselines (back ends: dtif, dtif_unit, quatro,\n"
+    "           svd_ransac, fgr; front end: FPFH); summary.csv, tables.md, pr.csv, ...\n";
 
 }  // namespace
 
@@ -33,6 +37,7 @@ int main(int argc, char** argv) {
     if (cmd == "extract") return dtif::tool::runExtract(args);
     if (cmd == "register") return dtif::tool::runRegister(args);
     if (cmd == "eval") return dtif::tool::runEval(args);
+    if (cmd == "bench") return dtif::tool::runBench(args);
     std::cerr << "dtif: unknown command '" << cmd << "'\n" << kUsage;
     return 2;
   } catch (const dtif::tool::UsageError& e) {
