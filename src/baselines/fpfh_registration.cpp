@@ -110,14 +110,10 @@ std::vector<Correspondence> matchFpfh(const FpfhFeatures& q, const FpfhFeatures&
   return out;
 }
 
-FpfhRegistration registerFpfh(const FpfhFeatures& q, const FpfhFeatures& c,
-                              const FpfhParams& params) {
+FpfhRegistration solveFpfh(const std::vector<Correspondence>& corrs, const FpfhParams& params) {
   FpfhRegistration r;
-  auto t0 = Clock::now();
-  const std::vector<Correspondence> corrs = matchFpfh(q, c);
-  r.match_ms = msSince(t0);
   r.correspondences = static_cast<int>(corrs.size());
-  t0 = Clock::now();
+  const auto t0 = Clock::now();
   PoseEstimate est;
   if (params.solver == "quatro") {
     QuatroParams p;
@@ -135,6 +131,16 @@ FpfhRegistration registerFpfh(const FpfhFeatures& q, const FpfhFeatures& c,
   r.T_c_q = est.T_c_q;
   r.inliers = static_cast<int>(est.inliers_T.size());
   r.accepted = r.inliers >= params.min_inliers;
+  return r;
+}
+
+FpfhRegistration registerFpfh(const FpfhFeatures& q, const FpfhFeatures& c,
+                              const FpfhParams& params) {
+  const auto t0 = Clock::now();
+  const std::vector<Correspondence> corrs = matchFpfh(q, c);
+  const double match_ms = msSince(t0);
+  FpfhRegistration r = solveFpfh(corrs, params);
+  r.match_ms = match_ms;
   return r;
 }
 

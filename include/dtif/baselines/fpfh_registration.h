@@ -46,7 +46,11 @@ struct FpfhRegistration {
   double solver_ms = 0.0;  ///< robust solver [ms]
 };
 
-/// Matches q to c and solves T_c_q; accepted when params.min_inliers support it.
+/// Solves T_c_q from matchFpfh's correspondences with params.solver; accepted when
+/// params.min_inliers support it (match_ms is left 0).
+FpfhRegistration solveFpfh(const std::vector<Correspondence>& corrs, const FpfhParams& params);
+
+/// matchFpfh, then solveFpfh.
 FpfhRegistration registerFpfh(const FpfhFeatures& q, const FpfhFeatures& c,
                               const FpfhParams& params);
 
