@@ -152,11 +152,14 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
 
 /// Matches one pair end to end (correspondences, pose, verification), without the database.
 /// Returns the loop when verified; `est`/`ver` (optional) receive the intermediate results.
-/// `solver` (optional) replaces estimatePose(corrs, params.pose).
+/// `solver` (optional) replaces estimatePose(corrs, params.pose); `tq`/`tc` (optional) are the
+/// sides' matchTriangles, computed here when null.
 std::optional<LoopClosure> matchPair(const Descriptor& q, const Descriptor& c,
                                      const LoopDetectorParams& params, PoseEstimate* est = nullptr,
                                      Verification* ver = nullptr, QueryStats* stats = nullptr,
-                                     const PoseSolver* solver = nullptr);
+                                     const PoseSolver* solver = nullptr,
+                                     const std::vector<MatchTriangle>* tq = nullptr,
+                                     const std::vector<MatchTriangle>* tc = nullptr);
 
 /// Sequential loop detector. Not thread-safe: callers serialise access. Descriptors are held
 /// by shared_ptr to const and may be shared with other owners.
@@ -186,6 +189,9 @@ class LoopDetector {
   LoopDetectorParams params_;
   std::vector<std::shared_ptr<const Descriptor>> entries_;
   PoseSolver solver_;
+  /// matchTriangles of each entry, computed when the entry is first matched and then reused
+  /// (the neighbour triangles of a descriptor do not depend on the query).
+  mutable std::vector<std::shared_ptr<const std::vector<MatchTriangle>>> triangles_;
 };
 
 }  // namespace dtif
