@@ -310,7 +310,8 @@ SceneBench runSceneBench(const Dataset& ds, const std::string& scene, const Dtif
         if (reg.accepted) res[i].push_back(all[i].back());
       }
     }
-    const std::string method = "FPFH + " + displayName(solver);
+    const std::string method =
+        std::string("FPFH + ") + (fp.prune ? "clique + " : "") + displayName(solver);
     out.runs.push_back(frontEndRun(method, res, t_loop, t_solver, t_desc_fpfh, fpfh_bytes_sum));
     // Its precision-recall over the inlier threshold.
     for (int k = 3; k <= 60; ++k) {

@@ -33,6 +33,8 @@ FpfhFeaturesPtr computeFpfh(const Cloud& cloud, const FpfhParams& params) {
   grid.setInputCloud(in);
   grid.setLeafSize(params.voxel_m, params.voxel_m, params.voxel_m);
   grid.filter(*vox);
+  // Keypoints: the voxels thinned evenly; normals and features use every voxel as the search
+  // surface, so thinning drops keypoints, not the neighbourhoods that describe them.
   auto pts = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
   const size_t step = vox->size() > params.max_points && params.max_points > 0
                           ? (vox->size() + params.max_points - 1) / params.max_points
@@ -42,15 +44,16 @@ FpfhFeaturesPtr computeFpfh(const Cloud& cloud, const FpfhParams& params) {
   auto tree = pcl::make_shared<pcl::search::KdTree<pcl::PointXYZ>>();
   auto normals = pcl::make_shared<pcl::PointCloud<pcl::Normal>>();
   pcl::NormalEstimationOMP<pcl::PointXYZ, pcl::Normal> ne(1);  // one thread: DATASET.md times
-  ne.setInputCloud(pts);
+  ne.setInputCloud(vox);
   ne.setSearchMethod(tree);
   ne.setRadiusSearch(params.normal_radius_m);
   ne.compute(*normals);
   auto feats = pcl::make_shared<pcl::PointCloud<pcl::FPFHSignature33>>();
   pcl::FPFHEstimationOMP<pcl::PointXYZ, pcl::Normal, pcl::FPFHSignature33> fe(1);
   fe.setInputCloud(pts);
+  fe.setSearchSurface(vox);
   fe.setInputNormals(normals);
-  fe.setSearchMethod(tree);
+  fe.setSearchMethod(pcl::make_shared<pcl::search::KdTree<pcl::PointXYZ>>());
   fe.setRadiusSearch(params.feature_radius_m);
   fe.compute(*feats);
   auto out = std::make_shared<FpfhFeatures>();
@@ -110,10 +113,16 @@ std::vector<Correspondence> matchFpfh(const FpfhFeatures& q, const FpfhFeatures&
   return out;
 }
 
-FpfhRegistration solveFpfh(const std::vector<Correspondence>& corrs, const FpfhParams& params) {
+FpfhRegistration solveFpfh(const std::vector<Correspondence>& all, const FpfhParams& params) {
   FpfhRegistration r;
-  r.correspondences = static_cast<int>(corrs.size());
+  r.correspondences = static_cast<int>(all.size());
   const auto t0 = Clock::now();
+  std::vector<Correspondence> corrs;
+  if (params.prune) {
+    for (int i : greedyConsistentSet(all, 2.0 * params.inlier_m)) corrs.push_back(all[i]);
+  } else {
+    corrs = all;
+  }
   PoseEstimate est;
   if (params.solver == "quatro") {
     QuatroParams p;

@@ -4,6 +4,7 @@
 #include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <numeric>
 #include <random>
 
@@ -253,6 +254,39 @@ PoseEstimate fastGlobalRegistration(const std::vector<Correspondence>& corrs,
     T = weightedRigid(corrs, all, l);
   }
   return finish(corrs, T, params.final_scale_m);
+}
+
+std::vector<int> greedyConsistentSet(const std::vector<Correspondence>& corrs, double eps) {
+  const int k = static_cast<int>(corrs.size());
+  std::vector<int> all(k);
+  std::iota(all.begin(), all.end(), 0);
+  if (k < 3) return all;
+  std::vector<uint8_t> agree(static_cast<size_t>(k) * k, 0);
+  std::vector<int> degree(k, 0);
+  for (int i = 0; i < k; ++i) {
+    for (int j = i + 1; j < k; ++j) {
+      const double lq = (corrs[i].pq - corrs[j].pq).norm(), lc = (corrs[i].pc - corrs[j].pc).norm();
+      if (std::fabs(lq - lc) > eps) continue;
+      agree[static_cast<size_t>(i) * k + j] = agree[static_cast<size_t>(j) * k + i] = 1;
+      ++degree[i];
+      ++degree[j];
+    }
+  }
+  std::stable_sort(all.begin(), all.end(), [&](int a, int b) { return degree[a] > degree[b]; });
+  std::vector<int> clique;
+  for (int i : all) {
+    if (degree[i] < static_cast<int>(clique.size())) break;  // cannot join a clique this big
+    bool ok = true;
+    for (int m : clique) {
+      if (!agree[static_cast<size_t>(i) * k + m]) {
+        ok = false;
+        break;
+      }
+    }
+    if (ok) clique.push_back(i);
+  }
+  std::sort(clique.begin(), clique.end());
+  return clique;
 }
 
 }  // namespace dtif::baselines

@@ -74,6 +74,20 @@ TEST(BaselineSolvers, FgrRecoversSixDofWithOutliers) {
   expectClose(fastGlobalRegistration(c.corrs, FgrParams{}), T, 0.3, 0.05);
 }
 
+TEST(BaselineSolvers, GreedyConsistentSetKeepsTheInliersOfHeavyOutliers) {
+  const Pose T = test::makePose(2.0, -1.0, 0.3, 0.0, 0.0, 1.1);
+  const Case c = makeCase(13, 200, 0.85, T, 4.0);
+  const std::vector<int> set = greedyConsistentSet(c.corrs, 0.1);
+  int good = 0;
+  for (int i : set) good += (c.corrs[i].pc - T * c.corrs[i].pq).norm() < 0.1;
+  EXPECT_GE(good, c.inliers - 2);
+  EXPECT_LE(static_cast<int>(set.size()) - good, 2);
+  // On the pruned set the Quatro-like estimator recovers T.
+  std::vector<Correspondence> kept;
+  for (int i : set) kept.push_back(c.corrs[i]);
+  expectClose(quatroLike(kept, QuatroParams{}), T, 0.3, 0.05);
+}
+
 TEST(BaselineSolvers, TooFewCorrespondencesGiveNoPose) {
   const Case c = makeCase(5, 2, 0.0, Pose::Identity(), 1.0);
   EXPECT_FALSE(svdRansac(c.corrs, RansacParams{}).ok);

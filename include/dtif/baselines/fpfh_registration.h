@@ -1,7 +1,8 @@
 // Point-feature global registration baseline standing in for Quatro++ / GROR-style front ends
 // (paper Tables 1-2): voxel downsampling, normals, FPFH (Rusu et al. 2009, PCL's
-// FPFHEstimationOMP on one thread), mutual nearest neighbours in feature space, then a robust
-// solver of solvers.h on those point correspondences. ROS-free; PCL's feature templates stay
+// FPFHEstimationOMP on one thread), mutual nearest neighbours in feature space, pruning on
+// pairwise length consistency (a greedy clique, as Quatro++/TEASER++'s maximum clique), then a
+// robust solver of solvers.h on those point correspondences. ROS-free; PCL's feature templates stay
 // in fpfh_registration.cpp.
 #pragma once
 
@@ -16,12 +17,13 @@ namespace dtif::baselines {
 
 struct FpfhParams {
   double voxel_m = 0.5;           ///< voxel grid leaf before features [m]
-  size_t max_points = 15000;      ///< evenly thinned to at most this many voxels
+  size_t max_points = 10000;      ///< keypoints: voxels evenly thinned to at most this many
   double normal_radius_m = 1.0;   ///< normal estimation radius [m]
-  double feature_radius_m = 2.5;  ///< FPFH support radius [m]
+  double feature_radius_m = 2.0;  ///< FPFH support radius [m]
   double inlier_m = 0.5;          ///< solver's inlier bound (about one voxel) [m]
   int min_inliers = 12;           ///< accepted when the estimate has this many inliers [-]
   std::string solver = "quatro";  ///< "quatro" (Quatro++-like) or "svd_ransac"
+  bool prune = true;              ///< greedyConsistentSet (max-clique stand-in) before the solver
 };
 
 /// Downsampled points and their FPFH signatures (opaque; PCL types stay in the .cpp).

@@ -56,4 +56,11 @@ struct FgrParams {
 PoseEstimate fastGlobalRegistration(const std::vector<Correspondence>& corrs,
                                     const FgrParams& params);
 
+/// Outlier pruning on pairwise length consistency, standing in for the maximum-clique step of
+/// TEASER++/Quatro++ (and GROR's node reliability): correspondences i, j agree when
+/// | |q_i - q_j| - |c_i - c_j| | <= eps (a rigid motion keeps lengths); a greedy clique is grown
+/// from the highest-degree correspondence, adding the next-highest ones that agree with every
+/// member. Returns indices into corrs (all of them when fewer than 3).
+std::vector<int> greedyConsistentSet(const std::vector<Correspondence>& corrs, double eps);
+
 }  // namespace dtif::baselines
