@@ -18,6 +18,18 @@ def rows(path):
         return list(csv.DictReader(f))
 
 
+def finish(fig, ax, path, xlabel, ylabel, log=()):
+    """Labels, log axes, legend, then saves and closes the figure."""
+    for axis in log:
+        getattr(ax, "set_%sscale" % axis)("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
 def main(out):
     out = Path(out)
     # Precision-recall over the acceptance threshold (all scenes pooled).
@@ -37,15 +49,10 @@ def main(out):
         rec = [tp / lp if lp else 0 for _, (a, tp, lp) in pts]
         prec = [tp / a if a else 1.0 for _, (a, tp, lp) in pts]
         ax.plot(rec, prec, marker=".", label=method)
-    ax.set_xlabel("recall")
-    ax.set_ylabel("precision")
     ax.set_title("Precision-recall over the inlier threshold (all scenes)")
     ax.set_xlim(0, 1)
     ax.set_ylim(0, 1.05)
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(out / "pr_curve.png", dpi=120)
-    plt.close(fig)
+    finish(fig, ax, out / "pr_curve.png", "recall", "precision")
 
     # Error distributions of accepted loops per method (all scenes).
     errs = defaultdict(lambda: ([], []))
@@ -75,13 +82,8 @@ def main(out):
     for key, label in [("t_extract_ms", "trunk extraction"), ("t_desc_ms", "descriptor (incl. extraction)"),
                        ("t_loop_ms", "loop query"), ("t_fpfh_ms", "FPFH features (baseline)")]:
         ax.scatter(tr, [float(r[key]) for r in sub], s=8, label=label)
-    ax.set_yscale("log")
-    ax.set_xlabel("trunks per submap")
-    ax.set_ylabel("ms per submap (one thread)")
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(out / "time_vs_trunks.png", dpi=120)
-    plt.close(fig)
+    finish(fig, ax, out / "time_vs_trunks.png", "trunks per submap", "ms per submap (one thread)",
+           log="y")
 
     # Query time vs database size.
     sc = out / "scaling.csv"
@@ -96,14 +98,8 @@ def main(out):
             ax.plot(n, [float(r["query_ms"]) for r in rs], marker="o", label=lab + ": query")
             ax.plot(n, [float(r["screen_ms"]) for r in rs], marker="x", ls="--",
                     label=lab + ": screening")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("database size [submaps]")
-        ax.set_ylabel("ms per query")
-        ax.legend(fontsize=7)
-        fig.tight_layout()
-        fig.savefig(out / "query_vs_database.png", dpi=120)
-        plt.close(fig)
+        finish(fig, ax, out / "query_vs_database.png", "database size [submaps]", "ms per query",
+               log="xy")
 
 
 if __name__ == "__main__":
