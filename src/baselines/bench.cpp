@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <numeric>
 #include <random>
 #include <sstream>
 #include <stdexcept>
@@ -363,10 +364,14 @@ std::vector<ScalingPoint> runScaling(const std::vector<std::shared_ptr<const Des
   std::vector<ScalingPoint> out;
   if (pool.empty() || queries.empty() || sizes.empty()) return out;
   const size_t max_size = *std::max_element(sizes.begin(), sizes.end());
+  // The pool in a fixed random order, so that every database size mixes all scenes.
+  std::vector<size_t> order(pool.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::shuffle(order.begin(), order.end(), std::mt19937(7));
   std::vector<std::shared_ptr<const Descriptor>> copies;
   for (size_t k = 0; copies.size() < max_size && k < 4 * max_size; ++k) {
-    auto d = std::make_shared<Descriptor>(
-        perturbedCopy(*pool[k % pool.size()], static_cast<uint32_t>(1000 + k), params.descriptor));
+    auto d = std::make_shared<Descriptor>(perturbedCopy(
+        *pool[order[k % pool.size()]], static_cast<uint32_t>(1000 + k), params.descriptor));
     if (!d->valid) continue;
     d->robot = "db";
     d->submap_id = static_cast<int64_t>(copies.size());

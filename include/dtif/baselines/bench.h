@@ -86,7 +86,8 @@ struct ScalingPoint {
 /// (random yaw and translation), jittered by 2 cm, 10 % dropped, described again.
 Descriptor perturbedCopy(const Descriptor& d, uint32_t seed, const DescriptorParams& params);
 
-/// Databases of `sizes` entries made of perturbed copies of `pool` (cycling through it), each
+/// Databases of `sizes` entries made of perturbed copies of `pool` (cycling through it in a
+/// fixed shuffled order), each
 /// queried by every descriptor of `queries`; the mean per query at each size.
 std::vector<ScalingPoint> runScaling(const std::vector<std::shared_ptr<const Descriptor>>& pool,
                                      const std::vector<std::shared_ptr<const Descriptor>>& queries,
