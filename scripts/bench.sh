@@ -5,7 +5,7 @@
 # missing ones; runs `dtif bench` (front ends, back ends, precision-recall, scaling), measures
 # the peak RSS of `dtif eval` on the largest scene, and draws the plots (python3-matplotlib,
 # installed with apt-get when missing). Writes tables.md, *.csv and *.png into out_dir.
-# About 15 min on 2 cores when the datasets exist.
+# About 20 min on 2 shared cores when the datasets exist.
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 OUT="${1:-${DTIF_REPO}/bench/$(date +%Y-%m-%d)}"
