@@ -4,7 +4,7 @@
 # Reuses the datasets of scripts/eval_scenes.sh (.ws/scenes/<name>/dataset), simulating the
 # missing ones; runs `dtif bench` (front ends, back ends, precision-recall, scaling), measures
 # the peak RSS of `dtif eval` on the largest scene, and draws the plots (python3-matplotlib,
-# installed with apt-get when missing). Writes tables.md, *.csv and *.png into out_dir.
+# installed through scripts/install_deps.sh). Writes tables.md, *.csv and *.png into out_dir.
 # About 20 min on 2 shared cores when the datasets exist.
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
@@ -16,12 +16,7 @@ if [ ${#SCENES[@]} -eq 0 ]; then
 fi
 
 dtif_build > "${DTIF_WS}/build.log" 2>&1 || { cat "${DTIF_WS}/build.log"; exit 1; }
-if ! /usr/bin/python3 -c "import matplotlib" 2>/dev/null; then
-  SUDO=""
-  [ "$(id -u)" -eq 0 ] || SUDO="sudo"
-  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -q -o DPkg::Lock::Timeout=900 \
-    --no-install-recommends python3-matplotlib
-fi
+bash "${DTIF_REPO}/scripts/install_deps.sh" python3-matplotlib  # the plots (Debian's, never pip)
 mkdir -p "${OUT}"
 DATASETS=()
 for scene in "${SCENES[@]}"; do

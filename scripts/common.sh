@@ -20,3 +20,22 @@ dtif_build() {
   fi
   (cd "${DTIF_WS}" && catkin_make -j"${DTIF_JOBS}" "${DTIF_CMAKE_ARGS[@]}" "$@")
 }
+
+# Sources the workspace (roslaunch, rosrun find dtif); catkin's setup script reads unset variables.
+dtif_source_ws() {
+  set +u
+  source "${DTIF_WS}/devel/setup.bash"
+  set -u
+}
+
+# A master of our own on a free port (other roscores on the machine are left alone): sets
+# DTIF_PORT and exports ROS_MASTER_URI; pass -p "${DTIF_PORT}" to roslaunch.
+dtif_private_master() {
+  DTIF_PORT="$(/usr/bin/python3 -c 'import socket; s=socket.socket(); s.bind(("", 0)); print(s.getsockname()[1])')"
+  export ROS_MASTER_URI="http://localhost:${DTIF_PORT}"
+}
+
+# ROBOTS: the robots of a dataset (submaps.csv), in order of first appearance.
+dtif_robots() {
+  mapfile -t ROBOTS < <(tail -n +2 "$1/submaps.csv" | cut -d, -f2 | awk '!seen[$0]++')
+}

@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Installs every Debian package dtif needs to build, test and run its demo.
+# Installs every Debian package dtif needs to build, test and run its demo, and the packages
+# named as arguments (other scripts' extras, e.g. scripts/screenshot.sh's rviz).
 # Idempotent: returns at once when everything is already installed.
 set -euo pipefail
 
@@ -14,6 +15,7 @@ PKGS=(
   libyaml-cpp-dev nlohmann-json3-dev
 )
 
+PKGS+=("$@")
 missing=()
 for p in "${PKGS[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

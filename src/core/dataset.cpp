@@ -391,6 +391,64 @@ void writeSubmapCloud(const Dataset& ds, const SubmapRecord& rec, const Cloud& c
   }
 }
 
+std::string loopLogHeader() {
+  return "query_robot,query_id,query_stamp,query_data_end,accepted,candidate_robot,candidate_id,"
+         "candidate_stamp,tx,ty,tz,qx,qy,qz,qw,inliers,score,t_loop_ms,ros_time,wall_time";
+}
+
+std::string formatLoopLogRow(const LoopLogRow& r) {
+  std::ostringstream os;
+  os << std::fixed << std::setprecision(6) << r.query_robot << ',' << r.query_id << ','
+     << r.query_stamp << ',' << r.query_data_end << ',' << int(r.accepted) << ','
+     << r.candidate_robot << ',' << r.candidate_id << ',' << r.candidate_stamp << ',';
+  os << std::defaultfloat << std::setprecision(9);
+  writePose(os, r.T_c_q);
+  os << ',' << r.inliers << ',' << r.score << ',' << r.t_loop_ms << ',' << std::fixed
+     << std::setprecision(6) << r.ros_time << ',' << r.wall_time;
+  return os.str();
+}
+
+std::vector<LoopLogRow> readLoopLog(const std::string& path) {
+  const CsvTable t = readCsv(path);
+  const int c_qr = t.column("query_robot"), c_qi = t.column("query_id"),
+            c_qs = t.column("query_stamp"), c_qe = t.column("query_data_end"),
+            c_acc = t.column("accepted"), c_cr = t.column("candidate_robot"),
+            c_ci = t.column("candidate_id"), c_cs = t.column("candidate_stamp"),
+            c_in = t.column("inliers"), c_sc = t.column("score"), c_tl = t.column("t_loop_ms"),
+            c_rt = t.column("ros_time"), c_wt = t.column("wall_time");
+  const auto c_pose = poseColumns(t, "");
+  std::vector<LoopLogRow> rows;
+  for (size_t i = 0; i < t.rows.size(); ++i) {
+    LoopLogRow r;
+    r.query_robot = cell(t, i, c_qr);
+    r.query_id = parseId(t, i, c_qi);
+    r.query_stamp = parseDouble(t, i, c_qs);
+    r.query_data_end = parseDouble(t, i, c_qe);
+    r.accepted = parseId(t, i, c_acc) != 0;
+    r.candidate_robot = cell(t, i, c_cr);
+    r.candidate_id = parseId(t, i, c_ci);
+    r.candidate_stamp = parseDouble(t, i, c_cs);
+    r.T_c_q = parsePose(t, i, c_pose);
+    r.inliers = static_cast<int>(parseId(t, i, c_in));
+    r.score = parseDouble(t, i, c_sc);
+    r.t_loop_ms = parseDouble(t, i, c_tl);
+    r.ros_time = parseDouble(t, i, c_rt);
+    r.wall_time = parseDouble(t, i, c_wt);
+    rows.push_back(std::move(r));
+  }
+  return rows;
+}
+
+std::map<int64_t, int64_t> readAcceptedLoops(const std::string& results_csv) {
+  const CsvTable t = readCsv(results_csv);
+  const int c_q = t.column("query"), c_c = t.column("candidate"), c_a = t.column("accepted");
+  std::map<int64_t, int64_t> out;
+  for (size_t i = 0; i < t.rows.size(); ++i) {
+    if (parseId(t, i, c_a) != 0) out[parseId(t, i, c_q)] = parseId(t, i, c_c);
+  }
+  return out;
+}
+
 Trunks readTrunkCsv(const std::string& path) {
   const CsvTable raw = readCsv(path, /*header_required=*/false);
   if (raw.rows.empty()) fail(path, "no trunks (expected rows x,y,z,r)");

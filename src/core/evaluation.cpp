@@ -258,12 +258,43 @@ void scoreAcceptedLoop(const Pose& T_c_q_gt, const Pose& T_c_q_est, double overl
                        row->err->trans_m <= eval.max_trans_err_m;
 }
 
-EvalSummary summarizeRows(const std::vector<EvalRow>& rows, const std::string& dataset,
-                          double bytes_sum) {
+namespace {
+
+using CellSets = std::vector<std::unordered_set<int64_t>>;
+
+// DATASET.md's ground truth: does some submap before i (file order) that i may be matched
+// with (not the same robot's within exclude_recent_s) form a true loop with it?
+bool hasTrueLoop(const Dataset& ds, const CellSets& cells, size_t i, double exclude_recent_s,
+                 const EvalParams& eval) {
+  for (size_t j = 0; j < i; ++j) {
+    if (!eligiblePair(ds.submaps[i], ds.submaps[j], exclude_recent_s)) continue;
+    if (cellOverlap(cells[i], cells[j]) >= eval.true_loop_overlap) return true;
+  }
+  return false;
+}
+
+// An accepted loop of query i with candidate j (file positions) and its estimate T_c_q, scored.
+void scoreAccepted(const Dataset& ds, const CellSets& cells, size_t i, size_t j, const Pose& T_c_q,
+                   const EvalParams& eval, EvalRow* row) {
+  row->candidate = ds.submaps[j].id;
+  const Pose T_c_q_gt =
+      ds.T_W_S.at(ds.submaps[j].id).inverse() * ds.T_W_S.at(ds.submaps[i].id);  // Eq. (4.2)
+  scoreAcceptedLoop(T_c_q_gt, T_c_q, cellOverlap(cells[i], cells[j]), eval, row);
+}
+
+void checkGroundTruth(const Dataset& ds) {
+  for (const auto& rec : ds.submaps) {
+    if (!ds.T_W_S.count(rec.id)) {
+      throw DatasetError(ds.root + "/ground_truth.csv: no ground truth for submap " +
+                         std::to_string(rec.id) + " (evaluation needs every submap's T_W_S)");
+    }
+  }
+}
+
+// Counts, precision/recall, mean errors and RMSE of the rows; times averaged over the rows.
+EvalSummary summarize(const std::vector<EvalRow>& rows) {
   EvalSummary s;
-  s.dataset = dataset;
-  const size_t n = rows.size();
-  s.submaps = n;
+  s.submaps = rows.size();
   PoseError sum_all, sum_tp;
   double sq_rot = 0.0, sq_trans = 0.0;
   auto accumulate = [](PoseError& acc, const PoseError& e) {
@@ -303,11 +334,11 @@ EvalSummary summarizeRows(const std::vector<EvalRow>& rows, const std::string& d
     }
   }
   s.false_positives = s.accepted - s.true_positives;
-  if (n > 0) {
-    s.t_desc_ms /= static_cast<double>(n);
-    s.t_loop_ms /= static_cast<double>(n);
-    s.t_solver_ms /= static_cast<double>(n);
-    s.descriptor_bytes_mean = bytes_sum / static_cast<double>(n);
+  if (!rows.empty()) {
+    const double n = static_cast<double>(rows.size());
+    s.t_desc_ms /= n;
+    s.t_loop_ms /= n;
+    s.t_solver_ms /= n;
   }
   s.t_total_ms = s.t_desc_ms + s.t_loop_ms;
   if (s.accepted > 0) {
@@ -326,17 +357,22 @@ EvalSummary summarizeRows(const std::vector<EvalRow>& rows, const std::string& d
   return s;
 }
 
+}  // namespace
+
+EvalSummary summarizeRows(const std::vector<EvalRow>& rows, const std::string& dataset,
+                          double bytes_sum) {
+  EvalSummary s = summarize(rows);
+  s.dataset = dataset;
+  if (!rows.empty()) s.descriptor_bytes_mean = bytes_sum / static_cast<double>(rows.size());
+  return s;
+}
+
 EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const EvalParams& eval,
                          const std::function<void(size_t, size_t)>& progress) {
-  for (const auto& rec : ds.submaps) {
-    if (!ds.T_W_S.count(rec.id)) {
-      throw DatasetError(ds.root + "/ground_truth.csv: no ground truth for submap " +
-                         std::to_string(rec.id) + " (evaluation needs every submap's T_W_S)");
-    }
-  }
+  checkGroundTruth(ds);
   EvalResult result;
   LoopDetector detector(params.loop);
-  std::vector<std::unordered_set<int64_t>> cells;
+  CellSets cells;
   cells.reserve(ds.submaps.size());
   double bytes_sum = 0.0;
   const size_t n = ds.submaps.size();
@@ -373,14 +409,8 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
     row.t_loop_ms = msSince(t0);
     row.t_solver_ms = qs.solver_ms;
 
-    // Ground truth: does any eligible earlier submap form a true loop with q?
-    for (size_t j = 0; j < i && !row.has_loop; ++j) {
-      if (!eligiblePair(rec, ds.submaps[j], params.loop.database.exclude_recent_s)) continue;
-      row.has_loop = cellOverlap(cells[i], cells[j]) >= eval.true_loop_overlap;
-    }
-
+    row.has_loop = hasTrueLoop(ds, cells, i, params.loop.database.exclude_recent_s, eval);
     if (loop) {
-      row.candidate = loop->candidate_id;
       row.inliers = loop->inliers;
       row.score = loop->score;
       size_t j = 0;
@@ -389,8 +419,7 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
         throw std::logic_error("loop detector returned an unknown candidate id " +
                                std::to_string(loop->candidate_id));
       }
-      const Pose T_c_q_gt = ds.T_W_S.at(loop->candidate_id).inverse() * T_W_q;  // Eq. (4.2)
-      scoreAcceptedLoop(T_c_q_gt, loop->T_c_q, cellOverlap(cells[i], cells[j]), eval, &row);
+      scoreAccepted(ds, cells, i, j, loop->T_c_q, eval, &row);
     }
 
     // 4. Insert q.
@@ -399,7 +428,79 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
     if (progress) progress(i + 1, n);
   }
 
-  result.summary = summarizeRows(result.rows, ds.root, bytes_sum);
+  result.summary = summarize(result.rows);
+  result.summary.dataset = ds.root;
+  if (n > 0) result.summary.descriptor_bytes_mean = bytes_sum / static_cast<double>(n);
+  return result;
+}
+
+EvalResult scoreLoopLog(const Dataset& ds, const std::vector<LoopLogRow>& log,
+                        double exclude_recent_s, const EvalParams& eval,
+                        std::vector<std::string>* unmatched) {
+  checkGroundTruth(ds);
+  constexpr double kStampTolS = 1e-3;
+  auto find = [&](const std::string& robot, double stamp) -> std::optional<size_t> {
+    for (size_t i = 0; i < ds.submaps.size(); ++i) {
+      const SubmapRecord& r = ds.submaps[i];
+      if (r.robot == robot && std::fabs(r.stamp - stamp) <= kStampTolS) return i;
+    }
+    return std::nullopt;
+  };
+  auto describe = [](const std::string& robot, int64_t id, double stamp) {
+    std::ostringstream os;
+    os << robot << "/" << id << " (stamp " << std::fixed << std::setprecision(3) << stamp << ")";
+    return os.str();
+  };
+  CellSets cells;
+  cells.reserve(ds.submaps.size());
+  for (const SubmapRecord& rec : ds.submaps) {
+    cells.push_back(overlapCells(*loadSubmapCloud(ds, rec), ds.T_W_S.at(rec.id)));
+  }
+  EvalResult result;
+  result.rows.resize(ds.submaps.size());
+  std::vector<char> logged(ds.submaps.size(), 0);
+  double t_loop_sum = 0.0;
+  size_t queried = 0;
+  for (const LoopLogRow& l : log) {
+    const std::optional<size_t> i = find(l.query_robot, l.query_stamp);
+    if (!i) {
+      if (unmatched)
+        unmatched->push_back("query " + describe(l.query_robot, l.query_id, l.query_stamp));
+      continue;
+    }
+    if (logged[*i]) {
+      if (unmatched)
+        unmatched->push_back("repeated query " +
+                             describe(l.query_robot, l.query_id, l.query_stamp));
+      continue;
+    }
+    logged[*i] = 1;
+    ++queried;
+    t_loop_sum += l.t_loop_ms;
+    EvalRow& row = result.rows[*i];
+    row.t_loop_ms = l.t_loop_ms;
+    if (!l.accepted) continue;
+    const std::optional<size_t> j = find(l.candidate_robot, l.candidate_stamp);
+    if (!j) {
+      if (unmatched) {
+        unmatched->push_back("candidate " +
+                             describe(l.candidate_robot, l.candidate_id, l.candidate_stamp) +
+                             " of query " + describe(l.query_robot, l.query_id, l.query_stamp));
+      }
+      continue;
+    }
+    row.inliers = l.inliers;
+    row.score = l.score;
+    scoreAccepted(ds, cells, *i, *j, l.T_c_q, eval, &row);
+  }
+  for (size_t i = 0; i < ds.submaps.size(); ++i) {
+    result.rows[i].query = ds.submaps[i].id;
+    result.rows[i].has_loop = hasTrueLoop(ds, cells, i, exclude_recent_s, eval);
+  }
+  result.summary = summarize(result.rows);
+  result.summary.dataset = ds.root;
+  result.summary.online = true;
+  result.summary.t_loop_ms = queried > 0 ? t_loop_sum / static_cast<double>(queried) : 0.0;
   return result;
 }
 
@@ -481,11 +582,15 @@ void writeSummaryJson(const std::string& path, const EvalSummary& s) {
   j["mean_err_tp"] = errJson(s.mean_err_tp);
   j["rmse_rot_deg"] = optJson(s.rmse_rot_deg);
   j["rmse_trans_m"] = optJson(s.rmse_trans_m);
-  j["time_ms"] = {{"desc", s.t_desc_ms},
+  // An online run's log has query times only.
+  const auto offline = [&](double v) {
+    return s.online ? nlohmann::json(nullptr) : nlohmann::json(v);
+  };
+  j["time_ms"] = {{"desc", offline(s.t_desc_ms)},
                   {"loop", s.t_loop_ms},
-                  {"solver", s.t_solver_ms},
-                  {"total", s.t_total_ms}};
-  j["descriptor_bytes_mean"] = s.descriptor_bytes_mean;
+                  {"solver", offline(s.t_solver_ms)},
+                  {"total", offline(s.t_total_ms)}};
+  j["descriptor_bytes_mean"] = offline(s.descriptor_bytes_mean);
   std::ofstream os(path);
   if (!os) throw DatasetError(path + ": cannot open file for writing");
   os << j.dump(2) << '\n';
@@ -496,6 +601,8 @@ void writeSummaryJson(const std::string& path, const EvalSummary& s) {
 std::string formatTable(const EvalSummary& s, const std::string& method) {
   const auto& e = s.mean_err_all;
   auto f = [&](double PoseError::*m) { return e ? fmt((*e).*m) : std::string("-"); };
+  // An online run's log has query times only.
+  auto offline = [&](double v) { return s.online ? std::nullopt : std::optional<double>(v); };
   std::ostringstream os;
   os << "| Method | Roll | Pitch | Yaw | Rot. | X | Y | Z | Trans. | RMSE-R | RMSE-T | Desc. ms"
         " | Loop ms | Total ms | Solver ms | Precision | Recall | TP/Acc./Loops | Bytes |\n"
@@ -504,10 +611,10 @@ std::string formatTable(const EvalSummary& s, const std::string& method) {
      << " | " << f(&PoseError::yaw_deg) << " | " << f(&PoseError::rot_deg) << " | "
      << f(&PoseError::x_m) << " | " << f(&PoseError::y_m) << " | " << f(&PoseError::z_m) << " | "
      << f(&PoseError::trans_m) << " | " << fmt(s.rmse_rot_deg) << " | " << fmt(s.rmse_trans_m)
-     << " | " << fmt(s.t_desc_ms) << " | " << fmt(s.t_loop_ms) << " | " << fmt(s.t_total_ms)
-     << " | " << fmt(s.t_solver_ms) << " | " << fmt(s.precision) << " | " << fmt(s.recall) << " | "
-     << s.true_positives << "/" << s.accepted << "/" << s.queries_with_loop << " | "
-     << fmt(s.descriptor_bytes_mean, 0) << " |\n";
+     << " | " << fmt(offline(s.t_desc_ms)) << " | " << fmt(s.t_loop_ms) << " | "
+     << fmt(offline(s.t_total_ms)) << " | " << fmt(offline(s.t_solver_ms)) << " | "
+     << fmt(s.precision) << " | " << fmt(s.recall) << " | " << s.true_positives << "/" << s.accepted
+     << "/" << s.queries_with_loop << " | " << fmt(offline(s.descriptor_bytes_mean), 0) << " |\n";
   os << "(errors in deg and m, averaged over all accepted loops as in the paper; " << s.submaps
      << " submaps)\n";
   return os.str();

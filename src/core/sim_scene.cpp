@@ -171,6 +171,9 @@ std::string SceneParams::validate() const {
   check(odometry.tilt_sd_deg >= 0 && odometry.tilt_sd_deg <= 5, "odometry.tilt_sd_deg: 0..5", &e);
   check(odometry.tilt_time_s > 0, "odometry.tilt_time_s must be > 0", &e);
   check(submap.duration_s >= 0.5 && submap.duration_s <= 600, "submap.duration_s: 0.5..600", &e);
+  const double frames_per_submap = submap.duration_s * sensor.frame_rate_hz;
+  check(std::abs(frames_per_submap - std::round(frames_per_submap)) < 1e-6,
+        "submap.duration_s must be a whole number of frames (1 / sensor.frame_rate_hz)", &e);
   check(submap.voxel_m >= 0.005 && submap.voxel_m <= 1, "submap.voxel_m: 0.005..1", &e);
   check(!robots.empty(), "robots: at least one robot", &e);
   const std::regex name_re("[A-Za-z0-9_]+");

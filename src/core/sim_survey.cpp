@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <map>
 #include <mutex>
 #include <queue>
@@ -312,20 +313,25 @@ class VoxelAccumulator {
     ++raw_;
   }
   std::vector<Eigen::Vector3f> centroids() const {
-    std::vector<const Cell*> v;
+    std::vector<Cell> v;  // copies, sorted in place: faster than chasing pointers
     v.reserve(used_);
     for (const Cell& c : cells_) {
-      if (c.n) v.push_back(&c);
+      if (c.n) v.push_back(c);
     }
-    std::sort(v.begin(), v.end(), [](const Cell* a, const Cell* b) { return a->key < b->key; });
+    std::sort(v.begin(), v.end(), [](const Cell& a, const Cell& b) { return a.key < b.key; });
     std::vector<Eigen::Vector3f> out;
     out.reserve(v.size());
-    for (const Cell* c : v) out.push_back(c->sum / static_cast<float>(c->n));
+    for (const Cell& c : v) out.push_back(c.sum / static_cast<float>(c.n));
     return out;
   }
   size_t raw() const { return raw_; }
   void clear() {
-    cells_.assign(1 << 16, Cell());
+    // Keeps a grown table: the next window of a survey needs about as many cells.
+    if (cells_.size() < (1 << 16)) {
+      cells_.assign(1 << 16, Cell());
+    } else {
+      std::fill(cells_.begin(), cells_.end(), Cell());
+    }
     used_ = 0;
     raw_ = 0;
   }
@@ -405,10 +411,47 @@ Simulator::Simulator(const SceneParams& scene, uint64_t seed) : scene_(scene), s
 
 Simulator::~Simulator() = default;
 
+namespace {
+
+// One unit of parallel work: the frames of one submap window of one robot. The window's random
+// streams are seeded from (seed, robot, window), so the output does not depend on which thread
+// runs it or in which order.
+struct WindowTask {
+  int robot;
+  int window;
+  int f_begin, f_end;  // frames [f_begin, f_end)
+};
+
+uint64_t splitmix64(uint64_t x) {
+  x += 0x9E3779B97F4A7C15ULL;
+  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ULL;
+  x = (x ^ (x >> 27)) * 0x94D049BB133111EBULL;
+  return x ^ (x >> 31);
+}
+
+uint64_t streamSeed(uint64_t seed, uint64_t stream, int robot, int window) {
+  return splitmix64(splitmix64(splitmix64(seed) ^ stream) ^
+                    (static_cast<uint64_t>(robot) << 32 | static_cast<uint32_t>(window)));
+}
+
+// A frame-producing window may run ahead of the oldest undelivered window of its robot by at
+// most this many windows, which bounds the frames held back for in-order delivery.
+constexpr int kMaxWindowsAhead = 3;
+
+}  // namespace
+
 SimulationStats Simulator::run(FrameSink* frames, SubmapSink* submaps, int threads) {
   const auto t_start = std::chrono::steady_clock::now();
   const SensorParams& sp = scene_.sensor;
   const double dur = scene_.submap.duration_s;
+  const int slices_per_frame = static_cast<int>(std::lround(kTrajectoryRateHz / sp.frame_rate_hz));
+  const int frames_per_window = static_cast<int>(std::lround(dur * sp.frame_rate_hz));
+  // Only whole frames are scanned, and only windows that are complete become submaps.
+  auto numFrames = [&](const Trajectory& tr) {
+    return static_cast<int>((tr.T_W_B.size() - 1) / slices_per_frame);
+  };
+  auto numWindows = [&](const Trajectory& tr) { return numFrames(tr) / frames_per_window; };
+
   // Submap ids: rank of the anchor stamp over all robots (acquisition order of submaps.csv).
   struct Slot {
     double stamp;
@@ -416,20 +459,17 @@ SimulationStats Simulator::run(FrameSink* frames, SubmapSink* submaps, int threa
     int window;
   };
   std::vector<Slot> slots;
-  const int slices_per_frame = static_cast<int>(std::lround(kTrajectoryRateHz / sp.frame_rate_hz));
-  // Only whole frames are scanned, and only windows that are complete become submaps.
-  auto numFrames = [&](const Trajectory& tr) {
-    return static_cast<int>((tr.T_W_B.size() - 1) / slices_per_frame);
-  };
-  auto numWindows = [&](const Trajectory& tr) {
-    const double scanned = numFrames(tr) * slices_per_frame / kTrajectoryRateHz;
-    return static_cast<int>(std::floor(scanned / dur + 1e-9));
-  };
+  std::vector<WindowTask> tasks;
   for (size_t r = 0; r < trajectories_.size(); ++r) {
-    const int n = numWindows(trajectories_[r]);
-    for (int w = 0; w < n; ++w) {
-      slots.push_back(
-          {scene_.epoch_s + trajectories_[r].start_s + (w + 0.5) * dur, static_cast<int>(r), w});
+    const Trajectory& tr = trajectories_[r];
+    const int n_frames = numFrames(tr);
+    for (int w = 0; w < numWindows(tr); ++w) {
+      slots.push_back({scene_.epoch_s + tr.start_s + (w + 0.5) * dur, static_cast<int>(r), w});
+    }
+    // Frames after the last complete window still go to `frames`.
+    for (int w = 0; w * frames_per_window < n_frames; ++w) {
+      tasks.push_back({static_cast<int>(r), w, w * frames_per_window,
+                       std::min(n_frames, (w + 1) * frames_per_window)});
     }
   }
   std::sort(slots.begin(), slots.end(), [](const Slot& a, const Slot& b) {
@@ -437,8 +477,10 @@ SimulationStats Simulator::run(FrameSink* frames, SubmapSink* submaps, int threa
   });
   std::map<std::pair<int, int>, int64_t> slot_id;
   for (size_t i = 0; i < slots.size(); ++i) slot_id[{slots[i].robot, slots[i].window}] = i;
+  // Robots interleaved window by window, so that every robot's frames advance together.
+  std::stable_sort(tasks.begin(), tasks.end(),
+                   [](const WindowTask& a, const WindowTask& b) { return a.window < b.window; });
 
-  std::mutex sink_mutex;
   SimulationStats stats;
   stats.stems = 0;
   for (const auto& s : world_->stems()) (s.sapling ? stats.saplings : stats.stems)++;
@@ -447,73 +489,58 @@ SimulationStats Simulator::run(FrameSink* frames, SubmapSink* submaps, int threa
   stats.branches = world_->cylinders().size() - world_->numLogs();
   double submap_points = 0.0;
 
-  auto simulateRobot = [&](int r) {
+  // Shared state, guarded by `mutex`: results, sinks (calls serialised), in-order frame delivery.
+  std::mutex mutex;
+  std::condition_variable delivered_cv;
+  size_t next_task = 0;
+  std::vector<int> next_window(trajectories_.size(), 0);  // oldest undelivered window per robot
+  std::vector<std::map<int, std::vector<Frame>>> held(trajectories_.size());
+
+  // Scans one window; per-thread scratch objects are reused across windows.
+  auto scanWindow = [&](const WindowTask& task, World::RayScratch* scratch,
+                        VoxelAccumulator* voxels, std::vector<Frame>* out_frames) {
+    const int r = task.robot;
     const Trajectory& tr = trajectories_[r];
+    const bool is_submap = task.window < numWindows(tr);
     const ScanPattern pattern(sp);
-    World::RayScratch scratch = world_->makeScratch(seed_ * 31 + 1000 + r);
-    std::mt19937_64 rng(seed_ * 7 + 77 + r);
+    scratch->rng.seed(streamSeed(seed_, 1, r, task.window));
+    std::mt19937_64 rng(streamSeed(seed_, 2, r, task.window));
     std::normal_distribution<double> noise(0.0, sp.range_noise_m);
     std::normal_distribution<double> jitter(0.0, 0.25 * sp.divergence_deg * kDeg);
     std::uniform_real_distribution<double> unit(0.0, 1.0);
     const size_t n_samples = tr.T_W_B.size();
-    const int n_frames = numFrames(tr);
-    const int n_windows = numWindows(tr);
-    // Each robot's sensor starts at a different point of the (non-repetitive) pattern.
-    uint64_t k_pt = static_cast<uint64_t>(r) * 7777777ULL;
-    double pts_acc = 0.0;
     const double pts_per_slice = sp.points_per_s / kTrajectoryRateHz;
-    VoxelAccumulator voxels(scene_.submap.voxel_m);
-    int window = -1;
-    Pose T_S_O = Pose::Identity(), T_O_S = Pose::Identity(), T_W_S = Pose::Identity();
-    Frame frame;
-    frame.robot = tr.robot;
-    frame.robot_index = r;
-    size_t rays = 0, returns = 0;
-    auto flushSubmap = [&]() {
-      if (window < 0 || window >= n_windows) return;
-      Submap sm;
-      sm.id = slot_id.at({r, window});
-      sm.robot = tr.robot;
-      sm.robot_index = r;
-      sm.stamp = scene_.epoch_s + tr.start_s + (window + 0.5) * dur;
-      sm.T_O_S = T_O_S;
-      sm.T_W_S = T_W_S;
-      sm.points = voxels.centroids();
-      sm.raw_points = voxels.raw();
-      std::lock_guard<std::mutex> lock(sink_mutex);
-      stats.submaps++;
-      submap_points += static_cast<double>(sm.points.size());
-      if (submaps) submaps->onSubmap(sm);
+    // Rays fired before slice i; each robot's sensor starts at a different point of the
+    // (non-repetitive) pattern.
+    auto raysBefore = [&](size_t i) {
+      return static_cast<uint64_t>(std::floor(static_cast<double>(i) * pts_per_slice + 1e-9));
     };
-    for (int f = 0; f < n_frames; ++f) {
-      frame.points.clear();
-      frame.intensity.clear();
+    const uint64_t k_pt0 = static_cast<uint64_t>(r) * 7777777ULL;
+    voxels->clear();
+    Pose T_S_O = Pose::Identity(), T_O_S = Pose::Identity(), T_W_S = Pose::Identity();
+    if (is_submap) {
+      // Anchor at the window's centre: the submap's pose is defined there.
+      const size_t ia =
+          std::min(n_samples - 1,
+                   static_cast<size_t>(std::lround((task.window + 0.5) * dur * kTrajectoryRateHz)));
+      T_O_S = gravityAligned(tr.T_O_B[ia]);
+      T_S_O = T_O_S.inverse();
+      // Ground truth: the estimate maps to W through T_W_B * T_O_B^-1 at the anchor.
+      T_W_S = tr.T_W_B[ia] * tr.T_O_B[ia].inverse() * T_O_S;
+    }
+    size_t rays = 0, returns = 0;
+    Frame scratch_frame;
+    for (int f = task.f_begin; f < task.f_end; ++f) {
+      Frame* frame = out_frames ? &out_frames->emplace_back() : &scratch_frame;
+      frame->robot = tr.robot;
+      frame->robot_index = r;
       for (int sl = 0; sl < slices_per_frame; ++sl) {
         const size_t i = static_cast<size_t>(f) * slices_per_frame + sl;
-        const double t_robot = static_cast<double>(i) / kTrajectoryRateHz;
-        const int w = static_cast<int>(std::floor(t_robot / dur + 1e-9));
-        if (w != window) {
-          flushSubmap();
-          voxels.clear();
-          window = w;
-          if (window < n_windows) {
-            // Anchor at the window's centre: the submap's pose is defined there.
-            const size_t ia = std::min(
-                n_samples - 1,
-                static_cast<size_t>(std::lround((window + 0.5) * dur * kTrajectoryRateHz)));
-            T_O_S = gravityAligned(tr.T_O_B[ia]);
-            T_S_O = T_O_S.inverse();
-            // Ground truth: the estimate maps to W through T_W_B * T_O_B^-1 at the anchor.
-            T_W_S = tr.T_W_B[ia] * tr.T_O_B[ia].inverse() * T_O_S;
-          }
-        }
         const Pose& T_W_B = tr.T_W_B[i];
         const Pose& T_O_B = tr.T_O_B[i];
-        pts_acc += pts_per_slice;
-        const int n_pts = static_cast<int>(pts_acc);
-        pts_acc -= n_pts;
         const Eigen::Vector3d o = T_W_B.translation();
-        for (int k = 0; k < n_pts; ++k, ++k_pt) {
+        const uint64_t k_end = k_pt0 + raysBefore(i + 1);
+        for (uint64_t k_pt = k_pt0 + raysBefore(i); k_pt < k_end; ++k_pt) {
           Eigen::Vector3d dir_B = pattern.direction(k_pt);
           if (sp.divergence_deg > 0) {
             // The beam's footprint: the return comes from somewhere inside it.
@@ -522,7 +549,7 @@ SimulationStats Simulator::run(FrameSink* frames, SubmapSink* submaps, int threa
           }
           const Eigen::Vector3d dir_W = T_W_B.linear() * dir_B;
           ++rays;
-          const RayHit hit = world_->castRay(o, dir_W, sp.min_range_m, sp.max_range_m, &scratch);
+          const RayHit hit = world_->castRay(o, dir_W, sp.min_range_m, sp.max_range_m, scratch);
           if (hit.material == Material::kNone) continue;
           const double fade = unit(rng);
           if (hit.range > sp.max_range_m * rangeFactor(hit.material) * (0.75 + 0.25 * fade)) {
@@ -532,56 +559,80 @@ SimulationStats Simulator::run(FrameSink* frames, SubmapSink* submaps, int threa
           const double range = hit.range + noise(rng);
           if (range < sp.min_range_m) continue;
           const Eigen::Vector3d p_O = T_O_B * (dir_B * range);  // de-skewed as FAST-LIO2 does
-          const Eigen::Vector3f p_Of = p_O.cast<float>();
-          frame.points.push_back(p_Of);
-          frame.intensity.push_back(
-              std::clamp(reflectivity(hit.material) * static_cast<float>(0.8 + 0.4 * unit(rng)),
-                         0.0f, 255.0f));
+          const float intensity = std::clamp(
+              reflectivity(hit.material) * static_cast<float>(0.8 + 0.4 * unit(rng)), 0.0f, 255.0f);
           ++returns;
-          if (window < n_windows) voxels.add((T_S_O * p_O).cast<float>());
+          if (out_frames) {
+            frame->points.push_back(p_O.cast<float>());
+            frame->intensity.push_back(intensity);
+          }
+          if (is_submap) voxels->add((T_S_O * p_O).cast<float>());
         }
       }
       const size_t i_end = static_cast<size_t>(f + 1) * slices_per_frame;
-      frame.stamp = scene_.epoch_s + tr.start_s + static_cast<double>(i_end) / kTrajectoryRateHz;
-      frame.T_O_B = tr.T_O_B[i_end];
-      frame.T_W_B = tr.T_W_B[i_end];
-      if (frames) {
-        std::lock_guard<std::mutex> lock(sink_mutex);
-        frames->onFrame(frame);
-      }
+      frame->stamp = scene_.epoch_s + tr.start_s + static_cast<double>(i_end) / kTrajectoryRateHz;
+      frame->T_O_B = tr.T_O_B[i_end];
+      frame->T_W_B = tr.T_W_B[i_end];
     }
-    // The last window closes when its final slice has been scanned.
-    flushSubmap();  // no-op unless the last window is complete
-    std::lock_guard<std::mutex> lock(sink_mutex);
-    stats.frames += static_cast<size_t>(n_frames);
+
+    std::lock_guard<std::mutex> lock(mutex);
+    stats.frames += static_cast<size_t>(task.f_end - task.f_begin);
     stats.rays += rays;
     stats.returns += returns;
+    if (is_submap) {
+      Submap sm;
+      sm.id = slot_id.at({r, task.window});
+      sm.robot = tr.robot;
+      sm.robot_index = r;
+      sm.stamp = scene_.epoch_s + tr.start_s + (task.window + 0.5) * dur;
+      sm.T_O_S = T_O_S;
+      sm.T_W_S = T_W_S;
+      sm.points = voxels->centroids();
+      sm.raw_points = voxels->raw();
+      stats.submaps++;
+      submap_points += static_cast<double>(sm.points.size());
+      if (submaps) submaps->onSubmap(sm);
+    }
+    if (out_frames) {
+      // Frames of one robot leave in time order: hold this window until its predecessors left.
+      held[r][task.window] = std::move(*out_frames);
+      for (auto it = held[r].begin(); it != held[r].end() && it->first == next_window[r];
+           it = held[r].erase(it)) {
+        for (const Frame& fr : it->second) frames->onFrame(fr);
+        ++next_window[r];
+      }
+      delivered_cv.notify_all();
+    }
+  };
+
+  auto worker = [&]() {
+    World::RayScratch scratch = world_->makeScratch(0);
+    VoxelAccumulator voxels(scene_.submap.voxel_m);
+    std::vector<Frame> window_frames;
+    while (true) {
+      WindowTask task;
+      {
+        std::unique_lock<std::mutex> lock(mutex);
+        if (next_task >= tasks.size()) return;
+        task = tasks[next_task++];
+        // Every earlier window of this robot is already running or held, so this wait ends.
+        if (frames) {
+          delivered_cv.wait(
+              lock, [&] { return task.window - next_window[task.robot] <= kMaxWindowsAhead; });
+        }
+      }
+      window_frames.clear();
+      scanWindow(task, &scratch, &voxels, frames ? &window_frames : nullptr);
+    }
   };
 
   int n_threads =
       threads > 0 ? threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-  n_threads = std::min<int>(n_threads, static_cast<int>(trajectories_.size()));
-  if (n_threads <= 1) {
-    for (size_t r = 0; r < trajectories_.size(); ++r) simulateRobot(static_cast<int>(r));
-  } else {
-    std::vector<std::thread> pool;
-    std::mutex next_mutex;
-    size_t next = 0;
-    for (int t = 0; t < n_threads; ++t) {
-      pool.emplace_back([&]() {
-        while (true) {
-          size_t r;
-          {
-            std::lock_guard<std::mutex> lock(next_mutex);
-            if (next >= trajectories_.size()) return;
-            r = next++;
-          }
-          simulateRobot(static_cast<int>(r));
-        }
-      });
-    }
-    for (auto& th : pool) th.join();
-  }
+  n_threads = std::max(1, std::min<int>(n_threads, static_cast<int>(tasks.size())));
+  std::vector<std::thread> pool;
+  for (int t = 1; t < n_threads; ++t) pool.emplace_back(worker);
+  worker();
+  for (auto& th : pool) th.join();
   stats.mean_submap_points = stats.submaps ? submap_points / stats.submaps : 0.0;
   stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
   return stats;

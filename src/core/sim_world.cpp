@@ -469,10 +469,12 @@ void World::buildIndex() {
       }
     }
   };
+  stem_bound_.resize(stems_.size());
   for (size_t k = 0; k < stems_.size(); ++k) {
     const Stem& s = stems_[k];
     const Eigen::Vector2d a = s.axisAt(-0.5), b = s.axisAt(s.height);
-    const Eigen::Vector2d r = Eigen::Vector2d::Constant(s.maxRadius());
+    stem_bound_[k] = s.maxRadius();
+    const Eigen::Vector2d r = Eigen::Vector2d::Constant(stem_bound_[k]);
     add((kItemStem << 30) | k, a.cwiseMin(b) - r, a.cwiseMax(b) + r, s.z_base - 0.6,
         s.z_base + s.height + 0.01);
     object_max_z_ = std::max(object_max_z_, s.z_base + s.height);
@@ -573,13 +575,13 @@ double World::traceTerrain(const Eigen::Vector3d& o, const Eigen::Vector3d& d, d
   return kInf;
 }
 
-bool World::hitStem(const Stem& s, const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t_max,
-                    double* t_hit) const {
+bool World::hitStem(const Stem& s, double bound, const Eigen::Vector3d& o, const Eigen::Vector3d& d,
+                    double t_max, double* t_hit) const {
   // In the stem's sheared frame the axis is vertical: u(t) = u0 + t u1, h(t) = h0 + t d.z.
   const double h0 = o.z() - s.z_base;
   const Eigen::Vector2d u0 = o.head<2>() - s.base_xy - s.lean * h0;
   const Eigen::Vector2d u1 = d.head<2>() - s.lean * d.z();
-  const double R = s.maxRadius();
+  const double R = bound;
   const double a = u1.squaredNorm(), b = u0.dot(u1), c = u0.squaredNorm() - R * R;
   if (a < 1e-12) return false;
   const double disc = b * b - a * c;
@@ -617,8 +619,9 @@ bool World::hitStem(const Stem& s, const Eigen::Vector3d& o, const Eigen::Vector
     const double t = t0 + i * dt;
     const double ft = f(t);
     if (ft <= 0) {
+      // Steps are at most ~0.1 m long: 7 halvings leave < 1 mm, far below the range noise.
       double lo = prev_t, hi = t;
-      for (int k = 0; k < 10; ++k) {
+      for (int k = 0; k < 7; ++k) {
         const double mid = 0.5 * (lo + hi);
         (f(mid) > 0 ? lo : hi) = mid;
       }
@@ -687,7 +690,7 @@ RayHit World::castRay(const Eigen::Vector3d& o, const Eigen::Vector3d& d, double
       double t = kInf;
       const double limit = std::min(best_t, t_max);
       if (kind == kItemStem) {
-        if (hitStem(stems_[idx], o, d, limit, &t) && t >= t_min && t < best_t) {
+        if (hitStem(stems_[idx], stem_bound_[idx], o, d, limit, &t) && t >= t_min && t < best_t) {
           best_t = t;
           best.material = Material::kBark;
           best.stem_id = stems_[idx].sapling ? -1 : stems_[idx].id;

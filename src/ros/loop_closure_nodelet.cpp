@@ -8,6 +8,7 @@
 #include <visualization_msgs/MarkerArray.h>
 
 #include <boost/bind/bind.hpp>
+#include <chrono>
 #include <condition_variable>
 #include <deque>
 #include <fstream>
@@ -20,6 +21,7 @@
 #include <set>
 #include <thread>
 
+#include "dtif/core/dataset.h"
 #include "dtif/core/loop_detector.h"
 #include "dtif/ros/conversions.h"
 #include "dtif/ros/markers.h"
@@ -73,6 +75,14 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       throw;
     }
     detector_ = std::make_unique<LoopDetector>(det);
+    if (!node_.loop_log.empty()) {
+      loop_log_.open(node_.loop_log, std::ios::trunc);
+      if (!loop_log_) {
+        NODELET_FATAL("loop_log: cannot open '%s' for writing", node_.loop_log.c_str());
+        throw ParamError("loop_log: cannot open " + node_.loop_log);
+      }
+      loop_log_ << loopLogHeader() << std::endl;
+    }
     if (!node_.database_file.empty()) {
       std::ifstream probe(node_.database_file);
       if (probe.good()) {
@@ -155,6 +165,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       return;
     }
     std::optional<LoopClosure> lc;
+    double t_loop_ms = 0.0;
     std::shared_ptr<const Descriptor> candidate;
     std::optional<Meta> candidate_meta;
     {
@@ -165,8 +176,11 @@ class LoopClosureNodelet : public nodelet::Nodelet {
                               d->robot.c_str(), static_cast<long>(d->submap_id));
         return;
       }
+      const auto t0 = std::chrono::steady_clock::now();
       try {
         lc = detector_->query(*d);
+        t_loop_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
+                        .count();
       } catch (const std::exception& e) {
         NODELET_ERROR_THROTTLE(5.0, "query of %s/%ld failed: %s", d->robot.c_str(),
                                static_cast<long>(d->submap_id), e.what());
@@ -192,21 +206,52 @@ class LoopClosureNodelet : public nodelet::Nodelet {
         robot_frames_.insert(meta.odom_frame);
       }
     }
-    if (!lc) return;
+    if (!lc) {
+      logQuery(msg, *d, std::nullopt, nullptr, t_loop_ms);
+      return;
+    }
     boost::shared_ptr<dtif_msgs::LoopClosure> out(new dtif_msgs::LoopClosure(ros_glue::toMsg(*lc)));
     out->header.stamp = msg.header.stamp;
     out->header.frame_id = candidate_meta ? candidate_meta->odom_frame : std::string();
     loop_pub_.publish(boost::shared_ptr<const dtif_msgs::LoopClosure>(out));
+    logQuery(msg, *d, lc, candidate.get(), t_loop_ms);
     NODELET_INFO("loop %s/%ld -> %s/%ld: %d inliers, score %.2f", lc->query_robot.c_str(),
                  static_cast<long>(lc->query_id), lc->candidate_robot.c_str(),
                  static_cast<long>(lc->candidate_id), lc->inliers, lc->score);
     if (candidate && marker_pub_.getNumSubscribers() > 0) {
       boost::shared_ptr<visualization_msgs::MarkerArray> markers(
-          new visualization_msgs::MarkerArray(ros_glue::loopMarkers(
-              *d, *candidate, *lc, meta.T_O_S, meta.odom_frame, msg.header.stamp)));
+          // Stamp 0: rviz uses the latest transform between odometry frames (as for trunks).
+          new visualization_msgs::MarkerArray(ros_glue::loopMarkers(*d, *candidate, *lc, meta.T_O_S,
+                                                                    meta.odom_frame, ros::Time())));
       marker_pub_.publish(boost::shared_ptr<const visualization_msgs::MarkerArray>(markers));
     }
     if (node_.publish_tf && node_.tf_rate_hz <= 0.0) publishTf();
+  }
+
+  // One row of ~loop_log (worker thread only).
+  void logQuery(const dtif_msgs::TrunkDescriptor& msg, const Descriptor& d,
+                const std::optional<LoopClosure>& lc, const Descriptor* candidate,
+                double t_loop_ms) {
+    if (!loop_log_.is_open()) return;
+    LoopLogRow r;
+    r.query_robot = d.robot;
+    r.query_id = d.submap_id;
+    r.query_stamp = d.stamp;
+    r.query_data_end = msg.data_end.isZero() ? d.stamp : msg.data_end.toSec();
+    if (lc) {
+      r.accepted = true;
+      r.candidate_robot = lc->candidate_robot;
+      r.candidate_id = lc->candidate_id;
+      r.candidate_stamp = candidate ? candidate->stamp : 0.0;
+      r.T_c_q = lc->T_c_q;
+      r.inliers = lc->inliers;
+      r.score = lc->score;
+    }
+    r.t_loop_ms = t_loop_ms;
+    r.ros_time = ros::Time::now().toSec();
+    r.wall_time = ros::WallTime::now().toSec();
+    loop_log_ << formatLoopLogRow(r) << std::endl;  // flushed: the run may end any time
+    if (!loop_log_) NODELET_ERROR_THROTTLE(30.0, "loop_log: write failed");
   }
 
   // Publishes a spanning tree of the link graph: each connected group of odometry frames hangs
@@ -327,6 +372,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
   std::vector<ros::Subscriber> subs_;
   ros::ServiceServer save_srv_, load_srv_, size_srv_;
   ros::WallTimer tf_timer_;
+  std::ofstream loop_log_;  // worker thread only
 };
 
 }  // namespace dtif

@@ -1,5 +1,6 @@
 #include "dtif/ros/submap_assembler.h"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -9,6 +10,9 @@ namespace ros_glue {
 std::string SubmapAssemblerParams::validate() const {
   std::ostringstream os;
   if (!(window_s > 0.0)) os << "window_s must be > 0\n";
+  if (!(cloud_period_s > 0.0 && cloud_period_s < window_s)) {
+    os << "cloud_period_s must be > 0 and < window_s\n";
+  }
   if (!(max_odom_gap_s > 0.0)) os << "max_odom_gap_s must be > 0\n";
   if (!(max_odom_age_s >= 0.0)) os << "max_odom_age_s must be >= 0\n";
   if (max_submap_points <= 0) os << "max_submap_points must be > 0\n";
@@ -35,8 +39,8 @@ const char* SubmapAssembler::describe(Status s) {
       return "duplicate stamp, message dropped";
     case Status::kOutOfOrder:
       return "stamp older than the previous message, message dropped";
-    case Status::kNoOdometry:
-      return "no odometry near the cloud's stamp, cloud dropped";
+    case Status::kNoAnchorPose:
+      return "no odometry at the finished window's centre, submap discarded";
     case Status::kOdometryGap:
       return "odometry gap, open submap discarded";
     case Status::kEmptyCloud:
@@ -55,14 +59,18 @@ SubmapAssembler::Status SubmapAssembler::addOdometry(double stamp, const Pose& T
   }
   Status status = Status::kOk;
   if (!odom_.empty() && stamp - odom_.back().stamp > params_.max_odom_gap_s) {
-    // The front end may have re-initialised (a new O): do not mix points across the gap.
+    // The front end may have re-initialised (a new O): do not mix points across the gap, and
+    // partition the new stream afresh.
     if (open_) status = Status::kOdometryGap;
     open_.reset();
     odom_.clear();
+    t0_.reset();
   }
   odom_.push_back({stamp, T_O_B});
-  // Keep a few seconds: anchors are looked up near the newest clouds only.
-  while (odom_.size() > 2 && odom_.front().stamp < stamp - 5.0) odom_.pop_front();
+  // Keep what the open window's anchor (its centre) and clouds a few seconds late may need.
+  double keep_from = stamp - params_.window_s - 5.0;
+  if (open_) keep_from = std::min(keep_from, centreOf(open_->index) - 1.0);
+  while (odom_.size() > 2 && odom_.front().stamp < keep_from) odom_.pop_front();
   return status;
 }
 
@@ -77,32 +85,47 @@ std::optional<Pose> SubmapAssembler::poseAt(double stamp) const {
     if (odom_.front().stamp - stamp <= tol) return odom_.front().T_O_B;
     return std::nullopt;
   }
-  for (size_t i = 1; i < odom_.size(); ++i) {
-    if (odom_[i].stamp < stamp) continue;
-    const Stamped& a = odom_[i - 1];
-    const Stamped& b = odom_[i];
-    if (b.stamp - a.stamp > params_.max_odom_gap_s) return std::nullopt;
-    const double s = (stamp - a.stamp) / (b.stamp - a.stamp);
-    Pose T = Pose::Identity();
-    const Eigen::Quaterniond qa(a.T_O_B.rotation()), qb(b.T_O_B.rotation());
-    T.linear() = qa.slerp(s, qb).toRotationMatrix();
-    T.translation() = (1.0 - s) * a.T_O_B.translation() + s * b.T_O_B.translation();
-    return T;
-  }
-  return std::nullopt;
+  const auto it = std::lower_bound(odom_.begin(), odom_.end(), stamp,
+                                   [](const Stamped& o, double t) { return o.stamp < t; });
+  const Stamped& a = *std::prev(it);
+  const Stamped& b = *it;
+  if (b.stamp - a.stamp > params_.max_odom_gap_s) return std::nullopt;
+  const double s = (stamp - a.stamp) / (b.stamp - a.stamp);
+  Pose T = Pose::Identity();
+  const Eigen::Quaterniond qa(a.T_O_B.rotation()), qb(b.T_O_B.rotation());
+  T.linear() = qa.slerp(s, qb).toRotationMatrix();
+  T.translation() = (1.0 - s) * a.T_O_B.translation() + s * b.T_O_B.translation();
+  return T;
 }
 
-bool SubmapAssembler::startWindow(double stamp) {
-  const std::optional<Pose> T_O_B = poseAt(stamp);
-  if (!T_O_B) return false;
+int64_t SubmapAssembler::windowOf(double stamp) const {
+  // Window k holds the stamps in (t0 + k * window_s, t0 + (k + 1) * window_s].
+  return static_cast<int64_t>(std::ceil((stamp - *t0_ - kStampTolS) / params_.window_s)) - 1;
+}
+
+double SubmapAssembler::centreOf(int64_t window) const {
+  return *t0_ + (static_cast<double>(window) + 0.5) * params_.window_s;
+}
+
+std::optional<AssembledSubmap> SubmapAssembler::close() {
+  Window w = std::move(*open_);
+  open_.reset();
+  const double centre = centreOf(w.index);
+  const std::optional<Pose> T_O_B = poseAt(centre);
+  if (!T_O_B) return std::nullopt;
   AssembledSubmap s;
   s.id = next_id_++;
-  s.stamp = stamp;
+  s.stamp = centre;
+  s.end_stamp = w.end_stamp;
   s.T_O_S = gravityAlignedPose(*T_O_B);
   s.cloud.reset(new Cloud);
-  T_S_O_ = s.T_O_S.inverse();
-  open_ = std::move(s);
-  return true;
+  s.cloud->reserve(w.cloud_O->size());
+  const Eigen::Affine3f T_S_O = s.T_O_S.inverse().cast<float>();
+  for (const auto& p : *w.cloud_O) {
+    const Eigen::Vector3f q = T_S_O * p.getVector3fMap();
+    s.cloud->push_back(pcl::PointXYZ(q.x(), q.y(), q.z()));
+  }
+  return s;
 }
 
 SubmapAssembler::Status SubmapAssembler::addCloud(double stamp, const Cloud& cloud_O,
@@ -114,36 +137,47 @@ SubmapAssembler::Status SubmapAssembler::addCloud(double stamp, const Cloud& clo
   }
   last_cloud_stamp_ = stamp;
   if (cloud_O.empty()) return Status::kEmptyCloud;
-  if (open_ && stamp - open_->stamp >= params_.window_s) {
-    *done = std::move(open_);
-    open_.reset();
-  }
-  if (!open_ && !startWindow(stamp)) return Status::kNoOdometry;
-  Cloud& out = *open_->cloud;
-  const Eigen::Affine3f T_S_O = T_S_O_.cast<float>();
+  // The points are in O already: only the window's centre needs a pose, so a cloud that
+  // arrives before its odometry (another connection; a fast replay) is kept.
+  if (!t0_) t0_ = stamp - params_.cloud_period_s;
+  const int64_t k = windowOf(stamp);
   Status status = Status::kOk;
+  if (open_ && open_->index != k) {
+    // The open window's last cloud never came: finish it with what it has.
+    *done = close();
+    if (!*done) status = Status::kNoAnchorPose;
+  }
+  if (!open_) open_ = Window{k, stamp, Cloud::Ptr(new Cloud)};
+  Cloud& out = *open_->cloud_O;
   for (const auto& p : cloud_O) {
     if (out.size() >= static_cast<size_t>(params_.max_submap_points)) {
       status = Status::kTruncated;
       break;
     }
     if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) continue;
-    const Eigen::Vector3f q = T_S_O * p.getVector3fMap();
-    out.push_back(pcl::PointXYZ(q.x(), q.y(), q.z()));
+    out.push_back(p);
+  }
+  open_->end_stamp = stamp;
+  // The window's last cloud finishes it at once (unless this call already returns a submap).
+  if (!*done && stamp >= *t0_ + static_cast<double>(k + 1) * params_.window_s - kStampTolS) {
+    *done = close();
+    if (!*done) status = Status::kNoAnchorPose;
   }
   return status;
 }
 
 std::optional<AssembledSubmap> SubmapAssembler::flush() {
-  std::optional<AssembledSubmap> out = std::move(open_);
-  open_.reset();
-  if (out && out->cloud->empty()) return std::nullopt;
-  return out;
+  if (!open_ || open_->cloud_O->empty()) {
+    open_.reset();
+    return std::nullopt;
+  }
+  return close();
 }
 
 void SubmapAssembler::reset() {
   open_.reset();
   odom_.clear();
+  t0_.reset();
   last_cloud_stamp_ = -1.0;
 }
 

@@ -13,6 +13,7 @@
 #include <chrono>
 #include <condition_variable>
 #include <deque>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <pluginlib/class_list_macros.hpp>
@@ -112,10 +113,15 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
     return true;
   }
 
+  // One throttled warning per input and status (a macro's throttle is per call site, which would
+  // let one kind of bad input hide another). Called under mutex_.
   void report(ros_glue::SubmapAssembler::Status s, const char* what) {
-    using S = ros_glue::SubmapAssembler::Status;
-    if (s == S::kOk) return;
-    NODELET_WARN_THROTTLE(5.0, "%s: %s", what, ros_glue::SubmapAssembler::describe(s));
+    if (s == ros_glue::SubmapAssembler::Status::kOk) return;
+    const ros::WallTime now = ros::WallTime::now();
+    ros::WallTime& last = last_warning_[{what, static_cast<int>(s)}];
+    if (!last.isZero() && (now - last).toSec() < 5.0) return;
+    last = now;
+    NODELET_WARN("%s: %s", what, ros_glue::SubmapAssembler::describe(s));
   }
 
   void onOdometry(const nav_msgs::Odometry::ConstPtr& msg) {
@@ -196,6 +202,7 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
       s.id = next_submap_id_++ + node_.first_submap_id;
     }
     s.stamp = stamp;
+    s.end_stamp = stamp;
     enqueue(std::move(s), frame);
   }
 
@@ -240,12 +247,15 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
                   d.valid ? "" : ", invalid: ", d.invalid_reason.c_str());
     boost::shared_ptr<dtif_msgs::TrunkDescriptor> msg(
         new dtif_msgs::TrunkDescriptor(ros_glue::toMsg(d, s.T_O_S, frame)));
+    msg->data_end.fromSec(s.end_stamp);
     descriptor_pub_.publish(boost::shared_ptr<const dtif_msgs::TrunkDescriptor>(msg));
+    // Markers and the cloud are in the odometry frame, where they do not move: stamp 0 lets
+    // rviz use the latest transform to another robot's frame, which exists only after the first
+    // loop between the two, i.e. after most submaps' stamps.
     if (trunks_pub_.getNumSubscribers() > 0) {
       boost::shared_ptr<visualization_msgs::MarkerArray> markers(
           new visualization_msgs::MarkerArray(ros_glue::trunkMarkers(
-              d, s.T_O_S, frame, node_.robot + "/submap_" + std::to_string(s.id),
-              msg->header.stamp)));
+              d, s.T_O_S, frame, node_.robot + "/submap_" + std::to_string(s.id), ros::Time())));
       trunks_pub_.publish(boost::shared_ptr<const visualization_msgs::MarkerArray>(markers));
     }
     if (node_.publish_submap_cloud && cloud_pub_.getNumSubscribers() > 0) {
@@ -254,7 +264,6 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
       pcl::transformPointCloud(*s.cloud, cloud_O, s.T_O_S.matrix().cast<float>());
       boost::shared_ptr<sensor_msgs::PointCloud2> cloud(new sensor_msgs::PointCloud2);
       pcl::toROSMsg(cloud_O, *cloud);
-      cloud->header.stamp = msg->header.stamp;
       cloud->header.frame_id = frame;
       cloud_pub_.publish(boost::shared_ptr<const sensor_msgs::PointCloud2>(cloud));
     }
@@ -265,8 +274,9 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
   TrunkExtractorParams extractor_params_;
   DescriptorParams descriptor_params_;
 
-  std::mutex mutex_;  // assembler_, odom_frame_, last_submap_stamp_, next_submap_id_
+  std::mutex mutex_;  // assembler_, odom_frame_, last_submap_stamp_, next_submap_id_, last_warning_
   std::unique_ptr<ros_glue::SubmapAssembler> assembler_;
+  std::map<std::pair<std::string, int>, ros::WallTime> last_warning_;
   std::string odom_frame_;
   double last_submap_stamp_ = -1.0;
   int64_t next_submap_id_ = 0;

@@ -5,6 +5,9 @@
 #include <string>
 #include <vector>
 
+#include "dtif/core/config.h"
+#include "dtif/core/evaluation.h"
+
 namespace dtif::tool {
 
 using Args = std::vector<std::string>;
@@ -14,6 +17,11 @@ int runExtract(const Args& args);
 int runRegister(const Args& args);
 int runEval(const Args& args);
 int runBench(const Args& args);
+int runScore(const Args& args);
+
+/// results.csv, summary.json, table.md and params.yaml into folder out (created when missing).
+void writeEvalFiles(const std::string& out, const EvalResult& res, const std::string& table,
+                    const DtifParams& params);
 
 /// Thrown for bad command-line usage; main() prints it with the usage line.
 struct UsageError {

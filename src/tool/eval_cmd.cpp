@@ -12,6 +12,23 @@
 
 namespace dtif::tool {
 
+void writeEvalFiles(const std::string& out, const EvalResult& res, const std::string& table,
+                    const DtifParams& params) {
+  std::error_code ec;
+  std::filesystem::create_directories(out, ec);
+  if (ec) throw DatasetError(out + ": cannot create output folder: " + ec.message());
+  const std::filesystem::path dir(out);
+  writeResultsCsv((dir / "results.csv").string(), res.rows);
+  writeSummaryJson((dir / "summary.json").string(), res.summary);
+  std::ofstream t(dir / "table.md");
+  t << table;
+  std::ofstream p(dir / "params.yaml");
+  p << paramsToYaml(params);
+  t.close();
+  p.close();
+  if (!t || !p) throw DatasetError(out + ": write failed");
+}
+
 int runEval(const Args& args) {
   const Options o = parseOptions(args, {"out", "config", "method"}, {"unit-weights", "quiet"});
   if (o.positional.size() != 1) throw UsageError{"expected one dataset folder"};
@@ -30,22 +47,11 @@ int runEval(const Args& args) {
   });
 
   // Results are written only once the whole run succeeded: no partial output.
-  std::error_code ec;
-  std::filesystem::create_directories(*out, ec);
-  if (ec) throw DatasetError(*out + ": cannot create output folder: " + ec.message());
-  const std::filesystem::path dir(*out);
-  writeResultsCsv((dir / "results.csv").string(), res.rows);
-  writeSummaryJson((dir / "summary.json").string(), res.summary);
   const std::string method =
       o.get("method").value_or(params.loop.pose.unit_weights ? "dtif (unit weights)" : "dtif");
   const std::string table = formatTable(res.summary, method);
-  {
-    std::ofstream t(dir / "table.md");
-    t << table;
-    std::ofstream p(dir / "params.yaml");
-    p << paramsToYaml(params);
-    if (!t || !p) throw DatasetError(*out + ": write failed");
-  }
+  writeEvalFiles(*out, res, table, params);
+  const std::filesystem::path dir(*out);
   std::cout << "dataset " << ds.root << ": " << res.summary.submaps << " submaps\n" << table;
   if (!res.detection.empty()) {
     writeDetectionCsv((dir / "detection.csv").string(), res.detection);

@@ -1,4 +1,4 @@
-// dtif: the offline command-line tool (simulate, extract, register, eval, bench).
+// dtif: the offline command-line tool (simulate, extract, register, eval, score, bench).
 #include <cstring>
 #include <exception>
 #include <iostream>
@@ -18,6 +18,11 @@ constexpr const char* kUsage =
     "  extract  <cloud.pcd> [--out <trunks.csv>] [--config <params.yaml>]\n"
     "  register <query> <candidate> [--config <params.yaml>]  (PCD submaps or x,y,z,r CSVs)\n"
     "  eval     <dataset_dir> --out <dir> [--config <params.yaml>] [--unit-weights]\n"
+    "  score    <dataset_dir> --loops <loop_log.csv> --out <dir> [--config <params.yaml>]\n"
+    "           [--eval <eval_out_dir>]: scores the loop log of the ROS nodelets on this\n"
+    "           dataset's bag against its ground truth (eval's metrics), lists the loops, "
+    "compares\n"
+    "           them with a dtif eval run and reports the lag of the results\n"
     "  bench    <dataset_dir>... --out <dir> [--config <params.yaml>] [--back-ends a,b,...]\n"
     "           [--no-front-ends] [--no-pr] [--no-scaling] [--scaling-sizes 10,20,...]\n"
     "           dtif vs the paper's baselines (back ends: dtif, dtif_unit, quatro,\n"
@@ -37,6 +42,7 @@ int main(int argc, char** argv) {
     if (cmd == "extract") return dtif::tool::runExtract(args);
     if (cmd == "register") return dtif::tool::runRegister(args);
     if (cmd == "eval") return dtif::tool::runEval(args);
+    if (cmd == "score") return dtif::tool::runScore(args);
     if (cmd == "bench") return dtif::tool::runBench(args);
     std::cerr << "dtif: unknown command '" << cmd << "'\n" << kUsage;
     return 2;

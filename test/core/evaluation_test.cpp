@@ -9,6 +9,7 @@
 #include <random>
 #include <sstream>
 
+#include "dtif/core/dataset.h"
 #include "test_utils.h"
 
 namespace dtif {
@@ -166,6 +167,86 @@ TEST(SummaryOutput, JsonHasExactKeysAndNullsWhenUndefined) {
     EXPECT_NE(text.find(key), std::string::npos) << key;
   }
   std::filesystem::remove(path);
+}
+
+// A 10 m x 10 m patch of ground with vegetation 1 m above it, in S.
+Cloud patchCloud() {
+  Cloud c;
+  for (int i = 0; i < 20; ++i) {
+    for (int j = 0; j < 20; ++j) {
+      c.push_back(pcl::PointXYZ(0.5f * i + 0.25f, 0.5f * j + 0.25f, 0.0f));
+      c.push_back(pcl::PointXYZ(0.5f * i + 0.25f, 0.5f * j + 0.25f, 1.0f));
+    }
+  }
+  return c;
+}
+
+TEST(LoopLog, RowsRoundTripAndScoreAgainstGroundTruth) {
+  // alpha at 100 s and 200 s, 2 m apart (overlap 0.8); bravo at 150 s, 50 m away.
+  const auto dir = test::freshTempDir("dtif_loop_log_test");
+  Dataset ds;
+  ds.root = dir.string();
+  const std::array<std::tuple<std::string, double, double>, 3> rows = {
+      {{"alpha", 100.0, 0.0}, {"bravo", 150.0, 50.0}, {"alpha", 200.0, 2.0}}};
+  for (int64_t id = 0; id < 3; ++id) {
+    SubmapRecord r;
+    r.id = id;
+    std::tie(r.robot, r.stamp, std::ignore) = rows[id];
+    r.file = "submaps/" + std::to_string(id) + ".pcd";
+    ds.submaps.push_back(r);
+    ds.T_W_S[id] = makePose(std::get<2>(rows[id]), 0, 0, 0, 0, 0);
+    writeSubmapCloud(ds, r, patchCloud());
+  }
+  writeDatasetTables(ds);
+  const Dataset read = readDataset(ds.root);
+
+  std::vector<LoopLogRow> log(4);
+  log[0].query_robot = "alpha", log[0].query_id = 0, log[0].query_stamp = 100.0;
+  log[1].query_robot = "bravo", log[1].query_id = 0, log[1].query_stamp = 150.0004;
+  log[1].accepted = true, log[1].candidate_robot = "alpha", log[1].candidate_stamp = 100.0;
+  log[1].T_c_q = makePose(1, 0, 0, 0, 0, 0);  // no overlap: a false positive
+  log[2].query_robot = "alpha", log[2].query_id = 1, log[2].query_stamp = 200.0;
+  log[2].accepted = true, log[2].candidate_robot = "alpha", log[2].candidate_id = 0;
+  log[2].candidate_stamp = 100.0, log[2].T_c_q = makePose(2.1, 0, 0, 0, 0, 0.5 * kDeg);
+  log[2].inliers = 12, log[2].score = 0.75, log[2].t_loop_ms = 3.0, log[2].ros_time = 205.25;
+  log[2].query_data_end = 205.0, log[2].wall_time = 1.7e9;
+  log[3].query_robot = "alpha", log[3].query_id = 2, log[3].query_stamp = 300.0;  // not there
+  const auto path = dir / "loops.csv";
+  {
+    std::ofstream os(path);
+    os << loopLogHeader() << "\n";
+    for (const auto& r : log) os << formatLoopLogRow(r) << "\n";
+  }
+  const std::vector<LoopLogRow> back = readLoopLog(path.string());
+  ASSERT_EQ(back.size(), 4u);
+  EXPECT_EQ(back[2].candidate_robot, "alpha");
+  EXPECT_EQ(back[2].inliers, 12);
+  EXPECT_DOUBLE_EQ(back[2].ros_time, 205.25);
+  EXPECT_DOUBLE_EQ(back[2].wall_time, 1.7e9);
+  EXPECT_NEAR(back[2].T_c_q.translation().x(), 2.1, 1e-9);
+  EXPECT_FALSE(back[0].accepted);
+
+  std::vector<std::string> unmatched;
+  const EvalResult res = scoreLoopLog(read, back, 30.0, EvalParams{}, &unmatched);
+  ASSERT_EQ(res.rows.size(), 3u);
+  EXPECT_FALSE(res.rows[0].accepted);
+  EXPECT_TRUE(res.rows[1].accepted);
+  EXPECT_FALSE(res.rows[1].true_positive);
+  EXPECT_TRUE(res.rows[2].has_loop);
+  EXPECT_TRUE(res.rows[2].true_positive);
+  EXPECT_EQ(*res.rows[2].candidate, 0);
+  EXPECT_NEAR(res.rows[2].overlap, 0.8, 1e-9);
+  EXPECT_NEAR(res.rows[2].err->trans_m, 0.1, 1e-6);
+  EXPECT_NEAR(res.rows[2].err->rot_deg, 0.5, 1e-6);
+  EXPECT_EQ(res.summary.accepted, 2u);
+  EXPECT_EQ(res.summary.true_positives, 1u);
+  EXPECT_EQ(res.summary.queries_with_loop, 1u);
+  EXPECT_TRUE(res.summary.online);
+  EXPECT_DOUBLE_EQ(res.summary.t_loop_ms, 1.0);  // 3 ms over the three queried submaps
+  ASSERT_EQ(unmatched.size(), 1u);
+  EXPECT_NE(unmatched[0].find("alpha/2"), std::string::npos) << unmatched[0];
+  EXPECT_NE(formatTable(res.summary).find("| - |"), std::string::npos);  // no descriptor times
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

@@ -98,6 +98,7 @@ TEST(ShippedYaml, NodeYamlsUseOnlyDeclaredKeys) {
   YAML::Node te = YAML::LoadFile(dir + "trunk_extraction_node.yaml");
   SubmapAssemblerParams a;
   a.window_s = te["window_s"].as<double>();
+  a.cloud_period_s = te["cloud_period_s"].as<double>();
   a.max_odom_gap_s = te["max_odom_gap_s"].as<double>();
   a.max_odom_age_s = te["max_odom_age_s"].as<double>();
   a.max_submap_points = te["max_submap_points"].as<int>();

@@ -30,44 +30,98 @@ TEST(GravityAlignedPose, KeepsPositionAndYawDropsRollPitch) {
   EXPECT_NEAR(std::atan2(x.y(), x.x()), 0.8, 0.01);
 }
 
-TEST(SubmapAssembler, WindowsCloudsIntoTheAnchorFrame) {
-  SubmapAssemblerParams p;
-  p.window_s = 1.0;
-  SubmapAssembler a(p, 5);
-  const double yaw = M_PI / 2;
-  for (int i = 0; i <= 30; ++i) {
-    ASSERT_EQ(a.addOdometry(10.0 + 0.1 * i, makePose(2.0 + 0.1 * i, 0, 0, 0, 0, yaw)), Status::kOk);
+// Odometry every 0.05 s over [t0, t1]: moving along +x at 1 m/s from x0, facing +y.
+void addTrack(SubmapAssembler* a, double t0, double t1, double x0) {
+  for (double t = t0; t <= t1 + 1e-9; t += 0.05) {
+    ASSERT_EQ(a->addOdometry(t, makePose(x0 + (t - t0), 0, 0, 0, 0, M_PI / 2)), Status::kOk);
   }
+}
+
+TEST(SubmapAssembler, AnchorsEachWindowAtItsCentre) {
+  SubmapAssemblerParams p;
+  p.window_s = 1.0;  // cloud_period_s 0.1: the first cloud (10.1) covers (10.0, 10.1]
+  SubmapAssembler a(p, 5);
+  addTrack(&a, 10.0, 13.0, 2.0);  // sensor at x = 2 + (t - 10)
   std::optional<AssembledSubmap> done;
-  // Anchor at t = 10.0: sensor at (2, 0, 0) facing +y. A point at O (2, 1, 0.5) is 1 m ahead.
-  EXPECT_EQ(a.addCloud(10.0, cloudOf({{2, 1, 0.5f}}), &done), Status::kOk);
+  // Window 0 = (10.0, 11.0], centre 10.5: sensor at (2.5, 0, 0) facing +y. A point at O
+  // (2.5, 1, 0.5) is 1 m ahead of it.
+  EXPECT_EQ(a.addCloud(10.1, cloudOf({{2.5f, 1, 0.5f}}), &done), Status::kOk);
   EXPECT_FALSE(done);
-  EXPECT_EQ(a.addCloud(10.5, cloudOf({{2, 3, 0}}), &done), Status::kOk);
+  EXPECT_EQ(a.addCloud(10.6, cloudOf({{2.5f, 3, 0}, {NAN, 0, 0}}), &done), Status::kOk);
   EXPECT_FALSE(done);
-  EXPECT_EQ(a.addCloud(11.05, cloudOf({{0, 0, 0}}), &done), Status::kOk);  // closes the window
+  EXPECT_EQ(a.addCloud(11.0, cloudOf({{0, 0, 0}}), &done), Status::kOk);  // the window's last
   ASSERT_TRUE(done);
   EXPECT_EQ(done->id, 5);
-  EXPECT_DOUBLE_EQ(done->stamp, 10.0);
-  EXPECT_TRUE(done->T_O_S.translation().isApprox(Eigen::Vector3d(2, 0, 0), 1e-9));
-  ASSERT_EQ(done->cloud->size(), 2u);
+  EXPECT_DOUBLE_EQ(done->stamp, 10.5);
+  EXPECT_DOUBLE_EQ(done->end_stamp, 11.0);
+  EXPECT_TRUE(done->T_O_S.translation().isApprox(Eigen::Vector3d(2.5, 0, 0), 1e-9));
+  EXPECT_NEAR(std::atan2(done->T_O_S.rotation()(1, 0), done->T_O_S.rotation()(0, 0)), M_PI / 2,
+              1e-9);
+  ASSERT_EQ(done->cloud->size(), 3u);
   EXPECT_NEAR((*done->cloud)[0].x, 1.0, 1e-5);  // 1 m ahead = +x of S
   EXPECT_NEAR((*done->cloud)[0].y, 0.0, 1e-5);
   EXPECT_NEAR((*done->cloud)[0].z, 0.5, 1e-5);
   EXPECT_NEAR((*done->cloud)[1].x, 3.0, 1e-5);
-  // The closing cloud anchors the next submap (sensor at x = 3.05 m, interpolated).
-  const auto next = a.flush();
-  ASSERT_TRUE(next);
-  EXPECT_EQ(next->id, 6);
-  EXPECT_NEAR(next->T_O_S.translation().x(), 3.05, 1e-6);
-  EXPECT_NEAR((*next->cloud)[0].y, 3.05, 1e-5);  // O origin lies 3.05 m to the left of S
+  EXPECT_NEAR((*done->cloud)[2].x, 0.0, 1e-5);  // O's origin, 2.5 m to the left of S
+  EXPECT_NEAR((*done->cloud)[2].y, 2.5, 1e-5);
+
+  // Window 1 = (11.0, 12.0] loses its last cloud: the first cloud of window 2 finishes it.
+  EXPECT_EQ(a.addCloud(11.1, cloudOf({{1, 1, 1}}), &done), Status::kOk);
+  EXPECT_FALSE(done);
+  EXPECT_EQ(a.addCloud(11.7, cloudOf({{1, 1, 1}}), &done), Status::kOk);
+  EXPECT_FALSE(done);
+  EXPECT_EQ(a.addCloud(12.3, cloudOf({{1, 1, 1}}), &done), Status::kOk);
+  ASSERT_TRUE(done);
+  EXPECT_EQ(done->id, 6);
+  EXPECT_DOUBLE_EQ(done->stamp, 11.5);
+  EXPECT_DOUBLE_EQ(done->end_stamp, 11.7);
+  EXPECT_NEAR(done->T_O_S.translation().x(), 3.5, 1e-9);
+  EXPECT_EQ(done->cloud->size(), 2u);
+  // Window 2 = (12.0, 13.0] is open with one cloud; its centre 12.5 has odometry.
+  const auto last = a.flush();
+  ASSERT_TRUE(last);
+  EXPECT_EQ(last->id, 7);
+  EXPECT_DOUBLE_EQ(last->stamp, 12.5);
+  EXPECT_EQ(last->cloud->size(), 1u);
+}
+
+// Stamps as a bag keeps them (whole nanoseconds of an epoch ~1.7e9 s): 10 Hz clouds starting
+// 0.1 s after the robot's start cut into 10 s windows at the simulator's boundaries, the last
+// cloud of each window (its end) included, each stamped at its centre.
+TEST(SubmapAssembler, PartitionsTimeLikeTheSimulator) {
+  SubmapAssembler a{SubmapAssemblerParams()};
+  const int64_t start_ns = 1700000123LL * 1000000000LL + 400000000LL;  // robot start
+  auto stampOf = [&](int i) { return static_cast<double>(start_ns + i * 100000000LL) * 1e-9; };
+  std::vector<AssembledSubmap> out;
+  std::vector<int> closing;
+  for (int i = 0; i <= 250; ++i) {
+    ASSERT_EQ(a.addOdometry(stampOf(i), makePose(0.1 * i, 0, 0, 0, 0, 0)), Status::kOk);
+    if (i == 0) continue;  // sensors publish a cloud at the end of each 0.1 s frame
+    std::optional<AssembledSubmap> done;
+    ASSERT_EQ(a.addCloud(stampOf(i), cloudOf({{0, 0, 0}}), &done), Status::kOk);
+    if (done) {
+      out.push_back(std::move(*done));
+      closing.push_back(i);
+    }
+  }
+  ASSERT_EQ(out.size(), 2u);
+  EXPECT_EQ(closing, (std::vector<int>{100, 200}));
+  EXPECT_NEAR(out[0].stamp, stampOf(50), 1e-6);
+  EXPECT_NEAR(out[1].stamp, stampOf(150), 1e-6);
+  EXPECT_NEAR(out[1].end_stamp, stampOf(200), 1e-6);
+  EXPECT_EQ(out[0].cloud->size(), 100u);  // clouds 1..100
+  EXPECT_EQ(out[1].cloud->size(), 100u);  // clouds 101..200
+  EXPECT_NEAR(out[1].T_O_S.translation().x(), 15.0, 1e-6);
 }
 
 TEST(SubmapAssembler, DropsDuplicateAndOutOfOrderStamps) {
-  SubmapAssembler a{SubmapAssemblerParams()};
+  SubmapAssemblerParams p;
+  p.window_s = 1.0;
+  SubmapAssembler a(p);
   EXPECT_EQ(a.addOdometry(1.0, Pose::Identity()), Status::kOk);
   EXPECT_EQ(a.addOdometry(1.0, Pose::Identity()), Status::kDuplicateStamp);
   EXPECT_EQ(a.addOdometry(0.9, Pose::Identity()), Status::kOutOfOrder);
-  EXPECT_EQ(a.addOdometry(1.1, Pose::Identity()), Status::kOk);
+  addTrack(&a, 1.1, 1.6, 0.0);
   std::optional<AssembledSubmap> done;
   EXPECT_EQ(a.addCloud(1.05, cloudOf({{1, 1, 1}}), &done), Status::kOk);
   EXPECT_EQ(a.addCloud(1.05, cloudOf({{1, 1, 1}}), &done), Status::kDuplicateStamp);
@@ -78,39 +132,59 @@ TEST(SubmapAssembler, DropsDuplicateAndOutOfOrderStamps) {
   EXPECT_EQ(s->cloud->size(), 1u);
 }
 
-TEST(SubmapAssembler, NeedsOdometryNearTheAnchor) {
-  SubmapAssembler a{SubmapAssemblerParams()};
+TEST(SubmapAssembler, NeedsOdometryAtTheAnchorOnly) {
+  SubmapAssemblerParams p;
+  p.window_s = 1.0;
+  SubmapAssembler a(p);
   std::optional<AssembledSubmap> done;
-  EXPECT_EQ(a.addCloud(1.0, cloudOf({{1, 1, 1}}), &done), Status::kNoOdometry);
-  EXPECT_EQ(a.addOdometry(2.0, Pose::Identity()), Status::kOk);
-  EXPECT_EQ(a.addCloud(3.0, cloudOf({{1, 1, 1}}), &done), Status::kNoOdometry);  // 1 s stale
-  EXPECT_EQ(a.addCloud(3.1, cloudOf({{1, 1, 1}}), &done), Status::kNoOdometry);
+  // Clouds are in O already: one that arrives before any odometry is kept. Window (0.9, 1.9].
+  EXPECT_EQ(a.addCloud(1.0, cloudOf({{1, 1, 1}}), &done), Status::kOk);
+  EXPECT_EQ(a.addOdometry(1.35, makePose(0, 0, 0, 0, 0, 0)), Status::kOk);
+  EXPECT_EQ(a.addOdometry(1.45, makePose(1, 0, 0, 0, 0, 0)), Status::kOk);
+  EXPECT_EQ(a.addCloud(1.9, cloudOf({{1, 1, 1}}), &done), Status::kOk);
+  ASSERT_TRUE(done);
+  EXPECT_DOUBLE_EQ(done->stamp, 1.4);
+  EXPECT_NEAR(done->T_O_S.translation().x(), 0.5, 1e-9);
+  EXPECT_EQ(done->cloud->size(), 2u);
+  // The front end stopped at 1.45: window (1.9, 2.9] has no pose at its centre and is dropped.
+  EXPECT_EQ(a.addCloud(2.0, cloudOf({{1, 1, 1}}), &done), Status::kOk);
+  EXPECT_EQ(a.addCloud(2.9, cloudOf({{1, 1, 1}}), &done), Status::kNoAnchorPose);
+  EXPECT_FALSE(done);
+  EXPECT_EQ(a.addCloud(3.0, cloudOf({{1, 1, 1}}), &done), Status::kOk);
   EXPECT_FALSE(a.flush());
 }
 
 TEST(SubmapAssembler, OdometryGapDiscardsTheOpenSubmap) {
-  SubmapAssembler a{SubmapAssemblerParams()};
+  SubmapAssemblerParams p;
+  p.window_s = 1.0;
+  SubmapAssembler a(p);
   std::optional<AssembledSubmap> done;
   EXPECT_EQ(a.addOdometry(1.0, Pose::Identity()), Status::kOk);
   EXPECT_EQ(a.addCloud(1.0, cloudOf({{1, 1, 1}}), &done), Status::kOk);
   EXPECT_EQ(a.addOdometry(5.0, Pose::Identity()), Status::kOdometryGap);
   EXPECT_FALSE(a.flush());
-  EXPECT_EQ(a.addCloud(5.0, cloudOf({{1, 1, 1}}), &done), Status::kOk);  // starts afresh
-  EXPECT_TRUE(a.flush());
+  // A new stream: windows restart at its first cloud, (4.9, 5.9], centre 5.4.
+  addTrack(&a, 5.05, 5.5, 0.0);
+  EXPECT_EQ(a.addCloud(5.0, cloudOf({{1, 1, 1}}), &done), Status::kOk);
+  const auto s = a.flush();
+  ASSERT_TRUE(s);
+  EXPECT_DOUBLE_EQ(s->stamp, 5.4);
 }
 
 TEST(SubmapAssembler, CapsPointsAndSkipsNaN) {
   SubmapAssemblerParams p;
   p.max_submap_points = 2;
+  p.window_s = 1.0;
   SubmapAssembler a(p);
   std::optional<AssembledSubmap> done;
-  a.addOdometry(1.0, Pose::Identity());
+  addTrack(&a, 0.9, 1.5, 0.0);
   Cloud c = cloudOf({{1, 0, 0}, {NAN, 0, 0}, {2, 0, 0}, {3, 0, 0}});
   EXPECT_EQ(a.addCloud(1.0, c, &done), Status::kTruncated);
   const auto s = a.flush();
   ASSERT_TRUE(s);
   ASSERT_EQ(s->cloud->size(), 2u);
-  EXPECT_FLOAT_EQ((*s->cloud)[1].x, 2.0f);
+  // makePose faces +y: a point 2 m along O's x lies 2 m to the right (-y) of S.
+  EXPECT_NEAR((*s->cloud)[1].y, -(2.0 - s->T_O_S.translation().x()), 1e-5);
 }
 
 }  // namespace

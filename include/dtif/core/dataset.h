@@ -61,6 +61,36 @@ void writeDatasetTables(const Dataset& ds);
 /// Writes a cloud as binary-compressed PCD to <ds.root>/<rec.file>, creating folders.
 void writeSubmapCloud(const Dataset& ds, const SubmapRecord& rec, const Cloud& cloud);
 
+/// One query of an online loop-closure run, as the LoopClosureNodelet logs it (~loop_log): a
+/// CSV row per descriptor queried, accepted or not. Times are ROS times (simulated under a bag
+/// replay with --clock) except wall_time.
+struct LoopLogRow {
+  std::string query_robot;
+  int64_t query_id = -1;        ///< the robot's own submap id
+  double query_stamp = 0.0;     ///< anchor time of the query submap [s]
+  double query_data_end = 0.0;  ///< stamp of the query submap's last cloud [s]
+  bool accepted = false;
+  std::string candidate_robot;  ///< empty unless accepted
+  int64_t candidate_id = -1;
+  double candidate_stamp = 0.0;   ///< [s]
+  Pose T_c_q = Pose::Identity();  ///< estimate (identity unless accepted)
+  int inliers = 0;
+  double score = 0.0;
+  double t_loop_ms = 0.0;  ///< query time, wall clock [ms]
+  double ros_time = 0.0;   ///< when the result was published [s]
+  double wall_time = 0.0;  ///< the same moment on the wall clock [s]
+};
+
+/// The header line of a loop log and one row of it (no newline).
+std::string loopLogHeader();
+std::string formatLoopLogRow(const LoopLogRow& r);
+
+/// Reads a loop log. Throws DatasetError naming the file and line.
+std::vector<LoopLogRow> readLoopLog(const std::string& path);
+
+/// query id -> candidate id of the accepted rows of eval's results.csv. Throws DatasetError.
+std::map<int64_t, int64_t> readAcceptedLoops(const std::string& results_csv);
+
 /// Trunk-map CSV `x,y,z,r` (header optional; extra columns ignored, except a fifth column named
 /// `base_seen` (0/1) in the header, which dtif extract writes). Throws DatasetError.
 Trunks readTrunkCsv(const std::string& path);

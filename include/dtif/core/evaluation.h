@@ -72,6 +72,7 @@ struct EvalSummary {
   std::optional<double> rmse_rot_deg, rmse_trans_m;
   double t_desc_ms = 0, t_loop_ms = 0, t_solver_ms = 0, t_total_ms = 0;
   double descriptor_bytes_mean = 0;
+  bool online = false;  ///< scored from an online run's loop log: only t_loop_ms is measured
 };
 
 /// Trunk extraction of one submap against the ground-truth stems (stems.csv); an extra output
@@ -119,6 +120,16 @@ EvalSummary summarizeRows(const std::vector<EvalRow>& rows, const std::string& d
 /// ground truth is missing or a cloud cannot be read.
 EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const EvalParams& eval,
                          const std::function<void(size_t, size_t)>& progress = {});
+
+/// Scores an online run (the LoopClosureNodelet's loop log, e.g. on a bag of this dataset from
+/// dtif simulate) with runEvaluation's ground truth and metrics. Log rows are matched to the
+/// dataset's submaps by robot and stamp (within 1 ms); rows come out in the dataset's order, a
+/// submap the run never queried counting as a query without a loop. t_loop_ms is the log's mean
+/// over queried submaps; the summary is marked online. Log rows whose query or candidate is not
+/// in the dataset are skipped and described in *unmatched. Throws DatasetError.
+EvalResult scoreLoopLog(const Dataset& ds, const std::vector<LoopLogRow>& log,
+                        double exclude_recent_s, const EvalParams& eval,
+                        std::vector<std::string>* unmatched = nullptr);
 
 /// results.csv and summary.json (exact columns/keys of DATASET.md). Throws DatasetError.
 void writeResultsCsv(const std::string& path, const std::vector<EvalRow>& rows);

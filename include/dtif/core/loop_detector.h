@@ -18,13 +18,15 @@ namespace dtif {
 
 /// Acceptance of a loop. False loops corrupt merged maps, so these err on rejecting.
 struct VerifierParams {
-  int min_hypothesis_inliers = 4;    ///< |I_T| from the descriptor correspondences at least
-  int min_inliers = 6;               ///< trunk pairs co-located after guided refinement at least
-  double min_inlier_weight = 8.0;    ///< sum of omega_k over I_T at least
-  double max_rms_xy_m = 0.2;         ///< RMS horizontal residual of the refined pairs at most [m]
-  double match_radius_m = 0.4;       ///< trunks this close after alignment co-locate [m]
-  double min_covisible_ratio = 0.5;  ///< co-located share of trunks in the common area [0..1]
-  int min_covisible = 6;             ///< co-located trunks (both directions summed) at least
+  int min_hypothesis_inliers = 4;  ///< |I_T| from the descriptor correspondences at least
+  int min_inliers = 6;             ///< trunk pairs co-located after guided refinement at least
+  double min_inlier_weight = 8.0;  ///< sum of omega_k over I_T at least
+  double max_rms_xy_m = 0.2;       ///< RMS horizontal residual of the refined pairs at most [m]
+  double match_radius_m = 0.4;     ///< trunks this close after alignment co-locate [m]
+  /// Co-located share of trunks in the common area at least [0..1]. Dense understory hides
+  /// half of the stems from either side, so correct loops there score 0.35-0.45.
+  double min_covisible_ratio = 0.35;
+  int min_covisible = 6;  ///< co-located trunks (both directions summed) at least
   /// Runner-up hypothesis (another yaw > 10 deg away, or another translation mode) with more
   /// than this share of the best one's support: ambiguous (repetitive stand), rejected [0..1].
   double max_ambiguity = 0.5;
@@ -43,8 +45,9 @@ struct VerifierParams {
   /// runner-up fit scores at most this share of the best. 0: ambiguous is always rejected [0..1).
   double max_fit_ambiguity = 0.7;
   double max_fit_rms_m = 0.08;  ///< the fitted winner's RMS pair residual at most [m]
-  /// Refined pairs whose stem bases were both seen at least: fewer leave t_z a guess (one wrong
-  /// base decides it), and the loop is rejected rather than reported with a wrong elevation.
+  /// Refined pairs whose stem bases were both seen and agree on t_z at least: fewer leave t_z a
+  /// guess (one wrong base decides it), and the loop is rejected rather than reported with a
+  /// wrong elevation.
   int min_z_pairs = 2;
 
   std::string validate() const;
@@ -132,7 +135,7 @@ struct Verification {
   std::vector<std::pair<int, int>> pairs;  ///< mutual nearest trunk pairs under T_c_q
   double rms_xy_m = 0.0;                   ///< RMS horizontal residual of pairs [m]
   double rms_z_m = 0.0;                    ///< RMS elevation residual of the z pairs [m]
-  int z_pairs = 0;  ///< pairs with both stem bases seen, which fixed t_z (0: t_z unobserved)
+  int z_pairs = 0;  ///< pairs with both stem bases seen that agree on t_z (0: t_z unobserved)
   bool tilt_fitted = false;      ///< residual roll/pitch estimated from those pairs
   double overlap = -1.0;         ///< overlap of the aligned footprints; -1 when not measured
   double fit_ambiguity = -1.0;   ///< runner-up / best lattice fit; -1 when not needed

@@ -99,8 +99,8 @@ class World {
   void buildIndex();
   double traceTerrain(const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t0, double t1,
                       double lip) const;
-  bool hitStem(const Stem& s, const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t_max,
-               double* t) const;
+  bool hitStem(const Stem& s, double bound, const Eigen::Vector3d& o, const Eigen::Vector3d& d,
+               double t_max, double* t) const;
 
   Eigen::Vector2d plot_size_{0, 0};
   Eigen::Vector2d min_xy_{0, 0}, max_xy_{0, 0};
@@ -113,6 +113,7 @@ class World {
   double object_max_z_ = 0.0;
 
   std::vector<Stem> stems_;
+  std::vector<double> stem_bound_;  ///< maxRadius() of each stem, looked up per ray
   std::vector<Cylinder> cylinders_;
   std::vector<Foliage> foliage_;
   size_t num_shrubs_ = 0, num_logs_ = 0;

@@ -324,8 +324,9 @@ class Simulator {
   const World& world() const { return *world_; }
   const std::vector<Trajectory>& trajectories() const { return trajectories_; }
 
-  /// Simulates every robot. `frames` may be null. `threads` <= 0: one per robot, up to the
-  /// hardware concurrency. Output does not depend on `threads`.
+  /// Simulates every robot. `frames` may be null. Work is split into (robot, submap window)
+  /// units, each with its own random streams, over `threads` threads (<= 0: the hardware
+  /// concurrency). Output does not depend on `threads`.
   SimulationStats run(FrameSink* frames, SubmapSink* submaps, int threads = 0);
 
  private:

@@ -38,6 +38,7 @@ struct LoopClosureNodeParams {
   bool publish_tf = true;                       ///< TF between odometry frames of linked robots
   double tf_rate_hz = 10.0;                     ///< TF re-publication rate [Hz]
   int queue_size = 100;                         ///< descriptors waiting; the oldest is dropped
+  std::string loop_log;                         ///< CSV of every query's result; empty: none
 
   template <class V>
   void visit(V& v) {
@@ -47,6 +48,7 @@ struct LoopClosureNodeParams {
     v("publish_tf", publish_tf);
     v("tf_rate_hz", tf_rate_hz);
     v("queue_size", queue_size);
+    v("loop_log", loop_log);
   }
 };
 

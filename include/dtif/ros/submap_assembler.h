@@ -1,6 +1,13 @@
 // Assembles gravity-aligned submaps from a registered cloud stream (FAST-LIO2's
 // cloud_registered, points in the odometry frame O) and its odometry, over a time window.
 // ROS-free so it is unit-tested without a master.
+//
+// Windows partition time as the simulator does (src/core/sim_survey.cpp): window k of a stream
+// covers (t0 + k * window_s, t0 + (k + 1) * window_s], where t0 = the first cloud's stamp minus
+// cloud_period_s (a cloud's stamp is the end of the time it covers, FAST-LIO2's lidar_end_time).
+// A submap is anchored at its window's centre (DATASET.md's anchor time): S is gravity-aligned at
+// the odometry pose interpolated there, and the submap's stamp is that centre. So a submap of a
+// simulated bag has the stamp and the frame of the dataset's submap of the same robot and window.
 #pragma once
 
 #include <cstdint>
@@ -15,9 +22,10 @@ namespace dtif {
 namespace ros_glue {
 
 struct SubmapAssemblerParams {
-  double window_s = 10.0;           ///< submap length: clouds within this time of the anchor [s]
+  double window_s = 10.0;           ///< submap length [s]
+  double cloud_period_s = 0.1;      ///< time one cloud covers, ending at its stamp [s]
   double max_odom_gap_s = 0.5;      ///< odometry silence that discards the open submap [s]
-  double max_odom_age_s = 0.2;      ///< the anchor needs an odometry pose this close in time [s]
+  double max_odom_age_s = 0.2;      ///< the anchor needs odometry this close in time [s]
   int max_submap_points = 3000000;  ///< further points of a window are dropped
 
   std::string validate() const;
@@ -25,6 +33,7 @@ struct SubmapAssemblerParams {
   template <class V>
   void visit(V& v) {
     v("window_s", window_s);
+    v("cloud_period_s", cloud_period_s);
     v("max_odom_gap_s", max_odom_gap_s);
     v("max_odom_age_s", max_odom_age_s);
     v("max_submap_points", max_submap_points);
@@ -35,7 +44,8 @@ struct SubmapAssemblerParams {
 /// at the anchor time, yaw from odometry) and its pose T_O_S.
 struct AssembledSubmap {
   int64_t id = -1;
-  double stamp = 0.0;  ///< anchor time [s]
+  double stamp = 0.0;      ///< anchor time = centre of the window [s]
+  double end_stamp = 0.0;  ///< stamp of the window's last cloud [s]
   Pose T_O_S = Pose::Identity();
   Cloud::Ptr cloud;
 };
@@ -47,7 +57,7 @@ class SubmapAssembler {
     kOk,
     kDuplicateStamp,  ///< same stamp as the previous message: dropped
     kOutOfOrder,      ///< older than the previous message: dropped
-    kNoOdometry,      ///< no odometry near the anchor time: cloud dropped, no submap started
+    kNoAnchorPose,    ///< no odometry at the closed window's centre: that submap was discarded
     kOdometryGap,     ///< odometry was silent too long: the open submap was discarded
     kEmptyCloud,      ///< nothing to add
     kTruncated,       ///< max_submap_points reached: some points dropped
@@ -58,11 +68,12 @@ class SubmapAssembler {
   /// T_O_B: pose of the sensor body in the odometry frame at stamp.
   Status addOdometry(double stamp, const Pose& T_O_B);
 
-  /// cloud_O: finite points in O. When this cloud closes the window, the finished submap is
-  /// returned in *done and this cloud anchors the next one.
+  /// cloud_O: points in O (non-finite ones are skipped). A window is finished by its last cloud
+  /// (stamp at the window's end) or, when that cloud is missing, by the first cloud of a later
+  /// window; the finished submap is then returned in *done.
   Status addCloud(double stamp, const Cloud& cloud_O, std::optional<AssembledSubmap>* done);
 
-  /// Finishes the open submap, if any (end of a bag).
+  /// Finishes the open (incomplete) submap, if any, when its anchor pose is known.
   std::optional<AssembledSubmap> flush();
 
   /// Drops the open submap and the odometry history.
@@ -75,15 +86,25 @@ class SubmapAssembler {
     double stamp;
     Pose T_O_B;
   };
+  /// Stamps closer than this to a window's end belong to it (bags keep nanoseconds) [s].
+  static constexpr double kStampTolS = 1e-4;
+  struct Window {
+    int64_t index = 0;  ///< k: covers (t0 + k * window_s, t0 + (k + 1) * window_s]
+    double end_stamp = 0.0;
+    Cloud::Ptr cloud_O;
+  };
   std::optional<Pose> poseAt(double stamp) const;
-  bool startWindow(double stamp);
+  int64_t windowOf(double stamp) const;
+  double centreOf(int64_t window) const;
+  /// Moves the open window into a submap in S; nullopt when its anchor pose is unknown.
+  std::optional<AssembledSubmap> close();
 
   SubmapAssemblerParams params_;
   int64_t next_id_;
   std::deque<Stamped> odom_;
   double last_cloud_stamp_ = -1.0;
-  std::optional<AssembledSubmap> open_;
-  Pose T_S_O_ = Pose::Identity();
+  std::optional<double> t0_;  ///< start of window 0 of the current stream
+  std::optional<Window> open_;
 };
 
 /// Gravity-aligned submap pose from a body pose: position kept, roll and pitch removed, yaw of

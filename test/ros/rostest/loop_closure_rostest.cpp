@@ -21,12 +21,15 @@
 #include "dtif/core/descriptor.h"
 #include "dtif/ros/conversions.h"
 #include "dtif/ros/msgs.h"
+#include "rostest_utils.h"
 
 namespace dtif {
 namespace {
 
 using ros_glue::fromMsg;
 using ros_glue::toMsg;
+using test::Inbox;
+using test::waitFor;
 
 Pose pose2d(double x, double y, double z, double yaw) {
   Pose T = Pose::Identity();
@@ -69,34 +72,6 @@ dtif_msgs::TrunkDescriptor descriptorMsg(const std::string& robot, int64_t id, d
   d.stamp = stamp;
   return toMsg(d, T_O_S, robot + "/odom");
 }
-
-// Spins until pred() holds or the deadline passes.
-bool waitFor(const std::function<bool()>& pred, double timeout_s) {
-  const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(timeout_s);
-  while (ros::ok() && ros::WallTime::now() < end) {
-    if (pred()) return true;
-    ros::WallDuration(0.02).sleep();
-  }
-  return pred();
-}
-
-template <class Msg>
-struct Inbox {
-  std::mutex mutex;
-  std::vector<boost::shared_ptr<const Msg>> msgs;
-  void cb(const boost::shared_ptr<const Msg>& m) {
-    std::lock_guard<std::mutex> lock(mutex);
-    msgs.push_back(m);
-  }
-  size_t size() {
-    std::lock_guard<std::mutex> lock(mutex);
-    return msgs.size();
-  }
-  boost::shared_ptr<const Msg> at(size_t i) {
-    std::lock_guard<std::mutex> lock(mutex);
-    return msgs.at(i);
-  }
-};
 
 class LoopClosureRostest : public ::testing::Test {
  protected:
@@ -281,21 +256,24 @@ TEST(TrunkExtractionRostest, AssemblesSubmapsAndSurvivesBadClouds) {
   ros::WallDuration(1.0).sleep();
   pcl::PointCloud<pcl::PointXYZ> stem;
   for (int k = 0; k < 30; ++k) stem.push_back(pcl::PointXYZ(5.0f, 2.0f, 0.1f * k));
+  // The first cloud (1.0, covering 0.9-1.0) starts window (0.9, 1.9]; its centre 1.4 anchors it.
   cloud_pub.publish(cloudMsg(stem, 1.0, "charlie/odom"));
   cloud_pub.publish(cloudMsg(stem, 1.0, "charlie/odom"));  // duplicate stamp
   cloud_pub.publish(cloudMsg(stem, 1.5, "wrong_frame"));
   cloud_pub.publish(cloudMsg(stem, 1.6, "charlie/odom"));
-  cloud_pub.publish(cloudMsg(stem, 2.2, "charlie/odom"));  // closes the 1 s window of 1.0
+  cloud_pub.publish(cloudMsg(stem, 1.3, "charlie/odom"));  // older than the previous one
+  cloud_pub.publish(cloudMsg(stem, 2.2, "charlie/odom"));  // next window: finishes the first
 
   ASSERT_TRUE(waitFor([&] { return descriptors.size() >= 1; }, 15.0)) << "no descriptor";
   const auto d = descriptors.at(0);
   EXPECT_EQ(d->robot, "charlie");
   EXPECT_EQ(d->submap_id, 0);
   EXPECT_EQ(d->header.frame_id, "charlie/odom");
-  EXPECT_NEAR(d->header.stamp.toSec(), 1.0, 1e-6);
+  EXPECT_NEAR(d->header.stamp.toSec(), 1.4, 1e-6);
+  EXPECT_NEAR(d->data_end.toSec(), 1.6, 1e-6);
   Pose T_O_S;
   ASSERT_TRUE(fromMsg(d->odom_pose, &T_O_S));
-  EXPECT_NEAR(T_O_S.translation().x(), 1.0, 1e-6);
+  EXPECT_NEAR(T_O_S.translation().x(), 1.08, 1e-6);  // odometry at 1.4
   EXPECT_NEAR(T_O_S.translation().y(), 2.0, 1e-6);
   EXPECT_NEAR(T_O_S.rotation()(2, 2), 1.0, 1e-9);  // gravity-aligned: roll removed
   EXPECT_NEAR(std::atan2(T_O_S.rotation()(1, 0), T_O_S.rotation()(0, 0)), yaw, 1e-3);
