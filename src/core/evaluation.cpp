@@ -243,6 +243,21 @@ double cellOverlap(const std::unordered_set<int64_t>& a, const std::unordered_se
   return static_cast<double>(common) / static_cast<double>(small.size());
 }
 
+bool eligiblePair(const SubmapRecord& q, const SubmapRecord& c, double exclude_recent_s) {
+  return c.robot != q.robot || std::fabs(c.stamp - q.stamp) >= exclude_recent_s;
+}
+
+void scoreAcceptedLoop(const Pose& T_c_q_gt, const Pose& T_c_q_est, double overlap,
+                       const EvalParams& eval, EvalRow* row) {
+  row->accepted = true;
+  row->T_c_q_est = T_c_q_est;
+  row->err = poseError(T_c_q_gt, T_c_q_est);
+  row->overlap = overlap;
+  row->true_loop = overlap >= eval.true_loop_overlap;
+  row->true_positive = row->true_loop && row->err->rot_deg <= eval.max_rot_err_deg &&
+                       row->err->trans_m <= eval.max_trans_err_m;
+}
+
 namespace {
 
 using CellSets = std::vector<std::unordered_set<int64_t>>;
@@ -251,10 +266,8 @@ using CellSets = std::vector<std::unordered_set<int64_t>>;
 // with (not the same robot's within exclude_recent_s) form a true loop with it?
 bool hasTrueLoop(const Dataset& ds, const CellSets& cells, size_t i, double exclude_recent_s,
                  const EvalParams& eval) {
-  const SubmapRecord& q = ds.submaps[i];
   for (size_t j = 0; j < i; ++j) {
-    const SubmapRecord& c = ds.submaps[j];
-    if (c.robot == q.robot && std::fabs(c.stamp - q.stamp) < exclude_recent_s) continue;
+    if (!eligiblePair(ds.submaps[i], ds.submaps[j], exclude_recent_s)) continue;
     if (cellOverlap(cells[i], cells[j]) >= eval.true_loop_overlap) return true;
   }
   return false;
@@ -263,16 +276,10 @@ bool hasTrueLoop(const Dataset& ds, const CellSets& cells, size_t i, double excl
 // An accepted loop of query i with candidate j (file positions) and its estimate T_c_q, scored.
 void scoreAccepted(const Dataset& ds, const CellSets& cells, size_t i, size_t j, const Pose& T_c_q,
                    const EvalParams& eval, EvalRow* row) {
-  row->accepted = true;
   row->candidate = ds.submaps[j].id;
-  row->T_c_q_est = T_c_q;
   const Pose T_c_q_gt =
       ds.T_W_S.at(ds.submaps[j].id).inverse() * ds.T_W_S.at(ds.submaps[i].id);  // Eq. (4.2)
-  row->err = poseError(T_c_q_gt, T_c_q);
-  row->overlap = cellOverlap(cells[i], cells[j]);
-  row->true_loop = row->overlap >= eval.true_loop_overlap;
-  row->true_positive = row->true_loop && row->err->rot_deg <= eval.max_rot_err_deg &&
-                       row->err->trans_m <= eval.max_trans_err_m;
+  scoreAcceptedLoop(T_c_q_gt, T_c_q, cellOverlap(cells[i], cells[j]), eval, row);
 }
 
 void checkGroundTruth(const Dataset& ds) {
@@ -351,6 +358,14 @@ EvalSummary summarize(const std::vector<EvalRow>& rows) {
 }
 
 }  // namespace
+
+EvalSummary summarizeRows(const std::vector<EvalRow>& rows, const std::string& dataset,
+                          double bytes_sum) {
+  EvalSummary s = summarize(rows);
+  s.dataset = dataset;
+  if (!rows.empty()) s.descriptor_bytes_mean = bytes_sum / static_cast<double>(rows.size());
+  return s;
+}
 
 EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const EvalParams& eval,
                          const std::function<void(size_t, size_t)>& progress) {

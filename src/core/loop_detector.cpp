@@ -512,9 +512,12 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
 
 std::optional<LoopClosure> matchPair(const Descriptor& q, const Descriptor& c,
                                      const LoopDetectorParams& params, PoseEstimate* est_out,
-                                     Verification* ver_out, QueryStats* stats) {
+                                     Verification* ver_out, QueryStats* stats,
+                                     const PoseSolver* solver, const std::vector<MatchTriangle>* tq,
+                                     const std::vector<MatchTriangle>* tc) {
   auto t0 = Clock::now();
-  const std::vector<Correspondence> corrs = buildCorrespondences(q, c, params.matcher);
+  const std::vector<Correspondence> corrs =
+      buildCorrespondences(q, c, params.matcher, nullptr, tq, tc);
   if (stats) stats->match_ms += msSince(t0);
   if (static_cast<int>(corrs.size()) < params.verification.min_hypothesis_inliers) {
     if (ver_out) {
@@ -526,7 +529,7 @@ std::optional<LoopClosure> matchPair(const Descriptor& q, const Descriptor& c,
   }
   if (stats) ++stats->matched;
   t0 = Clock::now();
-  const PoseEstimate est = estimatePose(corrs, params.pose);
+  const PoseEstimate est = solver && *solver ? (*solver)(corrs) : estimatePose(corrs, params.pose);
   if (stats) stats->solver_ms += msSince(t0);
   t0 = Clock::now();
   const Verification ver = verifyLoop(q, c, corrs, est, params.verification);
@@ -542,6 +545,7 @@ std::optional<LoopClosure> matchPair(const Descriptor& q, const Descriptor& c,
   lc.candidate_robot = c.robot;
   lc.candidate_id = c.submap_id;
   lc.T_c_q = ver.T_c_q;
+  lc.T_hypothesis = est.T_c_q;
   lc.inliers = static_cast<int>(ver.pairs.size());
   lc.score = ver.score;
   lc.inlier_pairs = ver.pairs;
@@ -579,6 +583,7 @@ LoopDetector::LoopDetector(const LoopDetectorParams& params) : params_(params) {
 bool LoopDetector::insert(std::shared_ptr<const Descriptor> d) {
   if (!d || !d->valid) return false;
   entries_.push_back(std::move(d));
+  triangles_.push_back(nullptr);
   return true;
 }
 
@@ -619,8 +624,16 @@ std::optional<LoopClosure> LoopDetector::query(const Descriptor& q, QueryStats* 
   st.screen_ms = msSince(t0);
 
   std::optional<LoopClosure> best;
+  std::vector<MatchTriangle> tq;
+  if (!cands.empty()) tq = matchTriangles(q, mp.neighbour_triangles);
   for (const Cand& cd : cands) {
-    auto lc = matchPair(q, *entries_[cd.index], params_, nullptr, nullptr, &st);
+    auto& tc = triangles_[cd.index];
+    if (!tc) {
+      tc = std::make_shared<const std::vector<MatchTriangle>>(
+          matchTriangles(*entries_[cd.index], mp.neighbour_triangles));
+    }
+    auto lc =
+        matchPair(q, *entries_[cd.index], params_, nullptr, nullptr, &st, &solver_, &tq, tc.get());
     if (lc && (!best || lc->score > best->score)) best = std::move(lc);
   }
   return best;
@@ -697,6 +710,7 @@ void LoopDetector::load(const std::string& path) {
     fail(e.what());
   }
   entries_ = std::move(loaded);
+  triangles_.assign(entries_.size(), nullptr);
 }
 
 }  // namespace dtif

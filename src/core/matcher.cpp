@@ -17,15 +17,9 @@ inline bool consistent(float a, float b, double rel, double abs_tol) {
   return diff <= abs_tol || diff <= rel * std::max(a, b);
 }
 
-/// A triangle to match and whether it is a Delaunay face (the paper's primitive).
-struct MatchTriangle {
-  Triangle t;
-  bool delaunay = true;
-};
+}  // namespace
 
-/// Delaunay faces plus, with k > 0, every triangle of a trunk and two of its k nearest
-/// neighbours (deduplicated), sorted by longest edge like Descriptor::triangles. Computed from the
-/// trunks on both sides, so nothing extra crosses the radio link.
+/// Computed from the trunks on both sides, so nothing extra crosses the radio link.
 std::vector<MatchTriangle> matchTriangles(const Descriptor& d, int k) {
   std::vector<MatchTriangle> out;
   if (k <= 0 || d.trunks.size() < 3) {
@@ -75,8 +69,6 @@ std::vector<MatchTriangle> matchTriangles(const Descriptor& d, int k) {
   return out;
 }
 
-}  // namespace
-
 std::string MatcherParams::validate() const {
   std::ostringstream err;
   auto unit = [&](const char* n, double v) {
@@ -113,6 +105,13 @@ double histogramIntersection(const std::vector<float>& a, const std::vector<floa
 std::vector<Correspondence> buildCorrespondences(const Descriptor& query,
                                                  const Descriptor& candidate,
                                                  const MatcherParams& params, MatchStats* stats) {
+  return buildCorrespondences(query, candidate, params, stats, nullptr, nullptr);
+}
+
+std::vector<Correspondence> buildCorrespondences(
+    const Descriptor& query, const Descriptor& candidate, const MatcherParams& params,
+    MatchStats* stats, const std::vector<MatchTriangle>* query_triangles,
+    const std::vector<MatchTriangle>* candidate_triangles) {
   MatchStats local;
   MatchStats& st = stats ? *stats : local;
   st = MatchStats{};
@@ -128,8 +127,11 @@ std::vector<Correspondence> buildCorrespondences(const Descriptor& query,
   }
   const size_t nq = query.trunks.size(), nc = candidate.trunks.size();
   if (nq == 0 || nc == 0 || query.triangles.empty() || candidate.triangles.empty()) return out;
-  const std::vector<MatchTriangle> tq = matchTriangles(query, params.neighbour_triangles);
-  const std::vector<MatchTriangle> tc = matchTriangles(candidate, params.neighbour_triangles);
+  std::vector<MatchTriangle> own_q, own_c;
+  if (!query_triangles) own_q = matchTriangles(query, params.neighbour_triangles);
+  if (!candidate_triangles) own_c = matchTriangles(candidate, params.neighbour_triangles);
+  const std::vector<MatchTriangle>& tq = query_triangles ? *query_triangles : own_q;
+  const std::vector<MatchTriangle>& tc = candidate_triangles ? *candidate_triangles : own_c;
 
   // Eq. (3.5): support matrices, flat |Vq| x |Vc| (submaps hold tens to a few hundred trunks).
   // The touched list lets the final scan visit only non-zero entries.

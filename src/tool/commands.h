@@ -16,6 +16,7 @@ int runSimulate(const Args& args);
 int runExtract(const Args& args);
 int runRegister(const Args& args);
 int runEval(const Args& args);
+int runBench(const Args& args);
 int runScore(const Args& args);
 
 /// results.csv, summary.json, table.md and params.yaml into folder out (created when missing).

@@ -1,4 +1,4 @@
-// dtif: the offline command-line tool (simulate, extract, register, eval, score).
+// dtif: the offline command-line tool (simulate, extract, register, eval, score, bench).
 #include <cstring>
 #include <exception>
 #include <iostream>
@@ -22,7 +22,11 @@ constexpr const char* kUsage =
     "           [--eval <eval_out_dir>]: scores the loop log of the ROS nodelets on this\n"
     "           dataset's bag against its ground truth (eval's metrics), lists the loops, "
     "compares\n"
-    "           them with a dtif eval run and reports the lag of the results\n";
+    "           them with a dtif eval run and reports the lag of the results\n"
+    "  bench    <dataset_dir>... --out <dir> [--config <params.yaml>] [--back-ends a,b,...]\n"
+    "           [--no-front-ends] [--no-pr] [--no-scaling] [--scaling-sizes 10,20,...]\n"
+    "           dtif vs the paper's baselines (back ends: dtif, dtif_unit, quatro,\n"
+    "           svd_ransac, fgr; front end: FPFH); summary.csv, tables.md, pr.csv, ...\n";
 
 }  // namespace
 
@@ -39,6 +43,7 @@ int main(int argc, char** argv) {
     if (cmd == "register") return dtif::tool::runRegister(args);
     if (cmd == "eval") return dtif::tool::runEval(args);
     if (cmd == "score") return dtif::tool::runScore(args);
+    if (cmd == "bench") return dtif::tool::runBench(args);
     std::cerr << "dtif: unknown command '" << cmd << "'\n" << kUsage;
     return 2;
   } catch (const dtif::tool::UsageError& e) {

@@ -102,6 +102,20 @@ struct EvalResult {
 /// detection.csv: one row per submap, the fields of DetectionRow. Throws DatasetError.
 void writeDetectionCsv(const std::string& path, const std::vector<DetectionRow>& rows);
 
+/// DATASET.md step 2: c is in q's database unless it is the same robot's within
+/// exclude_recent_s seconds.
+bool eligiblePair(const SubmapRecord& q, const SubmapRecord& c, double exclude_recent_s);
+
+/// Scores an accepted loop (q, c, T_c_q_est) of a pair with the given overlap: fills the row's
+/// accepted, T_c_q_est, err, overlap, true_loop and true_positive (DATASET.md's TP rule).
+void scoreAcceptedLoop(const Pose& T_c_q_gt, const Pose& T_c_q_est, double overlap,
+                       const EvalParams& eval, EvalRow* row);
+
+/// The summary of DATASET.md over one row per submap (means, RMSE, precision/recall, times);
+/// bytes_sum is the encoded descriptor size summed over the rows.
+EvalSummary summarizeRows(const std::vector<EvalRow>& rows, const std::string& dataset,
+                          double bytes_sum);
+
 /// Runs the protocol. progress(i, n) is called after each submap. Throws DatasetError when
 /// ground truth is missing or a cloud cannot be read.
 EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const EvalParams& eval,

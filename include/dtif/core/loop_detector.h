@@ -3,6 +3,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -105,7 +106,15 @@ struct LoopClosure {
   double score = 0.0;  ///< verification score (co-visible ratio x inlier weight share) [0..1]
   std::vector<std::pair<int, int>> inlier_pairs;  ///< (query trunk, candidate trunk), refined
   std::vector<std::pair<int, int>> all_pairs;     ///< every correspondence that was solved
+  /// The pose solver's hypothesis before verification's guided refinement (what a back-end
+  /// comparison scores; T_c_q is the refined pose).
+  Pose T_hypothesis = Pose::Identity();
 };
+
+/// A pose solver on weighted correspondences, in place of estimatePose (back-end comparisons).
+/// It must fill T_c_q, ok, inliers_T and inlier_weight; verification also reads the
+/// yaw/translation consensus fields (leave runner-ups at 0 when the solver has no such measure).
+using PoseSolver = std::function<PoseEstimate(const std::vector<Correspondence>&)>;
 
 /// Per-query timings and counts.
 struct QueryStats {
@@ -146,9 +155,14 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
 
 /// Matches one pair end to end (correspondences, pose, verification), without the database.
 /// Returns the loop when verified; `est`/`ver` (optional) receive the intermediate results.
+/// `solver` (optional) replaces estimatePose(corrs, params.pose); `tq`/`tc` (optional) are the
+/// sides' matchTriangles, computed here when null.
 std::optional<LoopClosure> matchPair(const Descriptor& q, const Descriptor& c,
                                      const LoopDetectorParams& params, PoseEstimate* est = nullptr,
-                                     Verification* ver = nullptr, QueryStats* stats = nullptr);
+                                     Verification* ver = nullptr, QueryStats* stats = nullptr,
+                                     const PoseSolver* solver = nullptr,
+                                     const std::vector<MatchTriangle>* tq = nullptr,
+                                     const std::vector<MatchTriangle>* tc = nullptr);
 
 /// Sequential loop detector. Not thread-safe: callers serialise access. Descriptors are held
 /// by shared_ptr to const and may be shared with other owners.
@@ -165,6 +179,8 @@ class LoopDetector {
   size_t size() const { return entries_.size(); }
   const std::vector<std::shared_ptr<const Descriptor>>& entries() const { return entries_; }
   const LoopDetectorParams& params() const { return params_; }
+  /// Replaces estimatePose by another solver on the same correspondences (empty: estimatePose).
+  void setSolver(PoseSolver solver) { solver_ = std::move(solver); }
 
   /// Writes the database to path atomically (temporary file, then rename). Throws on failure.
   void save(const std::string& path) const;
@@ -175,6 +191,10 @@ class LoopDetector {
  private:
   LoopDetectorParams params_;
   std::vector<std::shared_ptr<const Descriptor>> entries_;
+  PoseSolver solver_;
+  /// matchTriangles of each entry, computed when the entry is first matched and then reused
+  /// (the neighbour triangles of a descriptor do not depend on the query).
+  mutable std::vector<std::shared_ptr<const std::vector<MatchTriangle>>> triangles_;
 };
 
 }  // namespace dtif

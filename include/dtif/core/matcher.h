@@ -65,6 +65,18 @@ struct MatchStats {
   size_t triangle_pairs = 0;     ///< triangle pairs visited (after the length index)
 };
 
+/// A triangle buildCorrespondences matches, and whether it is a Delaunay face (the paper's
+/// primitive) rather than a neighbour triangle (MatcherParams::neighbour_triangles).
+struct MatchTriangle {
+  Triangle t;
+  bool delaunay = true;
+};
+
+/// The triangles matched for d: its Delaunay faces plus, with k > 0, every triangle of a trunk
+/// and two of its k nearest neighbours (deduplicated), sorted by longest edge. Depends only on d
+/// and k, so a database computes it once per descriptor, not once per pair. Pure; thread-safe.
+std::vector<MatchTriangle> matchTriangles(const Descriptor& d, int k);
+
 /// Histogram intersection S_cap(a, b) = sum_i min(a_i, b_i) of two normalised histograms.
 double histogramIntersection(const std::vector<float>& a, const std::vector<float>& b);
 
@@ -74,5 +86,11 @@ std::vector<Correspondence> buildCorrespondences(const Descriptor& query,
                                                  const Descriptor& candidate,
                                                  const MatcherParams& params,
                                                  MatchStats* stats = nullptr);
+/// The same with the sides' matchTriangles(d, params.neighbour_triangles) given (a nullptr side
+/// is computed here).
+std::vector<Correspondence> buildCorrespondences(
+    const Descriptor& query, const Descriptor& candidate, const MatcherParams& params,
+    MatchStats* stats, const std::vector<MatchTriangle>* query_triangles,
+    const std::vector<MatchTriangle>* candidate_triangles);
 
 }  // namespace dtif

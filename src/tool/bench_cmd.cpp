@@ -1,0 +1,209 @@
+// dtif bench <dataset_dir>... --out <dir> [--config params.yaml] [--back-ends a,b,...]
+//            [--no-front-ends] [--no-scaling] [--scaling-sizes 10,20,...]
+// Issue #5: dtif against the paper's baselines on the protocol of DATASET.md. Writes
+// summary.csv (one row per scene and method), tables.md (front ends and back ends, per scene
+// and over all scenes), pr.csv, submaps.csv, scaling.csv and each method's results.csv.
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+#include <iostream>
+#include <map>
+#include <sstream>
+
+#include "commands.h"
+#include "dtif/baselines/bench.h"
+#include "options.h"
+
+namespace dtif::tool {
+namespace {
+
+std::vector<std::string> splitList(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream ss(s);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    if (!item.empty()) out.push_back(item);
+  }
+  return out;
+}
+
+/// A dataset folder `<scene>/dataset` is named after <scene>, any other after itself.
+std::string sceneName(const std::string& dir) {
+  std::filesystem::path p = std::filesystem::path(dir).lexically_normal();
+  if (p.filename().empty()) p = p.parent_path();
+  if (p.filename() == "dataset" && p.has_parent_path()) return p.parent_path().filename().string();
+  return p.filename().string();
+}
+
+std::string slug(const std::string& s) {
+  std::string out;
+  for (char c : s) {
+    if (std::isalnum(static_cast<unsigned char>(c))) {
+      out += static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    } else if (!out.empty() && out.back() != '_') {
+      out += '_';
+    }
+  }
+  while (!out.empty() && out.back() == '_') out.pop_back();
+  return out;
+}
+
+void summaryCsvRow(std::ostream& os, const std::string& scene, const std::string& table,
+                   const std::string& method, const EvalSummary& s) {
+  auto opt = [&](const std::optional<double>& v) {
+    if (v) os << *v;
+    os << ',';
+  };
+  os << scene << ',' << table << ",\"" << method << "\",";
+  const auto& e = s.mean_err_all;
+  for (double PoseError::*m :
+       {&PoseError::roll_deg, &PoseError::pitch_deg, &PoseError::yaw_deg, &PoseError::rot_deg,
+        &PoseError::x_m, &PoseError::y_m, &PoseError::z_m, &PoseError::trans_m}) {
+    if (e) os << (*e).*m;
+    os << ',';
+  }
+  opt(s.rmse_rot_deg);
+  opt(s.rmse_trans_m);
+  os << s.t_desc_ms << ',' << s.t_loop_ms << ',' << s.t_total_ms << ',' << s.t_solver_ms << ',';
+  opt(s.precision);
+  opt(s.recall);
+  os << s.true_positives << ',' << s.accepted << ',' << s.queries_with_loop << ','
+     << s.descriptor_bytes_mean << '\n';
+}
+
+}  // namespace
+
+int runBench(const Args& args) {
+  const Options o = parseOptions(args, {"out", "config", "back-ends", "scaling-sizes"},
+                                 {"no-front-ends", "no-scaling", "no-pr"});
+  if (o.positional.empty()) throw UsageError{"expected one or more dataset folders"};
+  const auto out = o.get("out");
+  if (!out) throw UsageError{"--out <dir> is required"};
+  const DtifParams params = loadParams(o);
+  baselines::BenchOptions opt;
+  if (auto b = o.get("back-ends")) opt.back_ends = splitList(*b);
+  opt.front_ends = !o.has("no-front-ends");
+  opt.pr_curve = !o.has("no-pr");
+  std::vector<size_t> sizes{10, 20, 50, 100, 200, 500, 1000, 2000};
+  if (auto s = o.get("scaling-sizes")) {
+    sizes.clear();
+    for (const auto& v : splitList(*s)) sizes.push_back(std::stoul(v));
+  }
+
+  const std::filesystem::path dir(*out);
+  std::filesystem::create_directories(dir);
+  std::ofstream summary(dir / "summary.csv"), pr(dir / "pr.csv"), subs(dir / "submaps.csv");
+  summary << std::setprecision(6)
+          << "scene,table,method,roll_deg,pitch_deg,yaw_deg,rot_deg,x_m,y_m,z_m,trans_m,"
+             "rmse_rot_deg,rmse_trans_m,desc_ms,loop_ms,total_ms,solver_ms,precision,recall,"
+             "true_positives,accepted,queries_with_loop,bytes\n";
+  pr << "scene,method,threshold,accepted,true_positives,precision,recall\n";
+  subs << "scene,id,points,trunks,bytes,t_extract_ms,t_desc_ms,t_loop_ms,fpfh_points,t_fpfh_ms\n";
+
+  std::vector<baselines::SceneBench> scenes;
+  std::vector<std::shared_ptr<const Descriptor>> pool;
+  for (const std::string& path : o.positional) {
+    const Dataset ds = readDataset(path);
+    const std::string scene = sceneName(path);
+    baselines::SceneBench sb =
+        baselines::runSceneBench(ds, scene, params, opt, [&](const std::string& s) {
+          std::cerr << "\rdtif bench " << scene << ": " << s << "\033[K";
+        });
+    std::cerr << "\n";
+    const std::filesystem::path sdir = dir / scene;
+    std::filesystem::create_directories(sdir);
+    for (const auto& run : sb.runs) {
+      summaryCsvRow(summary, scene, run.table, run.method, run.summary);
+      writeResultsCsv((sdir / ("results_" + run.table + "_" + slug(run.method) + ".csv")).string(),
+                      run.rows);
+    }
+    for (const auto& p : sb.pr) {
+      pr << scene << ",\"" << p.method << "\"," << p.threshold << ',' << p.accepted << ','
+         << p.true_positives << ',' << p.precision << ',' << p.recall << '\n';
+    }
+    // dtif's own loop time per submap is the "dtif (weighted) + dtif refinement" run's.
+    const baselines::MethodRun* dtif_run = nullptr;
+    for (const auto& run : sb.runs) {
+      if (run.method == "dtif (weighted) + dtif refinement") dtif_run = &run;
+    }
+    for (size_t i = 0; i < sb.submaps.size(); ++i) {
+      const auto& st = sb.submaps[i];
+      subs << scene << ',' << st.id << ',' << st.points << ',' << st.trunks << ',' << st.bytes
+           << ',' << st.t_extract_ms << ',' << st.t_desc_ms << ','
+           << (dtif_run ? dtif_run->rows[i].t_loop_ms : 0.0) << ',' << st.fpfh_points << ','
+           << st.t_fpfh_ms << '\n';
+    }
+    pool.insert(pool.end(), sb.descriptors.begin(), sb.descriptors.end());
+    scenes.push_back(std::move(sb));
+  }
+
+  // Tables: per scene, then all scenes together (rows concatenated, summarised once).
+  std::ostringstream md;
+  for (const std::string table : {"front_end", "back_end"}) {
+    md << (table == std::string("front_end")
+               ? "### Front ends (same pairs: each query with a loop vs its most and least "
+                 "overlapping eligible submap)\n\n"
+               : "### Back ends on dtif's correspondences (sequential protocol, DATASET.md)\n\n");
+    std::vector<std::string> order;
+    std::map<std::string, std::vector<EvalRow>> all_rows;
+    std::map<std::string, double> all_bytes, loop_w, solver_w, evaluated;
+    md << baselines::tableHeader("Scene / method");
+    for (const auto& sb : scenes) {
+      for (const auto& run : sb.runs) {
+        if (run.table != table) continue;
+        md << baselines::tableRow(run.summary, sb.scene + ": " + run.method);
+        if (!all_rows.count(run.method)) order.push_back(run.method);
+        auto& rows = all_rows[run.method];
+        rows.insert(rows.end(), run.rows.begin(), run.rows.end());
+        all_bytes[run.method] += run.summary.descriptor_bytes_mean * run.summary.submaps;
+        // Front ends time per registered query (queries with a loop).
+        const double w =
+            table == std::string("front_end") ? run.summary.queries_with_loop : run.summary.submaps;
+        loop_w[run.method] += run.summary.t_loop_ms * w;
+        solver_w[run.method] += run.summary.t_solver_ms * w;
+        evaluated[run.method] += w;
+      }
+    }
+    for (const auto& method : order) {
+      EvalSummary s = summarizeRows(all_rows[method], "all", all_bytes[method]);
+      if (evaluated[method] > 0) {
+        s.t_loop_ms = loop_w[method] / evaluated[method];
+        s.t_solver_ms = solver_w[method] / evaluated[method];
+        s.t_total_ms = s.t_desc_ms + s.t_loop_ms;
+      }
+      md << baselines::tableRow(s, "**all scenes: " + method + "**");
+      summaryCsvRow(summary, "all", table, method, s);
+    }
+    md << "\n";
+  }
+
+  if (!o.has("no-scaling") && !pool.empty()) {
+    std::cerr << "dtif bench: query time vs database size\n";
+    std::vector<std::shared_ptr<const Descriptor>> queries;
+    const size_t step = std::max<size_t>(1, pool.size() / 24);
+    for (size_t i = 0; i < pool.size(); i += step) queries.push_back(pool[i]);
+    const auto pts = baselines::runScaling(pool, queries, params, sizes);
+    std::ofstream sc(dir / "scaling.csv");
+    sc << "db_size,indexed,query_ms,screen_ms,match_ms,solver_ms,screened_in\n";
+    md << "### Query time vs database size (" << queries.size()
+       << " queries; database of perturbed copies of all scenes' descriptors)\n\n"
+       << "| Database | Query ms | Screening ms | Correspondences ms | Solver ms | Screened in |\n"
+       << "|---|---|---|---|---|---|\n"
+       << std::fixed << std::setprecision(3);
+    for (const auto& p : pts) {
+      sc << p.db_size << ',' << p.indexed << ',' << p.query_ms << ',' << p.screen_ms << ','
+         << p.match_ms << ',' << p.solver_ms << ',' << p.screened_in << '\n';
+      md << "| " << p.db_size << " | " << p.query_ms << " | " << p.screen_ms << " | " << p.match_ms
+         << " | " << p.solver_ms << " | " << std::setprecision(1) << p.screened_in
+         << std::setprecision(3) << " |\n";
+    }
+    md << "\n";
+  }
+  std::ofstream(dir / "tables.md") << md.str();
+  std::cout << md.str();
+  if (!summary || !pr || !subs) throw DatasetError(*out + ": write failed");
+  return 0;
+}
+
+}  // namespace dtif::tool
