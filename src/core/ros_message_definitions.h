@@ -5,6 +5,49 @@
 // Internal to src/core/rosbag_writer.cpp.
 #pragma once
 
+// Definitions embed those of the messages they use, each after a separator line (as
+// genmsg writes them); the blocks used by several messages are written once here.
+#define DTIF_MSG_DEF_HEADER                                                                     \
+  "================================================================================\n"          \
+  "MSG: std_msgs/Header\n"                                                                      \
+  "# Standard metadata for higher-level stamped data types.\n"                                  \
+  "# This is generally used to communicate timestamped data \n"                                 \
+  "# in a particular coordinate frame.\n"                                                       \
+  "# \n"                                                                                        \
+  "# sequence ID: consecutively increasing ID \n"                                               \
+  "uint32 seq\n"                                                                                \
+  "#Two-integer timestamp that is expressed as:\n"                                              \
+  "# * stamp.sec: seconds (stamp_secs) since epoch (in Python the variable is called 'secs')\n" \
+  "# * stamp.nsec: nanoseconds since stamp_secs (in Python the variable is called 'nsecs')\n"   \
+  "# time-handling sugar is provided by the client library\n"                                   \
+  "time stamp\n"                                                                                \
+  "#Frame this data is associated with\n"                                                       \
+  "string frame_id\n"
+#define DTIF_MSG_DEF_VECTOR3                                                           \
+  "================================================================================\n" \
+  "MSG: geometry_msgs/Vector3\n"                                                       \
+  "# This represents a vector in free space. \n"                                       \
+  "# It is only meant to represent a direction. Therefore, it does not\n"              \
+  "# make sense to apply a translation to it (e.g., when applying a \n"                \
+  "# generic rigid transformation to a Vector3, tf2 will only apply the\n"             \
+  "# rotation). If you want your data to be translatable too, use the\n"               \
+  "# geometry_msgs/Point message instead.\n"                                           \
+  "\n"                                                                                 \
+  "float64 x\n"                                                                        \
+  "float64 y\n"                                                                        \
+  "float64 z\n"
+#define DTIF_MSG_DEF_QUATERNION                                                        \
+  "================================================================================\n" \
+  "MSG: geometry_msgs/Quaternion\n"                                                    \
+  "# This represents an orientation in free space in quaternion form.\n"               \
+  "\n"                                                                                 \
+  "float64 x\n"                                                                        \
+  "float64 y\n"                                                                        \
+  "float64 z\n"                                                                        \
+  "float64 w\n"
+
+// Literal blocks joined by macros, one per line: not for clang-format to reflow.
+// clang-format off
 namespace dtif::bag::defs {
 
 // sensor_msgs/PointCloud2
@@ -39,21 +82,7 @@ constexpr char kPointCloud2Definition[] =
     "\n"
     "bool is_dense        # True if there are no invalid points\n"
     "\n"
-    "================================================================================\n"
-    "MSG: std_msgs/Header\n"
-    "# Standard metadata for higher-level stamped data types.\n"
-    "# This is generally used to communicate timestamped data \n"
-    "# in a particular coordinate frame.\n"
-    "# \n"
-    "# sequence ID: consecutively increasing ID \n"
-    "uint32 seq\n"
-    "#Two-integer timestamp that is expressed as:\n"
-    "# * stamp.sec: seconds (stamp_secs) since epoch (in Python the variable is called 'secs')\n"
-    "# * stamp.nsec: nanoseconds since stamp_secs (in Python the variable is called 'nsecs')\n"
-    "# time-handling sugar is provided by the client library\n"
-    "time stamp\n"
-    "#Frame this data is associated with\n"
-    "string frame_id\n"
+    DTIF_MSG_DEF_HEADER
     "\n"
     "================================================================================\n"
     "MSG: sensor_msgs/PointField\n"
@@ -87,21 +116,7 @@ constexpr char kOdometryDefinition[] =
     "geometry_msgs/PoseWithCovariance pose\n"
     "geometry_msgs/TwistWithCovariance twist\n"
     "\n"
-    "================================================================================\n"
-    "MSG: std_msgs/Header\n"
-    "# Standard metadata for higher-level stamped data types.\n"
-    "# This is generally used to communicate timestamped data \n"
-    "# in a particular coordinate frame.\n"
-    "# \n"
-    "# sequence ID: consecutively increasing ID \n"
-    "uint32 seq\n"
-    "#Two-integer timestamp that is expressed as:\n"
-    "# * stamp.sec: seconds (stamp_secs) since epoch (in Python the variable is called 'secs')\n"
-    "# * stamp.nsec: nanoseconds since stamp_secs (in Python the variable is called 'nsecs')\n"
-    "# time-handling sugar is provided by the client library\n"
-    "time stamp\n"
-    "#Frame this data is associated with\n"
-    "string frame_id\n"
+    DTIF_MSG_DEF_HEADER
     "\n"
     "================================================================================\n"
     "MSG: geometry_msgs/PoseWithCovariance\n"
@@ -128,14 +143,7 @@ constexpr char kOdometryDefinition[] =
     "float64 y\n"
     "float64 z\n"
     "\n"
-    "================================================================================\n"
-    "MSG: geometry_msgs/Quaternion\n"
-    "# This represents an orientation in free space in quaternion form.\n"
-    "\n"
-    "float64 x\n"
-    "float64 y\n"
-    "float64 z\n"
-    "float64 w\n"
+    DTIF_MSG_DEF_QUATERNION
     "\n"
     "================================================================================\n"
     "MSG: geometry_msgs/TwistWithCovariance\n"
@@ -155,18 +163,7 @@ constexpr char kOdometryDefinition[] =
     "Vector3  linear\n"
     "Vector3  angular\n"
     "\n"
-    "================================================================================\n"
-    "MSG: geometry_msgs/Vector3\n"
-    "# This represents a vector in free space. \n"
-    "# It is only meant to represent a direction. Therefore, it does not\n"
-    "# make sense to apply a translation to it (e.g., when applying a \n"
-    "# generic rigid transformation to a Vector3, tf2 will only apply the\n"
-    "# rotation). If you want your data to be translatable too, use the\n"
-    "# geometry_msgs/Point message instead.\n"
-    "\n"
-    "float64 x\n"
-    "float64 y\n"
-    "float64 z\n";
+    DTIF_MSG_DEF_VECTOR3;
 
 // tf2_msgs/TFMessage
 constexpr char kTfMessageType[] = "tf2_msgs/TFMessage";
@@ -187,21 +184,7 @@ constexpr char kTfMessageDefinition[] =
     "string child_frame_id # the frame id of the child frame\n"
     "Transform transform\n"
     "\n"
-    "================================================================================\n"
-    "MSG: std_msgs/Header\n"
-    "# Standard metadata for higher-level stamped data types.\n"
-    "# This is generally used to communicate timestamped data \n"
-    "# in a particular coordinate frame.\n"
-    "# \n"
-    "# sequence ID: consecutively increasing ID \n"
-    "uint32 seq\n"
-    "#Two-integer timestamp that is expressed as:\n"
-    "# * stamp.sec: seconds (stamp_secs) since epoch (in Python the variable is called 'secs')\n"
-    "# * stamp.nsec: nanoseconds since stamp_secs (in Python the variable is called 'nsecs')\n"
-    "# time-handling sugar is provided by the client library\n"
-    "time stamp\n"
-    "#Frame this data is associated with\n"
-    "string frame_id\n"
+    DTIF_MSG_DEF_HEADER
     "\n"
     "================================================================================\n"
     "MSG: geometry_msgs/Transform\n"
@@ -210,25 +193,12 @@ constexpr char kTfMessageDefinition[] =
     "Vector3 translation\n"
     "Quaternion rotation\n"
     "\n"
-    "================================================================================\n"
-    "MSG: geometry_msgs/Vector3\n"
-    "# This represents a vector in free space. \n"
-    "# It is only meant to represent a direction. Therefore, it does not\n"
-    "# make sense to apply a translation to it (e.g., when applying a \n"
-    "# generic rigid transformation to a Vector3, tf2 will only apply the\n"
-    "# rotation). If you want your data to be translatable too, use the\n"
-    "# geometry_msgs/Point message instead.\n"
-    "\n"
-    "float64 x\n"
-    "float64 y\n"
-    "float64 z\n"
-    "================================================================================\n"
-    "MSG: geometry_msgs/Quaternion\n"
-    "# This represents an orientation in free space in quaternion form.\n"
-    "\n"
-    "float64 x\n"
-    "float64 y\n"
-    "float64 z\n"
-    "float64 w\n";
+    DTIF_MSG_DEF_VECTOR3
+    DTIF_MSG_DEF_QUATERNION;
 
 }  // namespace dtif::bag::defs
+// clang-format on
+
+#undef DTIF_MSG_DEF_HEADER
+#undef DTIF_MSG_DEF_VECTOR3
+#undef DTIF_MSG_DEF_QUATERNION
