@@ -2,7 +2,7 @@
 # Issue #5: dtif against the paper's baselines on every built-in scene, in one run.
 # Usage: scripts/bench.sh [out_dir] [scene.yaml ...]   (default out: bench/<date>)
 # Reuses the datasets of scripts/eval_scenes.sh (.ws/scenes/<name>/dataset), simulating the
-# missing ones; runs `dtif bench` (front ends, back ends, precision-recall, scaling), measures
+# missing or outdated ones as it does; runs `dtif bench` (front ends, back ends, precision-recall, scaling), measures
 # the peak RSS of `dtif eval` on the largest scene, and draws the plots (python3-matplotlib,
 # installed through scripts/install_deps.sh). Writes tables.md, *.csv and *.png into out_dir.
 # About 20 min on 2 shared cores when the datasets exist.
@@ -10,10 +10,7 @@ set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 OUT="${1:-${DTIF_REPO}/bench/$(date +%Y-%m-%d)}"
 shift || true
-SCENES=("$@")
-if [ ${#SCENES[@]} -eq 0 ]; then
-  SCENES=("${DTIF_REPO}"/config/scenes/*.yaml)
-fi
+dtif_scenes "$@"
 
 dtif_build > "${DTIF_WS}/build.log" 2>&1 || { cat "${DTIF_WS}/build.log"; exit 1; }
 bash "${DTIF_REPO}/scripts/install_deps.sh" python3-matplotlib  # the plots (Debian's, never pip)
@@ -21,12 +18,8 @@ mkdir -p "${OUT}"
 DATASETS=()
 for scene in "${SCENES[@]}"; do
   name="$(basename "${scene}" .yaml)"
-  ds="${DTIF_WS}/scenes/${name}/dataset"
-  if [ ! -f "${ds}/submaps.csv" ]; then
-    echo "== ${name}: simulating" >&2
-    "${DTIF_BIN}" simulate "${scene}" --out "${ds}" --seed 1 >&2
-  fi
-  DATASETS+=("${ds}")
+  dtif_scene_dataset "${scene}" "${DTIF_WS}/scenes/${name}"
+  DATASETS+=("${DTIF_WS}/scenes/${name}/dataset")
 done
 
 "${DTIF_BIN}" bench "${DATASETS[@]}" --out "${OUT}" > "${OUT}/bench.log"

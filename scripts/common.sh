@@ -39,3 +39,24 @@ dtif_private_master() {
 dtif_robots() {
   mapfile -t ROBOTS < <(tail -n +2 "$1/submaps.csv" | cut -d, -f2 | awk '!seen[$0]++')
 }
+
+# SCENES: the scene YAMLs given as arguments, else every built-in scene (config/scenes/).
+dtif_scenes() {
+  SCENES=("$@")
+  if [ ${#SCENES[@]} -eq 0 ]; then
+    SCENES=("${DTIF_REPO}"/config/scenes/*.yaml)
+  fi
+}
+
+# Simulates scene $1 (seed 1) into $2/dataset, with $2/scene.png and $2/simulate.log, unless $2
+# holds a dataset newer than the scene file (the datasets of eval_scenes.sh and bench.sh).
+dtif_scene_dataset() {
+  local scene="$1" dir="$2"
+  if [ ! -f "${dir}/dataset/submaps.csv" ] || [ "${scene}" -nt "${dir}/dataset/submaps.csv" ]; then
+    rm -rf "${dir}"
+    mkdir -p "${dir}"
+    echo "== $(basename "${scene}" .yaml): simulating" >&2
+    "${DTIF_BIN}" simulate "${scene}" --out "${dir}/dataset" --seed 1 --png "${dir}/scene.png" \
+      | tee "${dir}/simulate.log" >&2
+  fi
+}

@@ -7,10 +7,7 @@ set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 OUT="${1:-${DTIF_WS}/scenes}"
 shift || true
-SCENES=("$@")
-if [ ${#SCENES[@]} -eq 0 ]; then
-  SCENES=("${DTIF_REPO}"/config/scenes/*.yaml)
-fi
+dtif_scenes "$@"
 
 dtif_build > "${DTIF_WS}/build.log" 2>&1 || { cat "${DTIF_WS}/build.log"; exit 1; }
 mkdir -p "${OUT}"
@@ -19,13 +16,7 @@ TABLE="${OUT}/table.md"
 for scene in "${SCENES[@]}"; do
   name="$(basename "${scene}" .yaml)"
   dir="${OUT}/${name}"
-  if [ ! -f "${dir}/dataset/submaps.csv" ] || [ "${scene}" -nt "${dir}/dataset/submaps.csv" ]; then
-    rm -rf "${dir}"
-    mkdir -p "${dir}"
-    echo "== ${name}: simulating" >&2
-    "${DTIF_BIN}" simulate "${scene}" --out "${dir}/dataset" --seed 1 --png "${dir}/scene.png" \
-      | tee "${dir}/simulate.log" >&2
-  fi
+  dtif_scene_dataset "${scene}" "${dir}"
   echo "== ${name}: evaluating" >&2
   "${DTIF_BIN}" eval "${dir}/dataset" --out "${dir}/eval" > "${dir}/eval.log" 2>&1 \
     || { cat "${dir}/eval.log" >&2; exit 1; }
