@@ -2,7 +2,8 @@
 # Issue #5: dtif against the paper's baselines on every built-in scene, in one run.
 # Usage: scripts/bench.sh [out_dir] [scene.yaml ...]   (default out: bench/<date>)
 # Reuses the datasets of scripts/eval_scenes.sh (.ws/scenes/<name>/dataset), simulating the
-# missing or outdated ones as it does; runs `dtif bench` (front ends, back ends, precision-recall, scaling), measures
+# missing or outdated ones as it does; runs `dtif bench` (front ends, back ends,
+# precision-recall, scaling), measures
 # the peak RSS of `dtif eval` on the largest scene, and draws the plots (python3-matplotlib,
 # installed through scripts/install_deps.sh). Writes tables.md, *.csv and *.png into out_dir.
 # About 20 min on 2 shared cores when the datasets exist.
