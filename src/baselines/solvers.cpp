@@ -164,20 +164,11 @@ double adaptiveVoting(const std::vector<double>& v, double beta) {
 PoseEstimate quatroLike(const std::vector<Correspondence>& corrs, const QuatroParams& params) {
   const int k = static_cast<int>(corrs.size());
   if (k < 2) return PoseEstimate{};
-  const int64_t total = static_cast<int64_t>(k) * (k - 1) / 2;
-  const double stride =
-      std::max(1.0, static_cast<double>(total) / static_cast<double>(params.max_tim_pairs));
   std::vector<Tim2> tims;
-  double next = 0.0;
-  int64_t index = 0;
-  for (int a = 0; a < k; ++a) {
-    for (int b = a + 1; b < k; ++b, ++index) {
-      if (static_cast<double>(index) < next) continue;
-      next += stride;
-      tims.push_back(
-          {a, b, (corrs[a].pq - corrs[b].pq).head<2>(), (corrs[a].pc - corrs[b].pc).head<2>()});
-    }
-  }
+  forEachSampledPair(k, params.max_tim_pairs, [&](int a, int b) {
+    tims.push_back(
+        {a, b, (corrs[a].pq - corrs[b].pq).head<2>(), (corrs[a].pc - corrs[b].pc).head<2>()});
+  });
   // GNC-TLS (Yang et al. 2020) on yaw: mu from the largest residual of the least-squares start
   // up to the truncated cost, each step the closed-form weighted 2-D rotation.
   const double c2 = params.beta_m * params.beta_m;

@@ -233,41 +233,32 @@ PoseEstimate estimatePose(const std::vector<Correspondence>& corrs,
   std::vector<double> w(k);
   for (int i = 0; i < k; ++i) w[i] = params.unit_weights ? 1.0 : corrs[i].w;
 
-  // Eq. (3.13): translation-invariant measurements over correspondence pairs. With more pairs
-  // than max_tim_pairs, a fixed stride over the pair enumeration keeps a deterministic,
-  // evenly spread subsample.
+  // Eq. (3.13): translation-invariant measurements over correspondence pairs (a fixed subsample
+  // beyond max_tim_pairs).
   const double beta_r = params.beta_yaw_m, beta_r2 = beta_r * beta_r;
   const int64_t total_pairs = static_cast<int64_t>(k) * (k - 1) / 2;
-  const double stride =
-      std::max(1.0, static_cast<double>(total_pairs) / static_cast<double>(params.max_tim_pairs));
   std::vector<Tim> tims;
   tims.reserve(std::min<int64_t>(total_pairs, params.max_tim_pairs));
   std::vector<int> pair_count(k, 0);  // TIMs each correspondence takes part in
-  double next_pick = 0.0;
-  int64_t index = 0;
-  for (int a = 0; a < k; ++a) {
-    for (int b = a + 1; b < k; ++b, ++index) {
-      if (static_cast<double>(index) < next_pick) continue;
-      next_pick += stride;
-      // Two correspondences sharing a trunk are alternatives (one of them is wrong), never
-      // independent evidence.
-      if (corrs[a].iq == corrs[b].iq || corrs[a].ic == corrs[b].ic) continue;
-      Tim m{a,
-            b,
-            corrs[a].pq.x() - corrs[b].pq.x(),
-            corrs[a].pq.y() - corrs[b].pq.y(),
-            corrs[a].pc.x() - corrs[b].pc.x(),
-            corrs[a].pc.y() - corrs[b].pc.y(),
-            std::sqrt(w[a] * w[b])};  // omega_ab of Eq. (3.13)
-      const double lq = std::hypot(m.qx, m.qy), lc = std::hypot(m.cx, m.cy);
-      if (lq < 1e-9 || lc < 1e-9) continue;
-      // A rotation preserves length: a TIM with | |d^q| - |d^c| | > beta_R has residual
-      // > beta_R at every theta, so it adds the constant beta_R^2 to Eq. (3.14) and cannot
-      // move the minimiser. Dropping it is exact and removes most outliers before GNC.
-      if (std::fabs(lq - lc) > beta_r) continue;
-      tims.push_back(m);
-    }
-  }
+  forEachSampledPair(k, params.max_tim_pairs, [&](int a, int b) {
+    // Two correspondences sharing a trunk are alternatives (one of them is wrong), never
+    // independent evidence.
+    if (corrs[a].iq == corrs[b].iq || corrs[a].ic == corrs[b].ic) return;
+    Tim m{a,
+          b,
+          corrs[a].pq.x() - corrs[b].pq.x(),
+          corrs[a].pq.y() - corrs[b].pq.y(),
+          corrs[a].pc.x() - corrs[b].pc.x(),
+          corrs[a].pc.y() - corrs[b].pc.y(),
+          std::sqrt(w[a] * w[b])};  // omega_ab of Eq. (3.13)
+    const double lq = std::hypot(m.qx, m.qy), lc = std::hypot(m.cx, m.cy);
+    if (lq < 1e-9 || lc < 1e-9) return;
+    // A rotation preserves length: a TIM with | |d^q| - |d^c| | > beta_R has residual
+    // > beta_R at every theta, so it adds the constant beta_R^2 to Eq. (3.14) and cannot
+    // move the minimiser. Dropping it is exact and removes most outliers before GNC.
+    if (std::fabs(lq - lc) > beta_r) return;
+    tims.push_back(m);
+  });
   if (tims.empty()) return est;
 
   // Eq. (3.14): GNC-TLS, guarded by the exact 1-D consensus sweep; keep the lower TLS cost.

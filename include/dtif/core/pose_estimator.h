@@ -3,6 +3,8 @@
 // then weighted TLS elevation.
 #pragma once
 
+#include <algorithm>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -49,6 +51,24 @@ struct PoseEstimate {
   double translation_consensus = 0.0;  ///< weight of I_R within beta_xy of t_xy
   double translation_runner_up = 0.0;  ///< best such weight of a mode > 2 beta_xy away
 };
+
+/// Calls fn(a, b) for the correspondence pairs a < b of k correspondences, in order: all of
+/// them, or with more than max_pairs a fixed stride over their enumeration, a deterministic and
+/// evenly spread subsample (the translation-invariant measurements of Eq. 3.13).
+template <class Fn>
+void forEachSampledPair(int k, int max_pairs, Fn&& fn) {
+  const int64_t total = static_cast<int64_t>(k) * (k - 1) / 2;
+  const double stride = std::max(1.0, static_cast<double>(total) / static_cast<double>(max_pairs));
+  double next = 0.0;
+  int64_t index = 0;
+  for (int a = 0; a < k; ++a) {
+    for (int b = a + 1; b < k; ++b, ++index) {
+      if (static_cast<double>(index) < next) continue;
+      next += stride;
+      fn(a, b);
+    }
+  }
+}
 
 /// Solves Eqs. (3.11)-(3.17) on weighted correspondences. Pure; thread-safe; deterministic.
 PoseEstimate estimatePose(const std::vector<Correspondence>& corrs,
