@@ -150,21 +150,22 @@ double refineElevation(const Descriptor& q, const Descriptor& c,
   // of its supporters. Window 0.25 m: bases are cm-level, and a residual tilt of 0.5 deg moves
   // pairs 20 m apart by 0.17 m; a wrong base is decimetres off.
   constexpr double kZWindow = 0.25;
-  const auto tukey = [&](double r) {
-    const double u = r / kZWindow;
+  const auto tukey = [](double r, double c) {
+    const double u = r / c;
     return std::abs(u) < 1.0 ? (1.0 - u * u) * (1.0 - u * u) : 0.0;
   };
   double mode = dz[0], best_support = -1.0;
   for (double z0 : dz) {
     double support = 0.0;
-    for (double z1 : dz) support += tukey(z1 - z0);
+    for (double z1 : dz) support += tukey(z1 - z0, kZWindow);
     if (support > best_support + 1e-12) best_support = support, mode = z0;
   }
   double sw = 0.0, swz = 0.0;
   int agree = 0;
   for (double z1 : dz) {
-    sw += tukey(z1 - mode);
-    swz += tukey(z1 - mode) * z1;
+    const double w = tukey(z1 - mode, kZWindow);
+    sw += w;
+    swz += w * z1;
     agree += std::abs(z1 - mode) < kZWindow;
   }
   const double z_mode = swz / sw;  // the robust start value of the tilt fit below
@@ -192,9 +193,8 @@ double refineElevation(const Descriptor& q, const Descriptor& c,
     for (size_t k = 0; k < xy.size(); ++k) {
       const Eigen::Vector3d J(1.0, xy[k].x() - mean.x(), xy[k].y() - mean.y());
       const double r = dz[k] - J.dot(s);
-      const double u = r / kTukeyC;
-      if (std::abs(u) >= 1.0) continue;
-      const double w = (1.0 - u * u) * (1.0 - u * u);
+      const double w = tukey(r, kTukeyC);
+      if (w == 0.0) continue;
       A += w * J * J.transpose();
       b += w * J * dz[k];
     }
