@@ -12,6 +12,8 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "dtif/core/pair_vote.h"
+
 namespace dtif {
 namespace {
 
@@ -510,30 +512,112 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
   return v;
 }
 
+namespace {
+
+/// The triangles gave no pose hypothesis at all (as opposed to a hypothesis that failed a check).
+bool noHypothesis(const std::string& reason) {
+  return reason == "few correspondences" || reason == "no pose" ||
+         reason == "few hypothesis inliers" || reason == "low inlier weight";
+}
+
+/// The vote fallback (MatcherParams::vote_fallback): the voted peaks are fitted to all trunks
+/// (fitPose), the best fit must clearly beat every distinct runner-up (repetitive stands give
+/// several), and its mutual trunk pairs (unit weights) become the
+/// correspondences that the solver and verifyLoop see. Empty with `reason` set when none.
+std::vector<Correspondence> voteCorrespondences(const Descriptor& q, const Descriptor& c,
+                                                const LoopDetectorParams& params,
+                                                std::string* reason) {
+  constexpr int kPeaks = 4;
+  const std::vector<VotePeak> peaks = votePoses(q, c, params.matcher, kPeaks);
+  const double radius = params.verification.match_radius_m;
+  std::vector<Fit> fits;
+  for (const VotePeak& pk : peaks) {
+    Pose T = Pose::Identity();
+    T.linear() = rotZ(pk.yaw);
+    T.translation() = Eigen::Vector3d(pk.t.x(), pk.t.y(), 0.0);
+    fits.push_back(fitPose(q, c, T, radius));
+  }
+  size_t best = 0;
+  for (size_t k = 1; k < fits.size(); ++k)
+    if (fits[k].score > fits[best].score) best = k;
+  if (fits.empty() || fits[best].score <= 0.0) {
+    *reason = "no voted pose";
+    return {};
+  }
+  // Distinct: some query trunk lands more than two match radii away from where the best puts it.
+  double runner_up = 0.0;
+  for (size_t k = 0; k < fits.size(); ++k) {
+    if (k == best) continue;
+    double moved = 0.0;
+    for (const Trunk& t : q.trunks) {
+      const Eigen::Vector3d p(t.x, t.y, 0.0);
+      moved = std::max(moved, ((fits[k].T * p) - (fits[best].T * p)).head<2>().norm());
+    }
+    if (moved > 2.0 * radius) runner_up = std::max(runner_up, fits[k].score);
+  }
+  if (runner_up > params.verification.max_ambiguity * fits[best].score) {
+    *reason = "ambiguous votes";
+    return {};
+  }
+  // Radii are not compared (see votePoses): the pairs' geometry carries the evidence.
+  const Refined ref = guidedRefine(q, c, fits[best].T, radius);
+  std::vector<Correspondence> corrs;
+  for (const auto& [i, j] : ref.pairs) {
+    const Trunk &a = q.trunks[i], &b = c.trunks[j];
+    Correspondence k;
+    k.iq = i, k.ic = j;
+    k.pq = Eigen::Vector3d(a.x, a.y, a.z);
+    k.pc = Eigen::Vector3d(b.x, b.y, b.z);
+    k.z_ok = a.base_seen && b.base_seen;
+    corrs.push_back(k);
+  }
+  if (static_cast<int>(corrs.size()) < params.verification.min_hypothesis_inliers) {
+    *reason = "few voted pairs";
+    return {};
+  }
+  return corrs;
+}
+
+}  // namespace
+
 std::optional<LoopClosure> matchPair(const Descriptor& q, const Descriptor& c,
                                      const LoopDetectorParams& params, PoseEstimate* est_out,
                                      Verification* ver_out, QueryStats* stats,
                                      const PoseSolver* solver, const std::vector<MatchTriangle>* tq,
                                      const std::vector<MatchTriangle>* tc) {
   auto t0 = Clock::now();
-  const std::vector<Correspondence> corrs =
-      buildCorrespondences(q, c, params.matcher, nullptr, tq, tc);
+  std::vector<Correspondence> corrs = buildCorrespondences(q, c, params.matcher, nullptr, tq, tc);
   if (stats) stats->match_ms += msSince(t0);
-  if (static_cast<int>(corrs.size()) < params.verification.min_hypothesis_inliers) {
-    if (ver_out) {
-      *ver_out = Verification{};
-      ver_out->reason = "few correspondences";
-    }
-    if (est_out) *est_out = PoseEstimate{};
-    return std::nullopt;
+  PoseEstimate est;
+  Verification ver;
+  // Pose from correspondences, then verification (both timed).
+  auto solveAndVerify = [&]() {
+    if (stats) ++stats->matched;
+    t0 = Clock::now();
+    est = solver && *solver ? (*solver)(corrs) : estimatePose(corrs, params.pose);
+    if (stats) stats->solver_ms += msSince(t0);
+    t0 = Clock::now();
+    ver = verifyLoop(q, c, corrs, est, params.verification);
+    if (stats) stats->verify_ms += msSince(t0);
+  };
+  if (static_cast<int>(corrs.size()) >= params.verification.min_hypothesis_inliers) {
+    solveAndVerify();
+  } else {
+    ver.reason = "few correspondences";
   }
-  if (stats) ++stats->matched;
-  t0 = Clock::now();
-  const PoseEstimate est = solver && *solver ? (*solver)(corrs) : estimatePose(corrs, params.pose);
-  if (stats) stats->solver_ms += msSince(t0);
-  t0 = Clock::now();
-  const Verification ver = verifyLoop(q, c, corrs, est, params.verification);
-  if (stats) stats->verify_ms += msSince(t0);
+  if (!ver.accepted && params.matcher.vote_fallback && noHypothesis(ver.reason)) {
+    const std::string triangle_reason = ver.reason;
+    t0 = Clock::now();
+    std::string vote_reason;
+    std::vector<Correspondence> voted = voteCorrespondences(q, c, params, &vote_reason);
+    if (stats) stats->match_ms += msSince(t0);
+    if (!voted.empty()) {
+      corrs.swap(voted);
+      solveAndVerify();
+      vote_reason = ver.reason;
+    }
+    if (!ver.accepted) ver.reason = triangle_reason + "; votes: " + vote_reason;
+  }
   if (est_out) *est_out = est;
   if (ver_out) *ver_out = ver;
   if (!ver.accepted) return std::nullopt;

@@ -92,6 +92,15 @@ std::string MatcherParams::validate() const {
   if (neighbour_triangles < 0 || neighbour_triangles > 12) {
     err << "neighbour_triangles must be in [0, 12]; ";
   }
+  if (!(vote_max_pair_m >= 2.0 && vote_max_pair_m <= 100.0)) {
+    err << "vote_max_pair_m must be in [2, 100]; ";
+  }
+  if (!(vote_yaw_bin_deg >= 0.1 && vote_yaw_bin_deg <= 30.0)) {
+    err << "vote_yaw_bin_deg must be in [0.1, 30]; ";
+  }
+  if (!(vote_xy_bin_m >= 0.05 && vote_xy_bin_m <= 10.0)) {
+    err << "vote_xy_bin_m must be in [0.05, 10]; ";
+  }
   return err.str();
 }
 

@@ -27,6 +27,12 @@ struct MatcherParams {
   /// share few Delaunay faces (a trunk seen by one only changes them) but many such triangles.
   /// 0: Delaunay faces only, as in the paper.
   int neighbour_triangles = 4;
+  /// Beyond the paper: when the triangles give no usable hypothesis, trunk pairs vote for a
+  /// planar pose (pair_vote.h), and the best-fitting voted pose is verified like any other.
+  bool vote_fallback = true;
+  double vote_max_pair_m = 8.0;   ///< longest trunk pair that votes [m]
+  double vote_yaw_bin_deg = 2.0;  ///< yaw bin of the vote accumulator [deg]
+  double vote_xy_bin_m = 0.5;     ///< translation bin of the vote accumulator [m]
 
   std::string validate() const;
 
@@ -43,6 +49,10 @@ struct MatcherParams {
     v("alpha_w", alpha_w);
     v("max_correspondences", max_correspondences);
     v("neighbour_triangles", neighbour_triangles);
+    v("vote_fallback", vote_fallback);
+    v("vote_max_pair_m", vote_max_pair_m);
+    v("vote_yaw_bin_deg", vote_yaw_bin_deg);
+    v("vote_xy_bin_m", vote_xy_bin_m);
   }
 };
 

@@ -1,0 +1,145 @@
+// Pose voting over trunk pairs and the loop detector's fallback to it.
+#include "dtif/core/pair_vote.h"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "core/match_test_utils.h"
+#include "dtif/core/loop_detector.h"
+
+namespace dtif {
+namespace {
+
+using test::observe;
+using test::poseXyYaw;
+
+Descriptor describe(const Trunks& t, int64_t id) {
+  Descriptor d = buildDescriptor(t, DescriptorParams{});
+  d.robot = id % 2 ? "b" : "a";
+  d.submap_id = id;
+  return d;
+}
+
+double wrapDeg(double rad) { return std::fabs(std::remainder(rad, 2.0 * M_PI)) * 180.0 / M_PI; }
+
+/// Overlapping submaps (3-8 m apart, any headings) of a dense stand (1,200 stems/ha) in which
+/// either side detects only half of the stems (dense understory) and adds 15 % false trunks, so
+/// a quarter of the stems in the common area are seen by both: few shared Delaunay faces.
+test::ObservationNoise halfSeen() {
+  test::ObservationNoise nz;
+  nz.radius_m = 20.0;
+  nz.miss_ratio = 0.5;
+  nz.pos_sigma_m = 0.04;
+  nz.rad_sigma_m = 0.04;  // radii of half-hidden stems are poor
+  nz.false_ratio = 0.15;
+  return nz;
+}
+struct SparseOverlap {
+  Descriptor q, c;
+  Pose T_c_q;
+};
+std::vector<SparseOverlap> sparseOverlaps(int n, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> yaw(-M_PI, M_PI), off(3.0, 8.0), pos(35.0, 65.0);
+  const test::ObservationNoise nz = halfSeen();
+  std::vector<SparseOverlap> out;
+  for (int i = 0; i < n; ++i) {
+    const Trunks world = test::randomStand(rng, 100, 100, 1200);
+    const Eigen::Vector2d cc(pos(rng), pos(rng));
+    const double a = yaw(rng);
+    const Eigen::Vector2d qc = cc + off(rng) * Eigen::Vector2d(std::cos(a), std::sin(a));
+    const Pose T_w_c = poseXyYaw(cc.x(), cc.y(), 0.5, yaw(rng));
+    const Pose T_w_q = poseXyYaw(qc.x(), qc.y(), -0.5, yaw(rng));
+    SparseOverlap s;
+    s.c = describe(observe(rng, world, cc, T_w_c, nz), 2 * i);
+    s.q = describe(observe(rng, world, qc, T_w_q, nz), 2 * i + 1);
+    s.T_c_q = T_w_c.inverse() * T_w_q;
+    out.push_back(s);
+  }
+  return out;
+}
+
+TEST(VotePoses, StrongestPeakIsTheTruePoseInADenseStandSeenByHalves) {
+  const MatcherParams params;
+  int right = 0;
+  const auto cases = sparseOverlaps(20, 7);
+  for (const SparseOverlap& s : cases) {
+    const std::vector<VotePeak> peaks = votePoses(s.q, s.c, params, 4);
+    ASSERT_FALSE(peaks.empty());
+    for (size_t k = 1; k < peaks.size(); ++k) EXPECT_LE(peaks[k].votes, peaks[k - 1].votes);
+    const double true_yaw = std::atan2(s.T_c_q.linear()(1, 0), s.T_c_q.linear()(0, 0));
+    const double dyaw = wrapDeg(peaks[0].yaw - true_yaw);
+    const double dt = (peaks[0].t - s.T_c_q.translation().head<2>()).norm();
+    if (dyaw < 1.5 && dt < 0.6) ++right;
+  }
+  EXPECT_GE(right, 19) << "of " << cases.size();
+}
+
+TEST(VotePoses, DeterministicAndEmptyWithoutPairs) {
+  const MatcherParams params;
+  const auto cases = sparseOverlaps(1, 8);
+  const auto a = votePoses(cases[0].q, cases[0].c, params, 4);
+  const auto b = votePoses(cases[0].q, cases[0].c, params, 4);
+  ASSERT_EQ(a.size(), b.size());
+  for (size_t k = 0; k < a.size(); ++k) {
+    EXPECT_EQ(a[k].yaw, b[k].yaw);
+    EXPECT_EQ(a[k].t, b[k].t);
+    EXPECT_EQ(a[k].votes, b[k].votes);
+  }
+  // One trunk, or trunks farther apart than vote_max_pair_m (or closer than 1.5 m): no pairs.
+  Descriptor one, far, close;
+  one.trunks = {{0, 0, 0, 0.1}};
+  far.trunks = {{0, 0, 0, 0.1}, {20, 0, 0, 0.1}, {0, 20, 0, 0.1}};
+  close.trunks = {{0, 0, 0, 0.1}, {1, 0, 0, 0.1}, {0, 1, 0, 0.1}};
+  EXPECT_TRUE(votePoses(one, cases[0].c, params, 4).empty());
+  EXPECT_TRUE(votePoses(far, cases[0].c, params, 4).empty());
+  EXPECT_TRUE(votePoses(close, cases[0].c, params, 4).empty());
+  EXPECT_TRUE(votePoses(cases[0].q, cases[0].c, params, 0).empty());
+}
+
+/// The fallback is what finds these pairs: without it the triangles give no hypothesis for most
+/// of them; with it every accepted loop is right.
+TEST(LoopDetector, VoteFallbackRecoversPairsThatShareFewTriangles) {
+  LoopDetectorParams with, without;
+  without.matcher.vote_fallback = false;
+  int found_with = 0, found_without = 0;
+  const auto cases = sparseOverlaps(30, 9);
+  for (const SparseOverlap& s : cases) {
+    if (matchPair(s.q, s.c, without)) ++found_without;
+    const auto lc = matchPair(s.q, s.c, with);
+    if (!lc) continue;
+    ++found_with;
+    const double rot = test::yawError(lc->T_c_q, s.T_c_q) * 180.0 / M_PI;
+    const Eigen::Vector3d dt = lc->T_c_q.translation() - s.T_c_q.translation();
+    EXPECT_LT(rot, 0.5);
+    EXPECT_LT(dt.norm(), 0.2);
+  }
+  std::printf("[ info ] accepted %d/%zu with the vote fallback, %d without\n", found_with,
+              cases.size(), found_without);
+  EXPECT_GE(found_with, found_without + 5);
+  EXPECT_GE(found_with, static_cast<int>(0.7 * cases.size()));
+}
+
+/// Different places of the same kind of dense stand, their 20 m windows 2-59 m apart: the vote
+/// fallback must not turn chance alignments of trunk pairs into loops.
+TEST(LoopDetector, VoteFallbackRejectsDisjointPlacesOfADenseStand) {
+  std::mt19937 rng(11);
+  const LoopDetectorParams params;
+  ASSERT_TRUE(params.matcher.vote_fallback);
+  std::uniform_real_distribution<double> yaw(-M_PI, M_PI);
+  const test::ObservationNoise nz = halfSeen();
+  int false_accepts = 0;
+  for (int i = 0; i < 30; ++i) {
+    const Trunks world = test::randomStand(rng, 200, 60, 900 + 20 * i);
+    const Descriptor q =
+        describe(observe(rng, world, {30, 30}, poseXyYaw(30, 30, 0, yaw(rng)), nz), 0);
+    const Descriptor c = describe(
+        observe(rng, world, {30 + 42 + 3 * (i % 20), 30}, poseXyYaw(90, 30, 0, yaw(rng)), nz), 1);
+    if (matchPair(q, c, params)) ++false_accepts;
+  }
+  EXPECT_EQ(false_accepts, 0);
+}
+
+}  // namespace
+}  // namespace dtif
