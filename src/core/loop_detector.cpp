@@ -278,18 +278,24 @@ Refined guidedRefine(const Descriptor& q, const Descriptor& c, const Pose& T0, d
 struct Fit {
   Pose T = Pose::Identity();
   double score = 0.0;
-  double rms_xy = 0.0;  ///< of the refined pairs [m]
+  double median_xy = 0.0;  ///< median horizontal residual of the refined pairs [m]
 };
 Fit fitPose(const Descriptor& q, const Descriptor& c, const Pose& T0, double radius) {
   Fit f;
   const Refined r = guidedRefine(q, c, T0, radius);
   f.T = r.T;
-  f.rms_xy = r.rms_xy;
+  std::vector<double> residual;
   for (const auto& [i, j] : r.pairs) {
     const Eigen::Vector2d d = (r.T * Eigen::Vector3d(q.trunks[i].x, q.trunks[i].y, 0.0)).head<2>() -
                               Eigen::Vector2d(c.trunks[j].x, c.trunks[j].y);
     const double u = d.squaredNorm() / (radius * radius);
     if (u < 1.0) f.score += (1.0 - u) * (1.0 - u);
+    residual.push_back(d.norm());
+  }
+  if (!residual.empty()) {
+    const auto mid = residual.begin() + residual.size() / 2;
+    std::nth_element(residual.begin(), mid, residual.end());
+    f.median_xy = *mid;
   }
   return f;
 }
@@ -405,7 +411,7 @@ std::string VerifierParams::validate() const {
   if (!(tilt_min_spread_m >= 0.0)) err << "tilt_min_spread_m must be >= 0; ";
   if (!(max_tilt_deg > 0.0 && max_tilt_deg <= 10.0)) err << "max_tilt_deg must be in (0, 10]; ";
   if (!(min_overlap >= 0.0 && min_overlap <= 1.0)) err << "min_overlap must be in [0, 1]; ";
-  if (!(max_fit_rms_m > 0.0)) err << "max_fit_rms_m must be > 0; ";
+  if (!(max_fit_median_m > 0.0)) err << "max_fit_median_m must be > 0; ";
   if (min_z_pairs < 0) err << "min_z_pairs must be >= 0; ";
   if (!(max_fit_ambiguity >= 0.0 && max_fit_ambiguity < 1.0)) {
     err << "max_fit_ambiguity must be in [0, 1) (0: ambiguous hypotheses are rejected); ";
@@ -461,8 +467,10 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
     const auto [fit, ratio] = resolveByFit(q, c, est.T_c_q, params.match_radius_m);
     v.fit_ambiguity = ratio;
     if (ratio > params.max_fit_ambiguity) return reject("ambiguous");
-    // A wrong site of a jittered lattice pairs every trunk too, but only to the jitter.
-    if (fit.rms_xy > params.max_fit_rms_m) return reject("ambiguous");
+    // A wrong site of a jittered lattice pairs every trunk too, but only to the jitter. The
+    // median, not the RMS: the right site's few false or shifted trunks paired up to
+    // match_radius_m away would push its RMS above a wrong site's.
+    if (fit.median_xy > params.max_fit_median_m) return reject("ambiguous");
     T_hyp = fit.T;
   }
 
