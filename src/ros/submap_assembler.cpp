@@ -16,6 +16,7 @@ std::string SubmapAssemblerParams::validate() const {
   if (!(max_odom_gap_s > 0.0)) os << "max_odom_gap_s must be > 0\n";
   if (!(max_odom_age_s >= 0.0)) os << "max_odom_age_s must be >= 0\n";
   if (max_submap_points <= 0) os << "max_submap_points must be > 0\n";
+  if (!(std::isfinite(voxel_m) && voxel_m >= 0.0)) os << "voxel_m must be >= 0\n";
   return os.str();
 }
 
@@ -29,7 +30,7 @@ Pose gravityAlignedPose(const Pose& T_O_B) {
 }
 
 SubmapAssembler::SubmapAssembler(const SubmapAssemblerParams& params, int64_t first_id)
-    : params_(params), next_id_(first_id) {}
+    : params_(params), next_id_(first_id), voxels_(params.voxel_m > 0.0 ? params.voxel_m : 1.0) {}
 
 const char* SubmapAssembler::describe(Status s) {
   switch (s) {
@@ -119,11 +120,20 @@ std::optional<AssembledSubmap> SubmapAssembler::close() {
   s.end_stamp = w.end_stamp;
   s.T_O_S = gravityAlignedPose(*T_O_B);
   s.cloud.reset(new Cloud);
-  s.cloud->reserve(w.cloud_O->size());
-  const Eigen::Affine3f T_S_O = s.T_O_S.inverse().cast<float>();
-  for (const auto& p : *w.cloud_O) {
-    const Eigen::Vector3f q = T_S_O * p.getVector3fMap();
-    s.cloud->push_back(pcl::PointXYZ(q.x(), q.y(), q.z()));
+  // In double, as the simulator transforms its returns into S before its voxel filter.
+  const Pose T_S_O = s.T_O_S.inverse();
+  auto toS = [&T_S_O](const pcl::PointXYZ& p) -> Eigen::Vector3f {
+    return (T_S_O * p.getVector3fMap().cast<double>()).cast<float>();
+  };
+  auto append = [&s](const Eigen::Vector3f& q) { s.cloud->push_back({q.x(), q.y(), q.z()}); };
+  if (params_.voxel_m > 0.0) {
+    voxels_.clear();
+    for (const auto& p : *w.cloud_O) voxels_.add(toS(p));
+    s.cloud->reserve(voxels_.voxels());
+    for (const Eigen::Vector3f& q : voxels_.centroids()) append(q);
+  } else {
+    s.cloud->reserve(w.cloud_O->size());
+    for (const auto& p : *w.cloud_O) append(toS(p));
   }
   return s;
 }
