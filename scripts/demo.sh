@@ -7,11 +7,13 @@
 #     ground truth (dtif score: eval's metrics), side by side with eval's, and their lag.
 # Usage: scripts/demo.sh [scene.yaml] (default: config/scenes/mixed.yaml)
 # Environment: DTIF_DEMO_RATE (bag replay rate, default 2), DTIF_DEMO_BAG_ARGS (more options of
-# dtif simulate, e.g. "--bag-max-points 0" for unthinned clouds).
+# dtif simulate, e.g. "--bag-max-points 4000" for a smaller bag of thinned clouds; by default the
+# bag holds every return, so the nodelets assemble the dataset's submaps).
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 SCENE="${1:-${DTIF_REPO}/config/scenes/mixed.yaml}"
 RATE="${DTIF_DEMO_RATE:-2}"
+START_S="$(date +%s)"
 NAME="$(basename "${SCENE}" .yaml)"
 OUT="${DTIF_WS}/demo/${NAME}"
 
@@ -31,6 +33,7 @@ else
     --bag "${OUT}/${NAME}.bag" ${DTIF_DEMO_BAG_ARGS:-}
   echo "${SIM_KEY}" > "${OUT}/simulated"
 fi
+echo "dtif demo: bag $(( $(stat -c %s "${OUT}/${NAME}.bag") / 1000000 )) MB"
 rm -rf "${OUT}/eval" "${OUT}/ros"
 
 echo "dtif demo: 1. dtif eval on the dataset (results in ${OUT}/eval)"
@@ -86,3 +89,5 @@ cat "${OUT}/eval/table.md"
 echo
 echo "=== ROS nodelets on ${NAME}.bag, scored against ground truth (dtif score) ==="
 "${DTIF_BIN}" score "${OUT}/dataset" --loops "${LOG}" --out "${OUT}/ros/score" --eval "${OUT}/eval"
+echo
+echo "dtif demo: done in $(( $(date +%s) - START_S )) s of wall time"
