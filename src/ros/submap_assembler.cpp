@@ -20,6 +20,16 @@ std::string SubmapAssemblerParams::validate() const {
   return os.str();
 }
 
+void voxelFilterSubmap(VoxelCentroidGrid* grid, Cloud* cloud_S) {
+  grid->clear();
+  for (const auto& p : *cloud_S) grid->add(p.getVector3fMap());
+  cloud_S->clear();
+  cloud_S->reserve(grid->voxels());
+  for (const Eigen::Vector3f& q : grid->centroids()) {
+    cloud_S->push_back(pcl::PointXYZ(q.x(), q.y(), q.z()));
+  }
+}
+
 Pose gravityAlignedPose(const Pose& T_O_B) {
   const Eigen::Matrix3d R = T_O_B.rotation();
   const double yaw = std::atan2(R(1, 0), R(0, 0));
@@ -122,19 +132,12 @@ std::optional<AssembledSubmap> SubmapAssembler::close() {
   s.cloud.reset(new Cloud);
   // In double, as the simulator transforms its returns into S before its voxel filter.
   const Pose T_S_O = s.T_O_S.inverse();
-  auto toS = [&T_S_O](const pcl::PointXYZ& p) -> Eigen::Vector3f {
-    return (T_S_O * p.getVector3fMap().cast<double>()).cast<float>();
-  };
-  auto append = [&s](const Eigen::Vector3f& q) { s.cloud->push_back({q.x(), q.y(), q.z()}); };
-  if (params_.voxel_m > 0.0) {
-    voxels_.clear();
-    for (const auto& p : *w.cloud_O) voxels_.add(toS(p));
-    s.cloud->reserve(voxels_.voxels());
-    for (const Eigen::Vector3f& q : voxels_.centroids()) append(q);
-  } else {
-    s.cloud->reserve(w.cloud_O->size());
-    for (const auto& p : *w.cloud_O) append(toS(p));
+  s.cloud->reserve(w.cloud_O->size());
+  for (const auto& p : *w.cloud_O) {
+    const Eigen::Vector3f q = (T_S_O * p.getVector3fMap().cast<double>()).cast<float>();
+    s.cloud->push_back(pcl::PointXYZ(q.x(), q.y(), q.z()));
   }
+  if (params_.voxel_m > 0.0) voxelFilterSubmap(&voxels_, s.cloud.get());
   return s;
 }
 

@@ -78,8 +78,13 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
       throw;
     }
 
-    assembler_ =
-        std::make_unique<ros_glue::SubmapAssembler>(assembler_params_, node_.first_submap_id);
+    // The voxel filter of assembled submaps runs on the worker, off the cloud callback.
+    ros_glue::SubmapAssemblerParams in_callback = assembler_params_;
+    in_callback.voxel_m = 0.0;
+    assembler_ = std::make_unique<ros_glue::SubmapAssembler>(in_callback, node_.first_submap_id);
+    if (node_.input == "odometry" && assembler_params_.voxel_m > 0.0) {
+      voxel_grid_ = std::make_unique<VoxelCentroidGrid>(assembler_params_.voxel_m);
+    }
     recent_markers_ =
         std::make_unique<ros_glue::RecentMarkers>(static_cast<size_t>(node_.marker_history));
     descriptor_pub_ = nh.advertise<dtif_msgs::TrunkDescriptor>("descriptor", 10);
@@ -242,8 +247,9 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
     }
   }
 
-  void process(const ros_glue::AssembledSubmap& s, const std::string& frame) {
+  void process(ros_glue::AssembledSubmap& s, const std::string& frame) {
     const auto t0 = std::chrono::steady_clock::now();
+    if (voxel_grid_) ros_glue::voxelFilterSubmap(voxel_grid_.get(), s.cloud.get());
     const TrunkExtractionResult r = extractTrunks(*s.cloud, extractor_params_);
     Descriptor d = describeSubmap(r, descriptor_params_);
     d.robot = node_.robot;
@@ -302,6 +308,7 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
   std::deque<std::pair<ros_glue::AssembledSubmap, std::string>> queue_;
   bool stop_ = false;
   std::thread worker_;
+  std::unique_ptr<VoxelCentroidGrid> voxel_grid_;  // worker thread only; null: no voxel filter
 
   std::unique_ptr<ros_glue::RecentMarkers> recent_markers_;
   ros::WallTimer marker_timer_;

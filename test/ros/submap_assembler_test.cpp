@@ -221,6 +221,7 @@ TEST(SubmapAssembler, VoxelFilterAveragesEachVoxelOfS) {
   EXPECT_NEAR((*done->cloud)[2].x, 1.02, 1e-5);  // O y 1.01, 1.03, 1.02
   EXPECT_NEAR((*done->cloud)[2].y, 1.02, 1e-5);  // 0.5 - O x -0.51, -0.53, -0.52
   EXPECT_NEAR((*done->cloud)[2].z, (1.01 + 1.04 + 1.03) / 3, 1e-5);
+  const Cloud filtered = *done->cloud;
 
   // voxel_m 0 keeps all six points; a negative or NaN voxel is rejected.
   p.voxel_m = 0.0;
@@ -232,6 +233,13 @@ TEST(SubmapAssembler, VoxelFilterAveragesEachVoxelOfS) {
   b.addCloud(1.9, cloudOf({{0.48f, -2.04f, 0.01f}, {0.49f, 0.0f, 0.0f}}), &done);
   ASSERT_TRUE(done);
   EXPECT_EQ(done->cloud->size(), 6u);
+  // Filtering afterwards (as TrunkExtractionNodelet does, on its worker) gives the same points.
+  VoxelCentroidGrid grid(0.05);
+  voxelFilterSubmap(&grid, done->cloud.get());
+  ASSERT_EQ(done->cloud->size(), filtered.size());
+  for (size_t i = 0; i < filtered.size(); ++i) {
+    EXPECT_EQ((*done->cloud)[i].getVector3fMap(), filtered[i].getVector3fMap()) << i;
+  }
   p.voxel_m = -0.05;
   EXPECT_NE(p.validate(), "");
   p.voxel_m = NAN;
