@@ -78,7 +78,7 @@ for _ in $(seq 1 120); do
 done
 sleep 3  # rviz draws its first frame
 echo "dtif screenshot: playing ${OUT}/${NAME}.bag at rate ${RATE}"
-rosbag play --clock --quiet --rate "${RATE}" "${OUT}/${NAME}.bag"
+rosbag play --clock --quiet --delay 2 --rate "${RATE}" "${OUT}/${NAME}.bag"  # as in demo.sh
 sleep 5  # the last submaps and loop markers
 import -window root "${PNG}"
 echo "dtif screenshot: ${PNG}"

@@ -117,6 +117,12 @@ BagFrameSink::BagFrameSink(const std::string& path, const BagParams& params) : p
 
 BagFrameSink::~BagFrameSink() = default;
 
+void cloudRegistered(const Frame& frame, const BagParams& params,
+                     std::vector<Eigen::Vector3f>* points, std::vector<float>* intensity) {
+  voxelFilter(frame.points, frame.intensity, params.voxel_m, points, intensity);
+  thinEvenly(params.max_points, points, intensity);
+}
+
 void BagFrameSink::onFrame(const Frame& frame) {
   Timer timer(&stats_.write_seconds);
   const std::string ns = "/" + frame.robot;
@@ -146,8 +152,7 @@ void BagFrameSink::onFrame(const Frame& frame) {
 
   std::vector<Eigen::Vector3f> points;
   std::vector<float> intensity;
-  voxelFilter(frame.points, frame.intensity, params_.voxel_m, &points, &intensity);
-  thinEvenly(params_.max_points, &points, &intensity);
+  cloudRegistered(frame, params_, &points, &intensity);
   bag::Header h;
   h.seq = seq_[ns + "/cloud_registered"]++;
   h.stamp = stamp;

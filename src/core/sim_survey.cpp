@@ -13,6 +13,7 @@
 #include "dtif/core/params.h"
 #include "dtif/core/sim_world.h"
 #include "dtif/core/simulator.h"
+#include "dtif/core/voxel_grid.h"
 
 namespace dtif::sim {
 namespace {
@@ -291,80 +292,6 @@ Pose gravityAligned(const Pose& T_O_B) {
   return T;
 }
 
-// Centroid voxel filter, filled incrementally (bounded memory: one entry per voxel). Open
-// addressing with linear probing: this runs once per return, so it must be cheap.
-class VoxelAccumulator {
- public:
-  explicit VoxelAccumulator(double voxel) : inv_(1.0 / voxel) { clear(); }
-  void add(const Eigen::Vector3f& p) {
-    const int64_t x = static_cast<int64_t>(std::floor(p.x() * inv_)) + (1 << 20);
-    const int64_t y = static_cast<int64_t>(std::floor(p.y() * inv_)) + (1 << 20);
-    const int64_t z = static_cast<int64_t>(std::floor(p.z() * inv_)) + (1 << 20);
-    if (x < 0 || y < 0 || z < 0 || x >= (1 << 21) || y >= (1 << 21) || z >= (1 << 21)) return;
-    const uint64_t key = (static_cast<uint64_t>(x) << 42) | (static_cast<uint64_t>(y) << 21) |
-                         static_cast<uint64_t>(z);
-    if (2 * (used_ + 1) > cells_.size()) grow();
-    Cell& c = find(key);
-    if (c.n == 0) {
-      c.key = key;
-      ++used_;
-    }
-    c.sum += p;
-    ++c.n;
-    ++raw_;
-  }
-  std::vector<Eigen::Vector3f> centroids() const {
-    std::vector<Cell> v;  // copies, sorted in place: faster than chasing pointers
-    v.reserve(used_);
-    for (const Cell& c : cells_) {
-      if (c.n) v.push_back(c);
-    }
-    std::sort(v.begin(), v.end(), [](const Cell& a, const Cell& b) { return a.key < b.key; });
-    std::vector<Eigen::Vector3f> out;
-    out.reserve(v.size());
-    for (const Cell& c : v) out.push_back(c.sum / static_cast<float>(c.n));
-    return out;
-  }
-  size_t raw() const { return raw_; }
-  void clear() {
-    // Keeps a grown table: the next window of a survey needs about as many cells.
-    if (cells_.size() < (1 << 16)) {
-      cells_.assign(1 << 16, Cell());
-    } else {
-      std::fill(cells_.begin(), cells_.end(), Cell());
-    }
-    used_ = 0;
-    raw_ = 0;
-  }
-
- private:
-  // Sums relative to nothing: submap coordinates stay within ~50 m, so float sums of a few
-  // hundred points keep sub-millimetre precision.
-  struct Cell {
-    uint64_t key = 0;
-    Eigen::Vector3f sum{0, 0, 0};
-    uint32_t n = 0;
-  };
-  Cell& find(uint64_t key) {
-    const size_t mask = cells_.size() - 1;
-    size_t i = (key * 0x9E3779B97F4A7C15ULL) >> 20 & mask;
-    while (cells_[i].n != 0 && cells_[i].key != key) i = (i + 1) & mask;
-    return cells_[i];
-  }
-  void grow() {
-    std::vector<Cell> old;
-    old.swap(cells_);
-    cells_.assign(old.size() * 2, Cell());
-    for (const Cell& c : old) {
-      if (c.n) find(c.key) = c;
-    }
-  }
-  double inv_;
-  std::vector<Cell> cells_;
-  size_t used_ = 0;
-  size_t raw_ = 0;
-};
-
 float reflectivity(Material m) {
   switch (m) {
     case Material::kGround:
@@ -501,7 +428,7 @@ SimulationStats Simulator::run(FrameSink* frames, SubmapSink* submaps, int threa
 
   // Scans one window; per-thread scratch objects are reused across windows.
   auto scanWindow = [&](const WindowTask& task, World::RayScratch* scratch,
-                        VoxelAccumulator* voxels, std::vector<Frame>* out_frames) {
+                        VoxelCentroidGrid* voxels, std::vector<Frame>* out_frames) {
     const int r = task.robot;
     const Trajectory& tr = trajectories_[r];
     const bool is_submap = task.window < numWindows(tr);
@@ -611,7 +538,7 @@ SimulationStats Simulator::run(FrameSink* frames, SubmapSink* submaps, int threa
 
   auto worker = [&]() {
     World::RayScratch scratch = world_->makeScratch(0);
-    VoxelAccumulator voxels(scene_.submap.voxel_m);
+    VoxelCentroidGrid voxels(scene_.submap.voxel_m);
     std::vector<Frame> window_frames;
     while (true) {
       WindowTask task;

@@ -69,6 +69,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       if (node_.robots.empty()) problems += "robots: list at least one robot\n";
       if (node_.queue_size < 1) problems += "queue_size must be >= 1\n";
       if (!(node_.tf_rate_hz >= 0.0)) problems += "tf_rate_hz must be >= 0\n";
+      if (!(node_.marker_period_s >= 0.0)) problems += "marker_period_s must be >= 0\n";
       if (!problems.empty()) throw ParamError(pnh.getNamespace() + ": " + problems);
     } catch (const ParamError& e) {
       NODELET_FATAL("%s", e.what());
@@ -108,7 +109,19 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       tf_timer_ = nh.createWallTimer(ros::WallDuration(1.0 / node_.tf_rate_hz),
                                      [this](const ros::WallTimerEvent&) { publishTf(); });
     }
+    if (node_.marker_period_s > 0.0) {
+      marker_timer_ =
+          nh.createWallTimer(ros::WallDuration(node_.marker_period_s),
+                             [this](const ros::WallTimerEvent&) { republishMarkers(); });
+    }
     worker_ = std::thread(&LoopClosureNodelet::work, this);
+  }
+
+  // The latest loop's markers again (timer thread): its query frame may have been linked to the
+  // fixed frame only by this loop, after rviz dropped the first publication.
+  void republishMarkers() {
+    if (marker_pub_.getNumSubscribers() == 0) return;
+    if (auto markers = latest_loop_markers_.all()) marker_pub_.publish(markers);
   }
 
   void onDescriptor(const dtif_msgs::TrunkDescriptor::ConstPtr& msg, const std::string& robot) {
@@ -218,12 +231,15 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     NODELET_INFO("loop %s/%ld -> %s/%ld: %d inliers, score %.2f", lc->query_robot.c_str(),
                  static_cast<long>(lc->query_id), lc->candidate_robot.c_str(),
                  static_cast<long>(lc->candidate_id), lc->inliers, lc->score);
-    if (candidate && marker_pub_.getNumSubscribers() > 0) {
-      boost::shared_ptr<visualization_msgs::MarkerArray> markers(
-          // Stamp 0: rviz uses the latest transform between odometry frames (as for trunks).
-          new visualization_msgs::MarkerArray(ros_glue::loopMarkers(*d, *candidate, *lc, meta.T_O_S,
-                                                                    meta.odom_frame, ros::Time())));
-      marker_pub_.publish(boost::shared_ptr<const visualization_msgs::MarkerArray>(markers));
+    if (candidate) {
+      // Stamp 0: rviz uses the latest transform between odometry frames (as for trunks).
+      visualization_msgs::MarkerArray markers =
+          ros_glue::loopMarkers(*d, *candidate, *lc, meta.T_O_S, meta.odom_frame, ros::Time());
+      if (marker_pub_.getNumSubscribers() > 0) {
+        marker_pub_.publish(boost::shared_ptr<const visualization_msgs::MarkerArray>(
+            new visualization_msgs::MarkerArray(markers)));
+      }
+      latest_loop_markers_.add(std::move(markers));
     }
     if (node_.publish_tf && node_.tf_rate_hz <= 0.0) publishTf();
   }
@@ -368,6 +384,8 @@ class LoopClosureNodelet : public nodelet::Nodelet {
   std::thread worker_;
 
   std::unique_ptr<tf2_ros::TransformBroadcaster> tf_broadcaster_;
+  ros_glue::RecentMarkers latest_loop_markers_{1};  // the latest loop's
+  ros::WallTimer marker_timer_;
   ros::Publisher loop_pub_, marker_pub_;
   std::vector<ros::Subscriber> subs_;
   ros::ServiceServer save_srv_, load_srv_, size_srv_;

@@ -139,5 +139,27 @@ visualization_msgs::MarkerArray loopMarkers(const Descriptor& q, const Descripto
   return out;
 }
 
+void RecentMarkers::add(visualization_msgs::MarkerArray m) {
+  if (capacity_ == 0) return;
+  std::lock_guard<std::mutex> lock(mutex_);
+  kept_.push_back(std::move(m));
+  while (kept_.size() > capacity_) kept_.pop_front();
+}
+
+boost::shared_ptr<const visualization_msgs::MarkerArray> RecentMarkers::all() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (kept_.empty()) return nullptr;
+  boost::shared_ptr<visualization_msgs::MarkerArray> out(new visualization_msgs::MarkerArray);
+  for (const auto& a : kept_) {
+    out->markers.insert(out->markers.end(), a.markers.begin(), a.markers.end());
+  }
+  return out;
+}
+
+size_t RecentMarkers::size() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return kept_.size();
+}
+
 }  // namespace ros_glue
 }  // namespace dtif

@@ -16,7 +16,18 @@ std::string SubmapAssemblerParams::validate() const {
   if (!(max_odom_gap_s > 0.0)) os << "max_odom_gap_s must be > 0\n";
   if (!(max_odom_age_s >= 0.0)) os << "max_odom_age_s must be >= 0\n";
   if (max_submap_points <= 0) os << "max_submap_points must be > 0\n";
+  if (!(std::isfinite(voxel_m) && voxel_m >= 0.0)) os << "voxel_m must be >= 0\n";
   return os.str();
+}
+
+void voxelFilterSubmap(VoxelCentroidGrid* grid, Cloud* cloud_S) {
+  grid->clear();
+  for (const auto& p : *cloud_S) grid->add(p.getVector3fMap());
+  cloud_S->clear();
+  cloud_S->reserve(grid->voxels());
+  for (const Eigen::Vector3f& q : grid->centroids()) {
+    cloud_S->push_back(pcl::PointXYZ(q.x(), q.y(), q.z()));
+  }
 }
 
 Pose gravityAlignedPose(const Pose& T_O_B) {
@@ -29,7 +40,7 @@ Pose gravityAlignedPose(const Pose& T_O_B) {
 }
 
 SubmapAssembler::SubmapAssembler(const SubmapAssemblerParams& params, int64_t first_id)
-    : params_(params), next_id_(first_id) {}
+    : params_(params), next_id_(first_id), voxels_(params.voxel_m > 0.0 ? params.voxel_m : 1.0) {}
 
 const char* SubmapAssembler::describe(Status s) {
   switch (s) {
@@ -119,12 +130,14 @@ std::optional<AssembledSubmap> SubmapAssembler::close() {
   s.end_stamp = w.end_stamp;
   s.T_O_S = gravityAlignedPose(*T_O_B);
   s.cloud.reset(new Cloud);
+  // In double, as the simulator transforms its returns into S before its voxel filter.
+  const Pose T_S_O = s.T_O_S.inverse();
   s.cloud->reserve(w.cloud_O->size());
-  const Eigen::Affine3f T_S_O = s.T_O_S.inverse().cast<float>();
   for (const auto& p : *w.cloud_O) {
-    const Eigen::Vector3f q = T_S_O * p.getVector3fMap();
+    const Eigen::Vector3f q = (T_S_O * p.getVector3fMap().cast<double>()).cast<float>();
     s.cloud->push_back(pcl::PointXYZ(q.x(), q.y(), q.z()));
   }
+  if (params_.voxel_m > 0.0) voxelFilterSubmap(&voxels_, s.cloud.get());
   return s;
 }
 

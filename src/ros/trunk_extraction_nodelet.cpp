@@ -62,6 +62,8 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
         problems += "input must be 'odometry' or 'submap', not '" + node_.input + "'\n";
       }
       if (node_.queue_size < 1) problems += "queue_size must be >= 1\n";
+      if (node_.marker_history < 0) problems += "marker_history must be >= 0\n";
+      if (!(node_.marker_period_s >= 0.0)) problems += "marker_period_s must be >= 0\n";
       if (node_.robot.empty()) {
         const std::string ns = nh.getNamespace();
         node_.robot = ns.substr(ns.find_last_of('/') + 1);
@@ -76,8 +78,15 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
       throw;
     }
 
-    assembler_ =
-        std::make_unique<ros_glue::SubmapAssembler>(assembler_params_, node_.first_submap_id);
+    // The voxel filter of assembled submaps runs on the worker, off the cloud callback.
+    ros_glue::SubmapAssemblerParams in_callback = assembler_params_;
+    in_callback.voxel_m = 0.0;
+    assembler_ = std::make_unique<ros_glue::SubmapAssembler>(in_callback, node_.first_submap_id);
+    if (node_.input == "odometry" && assembler_params_.voxel_m > 0.0) {
+      voxel_grid_ = std::make_unique<VoxelCentroidGrid>(assembler_params_.voxel_m);
+    }
+    recent_markers_ =
+        std::make_unique<ros_glue::RecentMarkers>(static_cast<size_t>(node_.marker_history));
     descriptor_pub_ = nh.advertise<dtif_msgs::TrunkDescriptor>("descriptor", 10);
     trunks_pub_ = nh.advertise<visualization_msgs::MarkerArray>("trunks", 2);
     if (node_.publish_submap_cloud) {
@@ -92,6 +101,11 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
         tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh);
       }
       submap_sub_ = nh.subscribe("submap", 4, &TrunkExtractionNodelet::onSubmap, this);
+    }
+    if (node_.marker_period_s > 0.0 && node_.marker_history > 0) {
+      marker_timer_ =
+          nh.createWallTimer(ros::WallDuration(node_.marker_period_s),
+                             [this](const ros::WallTimerEvent&) { republishMarkers(); });
     }
     worker_ = std::thread(&TrunkExtractionNodelet::work, this);
     NODELET_INFO("robot '%s', input '%s', window %.1f s", node_.robot.c_str(), node_.input.c_str(),
@@ -233,8 +247,9 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
     }
   }
 
-  void process(const ros_glue::AssembledSubmap& s, const std::string& frame) {
+  void process(ros_glue::AssembledSubmap& s, const std::string& frame) {
     const auto t0 = std::chrono::steady_clock::now();
+    if (voxel_grid_) ros_glue::voxelFilterSubmap(voxel_grid_.get(), s.cloud.get());
     const TrunkExtractionResult r = extractTrunks(*s.cloud, extractor_params_);
     Descriptor d = describeSubmap(r, descriptor_params_);
     d.robot = node_.robot;
@@ -252,12 +267,13 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
     // Markers and the cloud are in the odometry frame, where they do not move: stamp 0 lets
     // rviz use the latest transform to another robot's frame, which exists only after the first
     // loop between the two, i.e. after most submaps' stamps.
+    visualization_msgs::MarkerArray markers = ros_glue::trunkMarkers(
+        d, s.T_O_S, frame, node_.robot + "/submap_" + std::to_string(s.id), ros::Time());
     if (trunks_pub_.getNumSubscribers() > 0) {
-      boost::shared_ptr<visualization_msgs::MarkerArray> markers(
-          new visualization_msgs::MarkerArray(ros_glue::trunkMarkers(
-              d, s.T_O_S, frame, node_.robot + "/submap_" + std::to_string(s.id), ros::Time())));
-      trunks_pub_.publish(boost::shared_ptr<const visualization_msgs::MarkerArray>(markers));
+      trunks_pub_.publish(boost::shared_ptr<const visualization_msgs::MarkerArray>(
+          new visualization_msgs::MarkerArray(markers)));
     }
+    recent_markers_->add(std::move(markers));
     if (node_.publish_submap_cloud && cloud_pub_.getNumSubscribers() > 0) {
       // In the odometry frame, so rviz needs no extra TF for the submap frame.
       Cloud cloud_O;
@@ -267,6 +283,12 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
       cloud->header.frame_id = frame;
       cloud_pub_.publish(boost::shared_ptr<const sensor_msgs::PointCloud2>(cloud));
     }
+  }
+
+  // The trunk markers of the latest marker_history submaps, all again (timer thread).
+  void republishMarkers() {
+    if (trunks_pub_.getNumSubscribers() == 0) return;
+    if (auto markers = recent_markers_->all()) trunks_pub_.publish(markers);
   }
 
   ros_glue::TrunkExtractionNodeParams node_;
@@ -286,6 +308,10 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
   std::deque<std::pair<ros_glue::AssembledSubmap, std::string>> queue_;
   bool stop_ = false;
   std::thread worker_;
+  std::unique_ptr<VoxelCentroidGrid> voxel_grid_;  // worker thread only; null: no voxel filter
+
+  std::unique_ptr<ros_glue::RecentMarkers> recent_markers_;
+  ros::WallTimer marker_timer_;
 
   std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;

@@ -466,11 +466,10 @@ TEST(SimulateBag, FramesRoundTripAndAssembleIntoSubmaps) {
   scene.robots[0].waypoints = {{5, 4}, {22, 4}, {22, 16}};
   scene.robots[1].waypoints = {{60, 11}, {35, 9}};
   const fs::path dir = tempDir("simulate");
-  sim::BagParams raw_params;
-  raw_params.voxel_m = 0.0;
-  raw_params.max_points = 0;
-  sim::BagFrameSink raw((dir / "raw.bag").string(), raw_params);
-  sim::BagFrameSink voxel((dir / "voxel.bag").string());  // default voxel
+  sim::BagFrameSink raw((dir / "raw.bag").string());  // default: every return
+  sim::BagParams voxel_params;
+  voxel_params.voxel_m = 0.1;
+  sim::BagFrameSink voxel((dir / "voxel.bag").string(), voxel_params);
   Tee tee;
   tee.sinks = {&raw, &voxel};
   const sim::DatasetRunResult result =

@@ -30,6 +30,14 @@ TEST(GravityAlignedPose, KeepsPositionAndYawDropsRollPitch) {
   EXPECT_NEAR(std::atan2(x.y(), x.x()), 0.8, 0.01);
 }
 
+// Every point kept (no voxel filter): these tests count and place single points.
+SubmapAssemblerParams unfiltered(double window_s) {
+  SubmapAssemblerParams p;
+  p.window_s = window_s;
+  p.voxel_m = 0.0;
+  return p;
+}
+
 // Odometry every 0.05 s over [t0, t1]: moving along +x at 1 m/s from x0, facing +y.
 void addTrack(SubmapAssembler* a, double t0, double t1, double x0) {
   for (double t = t0; t <= t1 + 1e-9; t += 0.05) {
@@ -38,8 +46,8 @@ void addTrack(SubmapAssembler* a, double t0, double t1, double x0) {
 }
 
 TEST(SubmapAssembler, AnchorsEachWindowAtItsCentre) {
-  SubmapAssemblerParams p;
-  p.window_s = 1.0;  // cloud_period_s 0.1: the first cloud (10.1) covers (10.0, 10.1]
+  // cloud_period_s 0.1: the first cloud (10.1) covers (10.0, 10.1]
+  SubmapAssemblerParams p = unfiltered(1.0);
   SubmapAssembler a(p, 5);
   addTrack(&a, 10.0, 13.0, 2.0);  // sensor at x = 2 + (t - 10)
   std::optional<AssembledSubmap> done;
@@ -89,7 +97,7 @@ TEST(SubmapAssembler, AnchorsEachWindowAtItsCentre) {
 // 0.1 s after the robot's start cut into 10 s windows at the simulator's boundaries, the last
 // cloud of each window (its end) included, each stamped at its centre.
 TEST(SubmapAssembler, PartitionsTimeLikeTheSimulator) {
-  SubmapAssembler a{SubmapAssemblerParams()};
+  SubmapAssembler a{unfiltered(10.0)};
   const int64_t start_ns = 1700000123LL * 1000000000LL + 400000000LL;  // robot start
   auto stampOf = [&](int i) { return static_cast<double>(start_ns + i * 100000000LL) * 1e-9; };
   std::vector<AssembledSubmap> out;
@@ -115,8 +123,7 @@ TEST(SubmapAssembler, PartitionsTimeLikeTheSimulator) {
 }
 
 TEST(SubmapAssembler, DropsDuplicateAndOutOfOrderStamps) {
-  SubmapAssemblerParams p;
-  p.window_s = 1.0;
+  SubmapAssemblerParams p = unfiltered(1.0);
   SubmapAssembler a(p);
   EXPECT_EQ(a.addOdometry(1.0, Pose::Identity()), Status::kOk);
   EXPECT_EQ(a.addOdometry(1.0, Pose::Identity()), Status::kDuplicateStamp);
@@ -133,8 +140,7 @@ TEST(SubmapAssembler, DropsDuplicateAndOutOfOrderStamps) {
 }
 
 TEST(SubmapAssembler, NeedsOdometryAtTheAnchorOnly) {
-  SubmapAssemblerParams p;
-  p.window_s = 1.0;
+  SubmapAssemblerParams p = unfiltered(1.0);
   SubmapAssembler a(p);
   std::optional<AssembledSubmap> done;
   // Clouds are in O already: one that arrives before any odometry is kept. Window (0.9, 1.9].
@@ -155,8 +161,7 @@ TEST(SubmapAssembler, NeedsOdometryAtTheAnchorOnly) {
 }
 
 TEST(SubmapAssembler, OdometryGapDiscardsTheOpenSubmap) {
-  SubmapAssemblerParams p;
-  p.window_s = 1.0;
+  SubmapAssemblerParams p = unfiltered(1.0);
   SubmapAssembler a(p);
   std::optional<AssembledSubmap> done;
   EXPECT_EQ(a.addOdometry(1.0, Pose::Identity()), Status::kOk);
@@ -172,9 +177,8 @@ TEST(SubmapAssembler, OdometryGapDiscardsTheOpenSubmap) {
 }
 
 TEST(SubmapAssembler, CapsPointsAndSkipsNaN) {
-  SubmapAssemblerParams p;
+  SubmapAssemblerParams p = unfiltered(1.0);
   p.max_submap_points = 2;
-  p.window_s = 1.0;
   SubmapAssembler a(p);
   std::optional<AssembledSubmap> done;
   addTrack(&a, 0.9, 1.5, 0.0);
@@ -185,6 +189,61 @@ TEST(SubmapAssembler, CapsPointsAndSkipsNaN) {
   ASSERT_EQ(s->cloud->size(), 2u);
   // makePose faces +y: a point 2 m along O's x lies 2 m to the right (-y) of S.
   EXPECT_NEAR((*s->cloud)[1].y, -(2.0 - s->T_O_S.translation().x()), 1e-5);
+}
+
+// The default voxel filter: the mean of the points of each voxel of S (on the grid floor(p /
+// voxel_m), as dtif simulate downsamples the dataset's submaps), in voxel key order; one voxel per
+// point when they are apart.
+TEST(SubmapAssembler, VoxelFilterAveragesEachVoxelOfS) {
+  SubmapAssemblerParams p;
+  p.window_s = 1.0;
+  ASSERT_DOUBLE_EQ(p.voxel_m, 0.05);
+  SubmapAssembler a(p);
+  std::optional<AssembledSubmap> done;
+  addTrack(&a, 0.9, 2.0, 0.0);  // anchor at 1.4: sensor at O (0.5, 0, 0) facing +y
+  // S = O shifted by -0.5 in x and turned by -90 deg: O (x, y) -> S (y, 0.5 - x).
+  // Two clouds of the window hit S voxel (20, 20, 20) = [1.0, 1.05)^3 three times, two clouds
+  // voxel (-41, 0, 0) twice; the last point is alone.
+  EXPECT_EQ(a.addCloud(1.0, cloudOf({{-0.51f, 1.01f, 1.01f}, {0.49f, -2.01f, 0.02f}}), &done),
+            Status::kOk);
+  EXPECT_EQ(a.addCloud(1.5, cloudOf({{-0.53f, 1.03f, 1.04f}, {-0.52f, 1.02f, 1.03f}}), &done),
+            Status::kOk);
+  EXPECT_EQ(a.addCloud(1.9, cloudOf({{0.48f, -2.04f, 0.01f}, {0.49f, 0.0f, 0.0f}}), &done),
+            Status::kOk);
+  ASSERT_TRUE(done);
+  ASSERT_EQ(done->cloud->size(), 3u);
+  // Key order: x index first (-41 < 0 < 20).
+  EXPECT_NEAR((*done->cloud)[0].x, -2.025, 1e-5);  // O y -2.01, -2.04
+  EXPECT_NEAR((*done->cloud)[0].y, 0.015, 1e-5);   // 0.5 - O x 0.49, 0.48
+  EXPECT_NEAR((*done->cloud)[0].z, 0.015, 1e-5);
+  EXPECT_NEAR((*done->cloud)[1].x, 0.0, 1e-5);
+  EXPECT_NEAR((*done->cloud)[1].y, 0.01, 1e-5);
+  EXPECT_NEAR((*done->cloud)[2].x, 1.02, 1e-5);  // O y 1.01, 1.03, 1.02
+  EXPECT_NEAR((*done->cloud)[2].y, 1.02, 1e-5);  // 0.5 - O x -0.51, -0.53, -0.52
+  EXPECT_NEAR((*done->cloud)[2].z, (1.01 + 1.04 + 1.03) / 3, 1e-5);
+  const Cloud filtered = *done->cloud;
+
+  // voxel_m 0 keeps all six points; a negative or NaN voxel is rejected.
+  p.voxel_m = 0.0;
+  EXPECT_EQ(p.validate(), "");
+  SubmapAssembler b(p);
+  addTrack(&b, 0.9, 2.0, 0.0);
+  b.addCloud(1.0, cloudOf({{-0.51f, 1.01f, 1.01f}, {0.49f, -2.01f, 0.02f}}), &done);
+  b.addCloud(1.5, cloudOf({{-0.53f, 1.03f, 1.04f}, {-0.52f, 1.02f, 1.03f}}), &done);
+  b.addCloud(1.9, cloudOf({{0.48f, -2.04f, 0.01f}, {0.49f, 0.0f, 0.0f}}), &done);
+  ASSERT_TRUE(done);
+  EXPECT_EQ(done->cloud->size(), 6u);
+  // Filtering afterwards (as TrunkExtractionNodelet does, on its worker) gives the same points.
+  VoxelCentroidGrid grid(0.05);
+  voxelFilterSubmap(&grid, done->cloud.get());
+  ASSERT_EQ(done->cloud->size(), filtered.size());
+  for (size_t i = 0; i < filtered.size(); ++i) {
+    EXPECT_EQ((*done->cloud)[i].getVector3fMap(), filtered[i].getVector3fMap()) << i;
+  }
+  p.voxel_m = -0.05;
+  EXPECT_NE(p.validate(), "");
+  p.voxel_m = NAN;
+  EXPECT_NE(p.validate(), "");
 }
 
 }  // namespace

@@ -19,13 +19,15 @@
 namespace dtif::sim {
 
 struct BagParams {
-  /// Per-frame centroid voxel filter of cloud_registered (FAST-LIO2 also publishes a
-  /// downsampled scan unless dense_publish_en); 0 keeps every return [m].
-  double voxel_m = 0.1;
+  /// Per-frame centroid voxel filter of cloud_registered (as FAST-LIO2 publishes a downsampled
+  /// scan unless dense_publish_en); 0 keeps every return (dense_publish_en), the default: the
+  /// submaps TrunkExtractionNodelet assembles from the bag are then the dataset's (both are the
+  /// centroid voxel filter of all returns of the window) [m].
+  double voxel_m = 0.0;
   /// Then at most this many points per cloud_registered, thinned evenly in scan order (a lower
-  /// point rate; keeps the bag of a few-minute full-rate 3-robot scene to a few hundred MB:
-  /// 16 bytes per point); 0: no limit.
-  uint32_t max_points = 4000;
+  /// point rate; a smaller bag: 16 bytes per point, ~3.2 MB/s per robot at 200k returns/s); 0: no
+  /// limit, the default.
+  uint32_t max_points = 0;
   /// cloud_registered is recorded this long after Odometry and /tf of the same frame, so replay
   /// delivers the pose first, as FAST-LIO2 publishes it (header stamps are not shifted) [s].
   double cloud_delay_s = 0.001;
@@ -51,6 +53,11 @@ void voxelFilter(const std::vector<Eigen::Vector3f>& points, const std::vector<f
 /// floor(i * n / max_points). max_points == 0 or n <= max_points: unchanged.
 void thinEvenly(uint32_t max_points, std::vector<Eigen::Vector3f>* points,
                 std::vector<float>* intensity);
+
+/// The points (in O) and intensities of a frame's cloud_registered: voxelFilter, then
+/// thinEvenly, with params' voxel_m and max_points.
+void cloudRegistered(const Frame& frame, const BagParams& params,
+                     std::vector<Eigen::Vector3f>* points, std::vector<float>* intensity);
 
 /// FrameSink writing a bag. Writes `path`.tmp, renamed to `path` by close(); destroyed without
 /// close() (e.g. the simulation threw), it leaves no bag. Not thread-safe (the simulator

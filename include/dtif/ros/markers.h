@@ -1,8 +1,12 @@
-// rviz markers of trunk maps, Delaunay topologies and loop closures. Pure functions.
+// rviz markers of trunk maps, Delaunay topologies and loop closures (pure functions), and the
+// recent markers the nodelets publish again.
 #pragma once
 
 #include <visualization_msgs/MarkerArray.h>
 
+#include <cstddef>
+#include <deque>
+#include <mutex>
 #include <string>
 
 #include "dtif/core/descriptor.h"
@@ -24,6 +28,26 @@ visualization_msgs::MarkerArray trunkMarkers(const Descriptor& d, const Pose& T_
 visualization_msgs::MarkerArray loopMarkers(const Descriptor& q, const Descriptor& c,
                                             const LoopClosure& lc, const Pose& T_F_Sq,
                                             const std::string& frame, const ros::Time& stamp);
+
+/// The marker arrays of the latest `capacity` publications (e.g. one per submap), to publish again
+/// on a timer: rviz drops a marker whose frame it cannot yet transform to the fixed frame (another
+/// robot's odometry frame is linked only once a loop between the robots fixes it), so markers
+/// published once before that would never show. Thread-safe (a worker adds, a timer reads).
+class RecentMarkers {
+ public:
+  explicit RecentMarkers(size_t capacity) : capacity_(capacity) {}
+  /// Keeps m; the oldest kept array is dropped beyond capacity (capacity 0: nothing kept).
+  void add(visualization_msgs::MarkerArray m);
+  /// Every kept marker, oldest array first (a later array's DELETEALL or same ns/id wins, as when
+  /// they were first published); null when nothing is kept.
+  boost::shared_ptr<const visualization_msgs::MarkerArray> all() const;
+  size_t size() const;
+
+ private:
+  const size_t capacity_;
+  mutable std::mutex mutex_;
+  std::deque<visualization_msgs::MarkerArray> kept_;
+};
 
 }  // namespace ros_glue
 }  // namespace dtif

@@ -17,6 +17,8 @@ struct TrunkExtractionNodeParams {
   int first_submap_id = 0;            ///< id of the first submap (raise it after a restart)
   int queue_size = 2;                 ///< submaps waiting for extraction; the oldest is dropped
   bool publish_submap_cloud = false;  ///< publish the assembled submap on `submap_cloud`
+  int marker_history = 100;           ///< submaps whose trunk markers are published again
+  double marker_period_s = 2.0;       ///< wall-clock period of that; 0: markers published once [s]
 
   template <class V>
   void visit(V& v) {
@@ -26,6 +28,8 @@ struct TrunkExtractionNodeParams {
     v("first_submap_id", first_submap_id);
     v("queue_size", queue_size);
     v("publish_submap_cloud", publish_submap_cloud);
+    v("marker_history", marker_history);
+    v("marker_period_s", marker_period_s);
   }
 };
 
@@ -39,6 +43,7 @@ struct LoopClosureNodeParams {
   double tf_rate_hz = 10.0;                     ///< TF re-publication rate [Hz]
   int queue_size = 100;                         ///< descriptors waiting; the oldest is dropped
   std::string loop_log;                         ///< CSV of every query's result; empty: none
+  double marker_period_s = 2.0;                 ///< latest loop's markers again (wall); 0: once [s]
 
   template <class V>
   void visit(V& v) {
@@ -49,6 +54,7 @@ struct LoopClosureNodeParams {
     v("tf_rate_hz", tf_rate_hz);
     v("queue_size", queue_size);
     v("loop_log", loop_log);
+    v("marker_period_s", marker_period_s);
   }
 };
 

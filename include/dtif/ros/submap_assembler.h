@@ -17,6 +17,7 @@
 
 #include "dtif/core/trunk_extractor.h"
 #include "dtif/core/types.h"
+#include "dtif/core/voxel_grid.h"
 
 namespace dtif {
 namespace ros_glue {
@@ -27,6 +28,10 @@ struct SubmapAssemblerParams {
   double max_odom_gap_s = 0.5;      ///< odometry silence that discards the open submap [s]
   double max_odom_age_s = 0.2;      ///< the anchor needs odometry this close in time [s]
   int max_submap_points = 3000000;  ///< further points of a window are dropped
+  /// Centroid voxel filter of the finished submap in S, on the grid dtif simulate uses for the
+  /// dataset's submaps (default: its submap.voxel_m), so that the same returns give the same
+  /// submap; 0 keeps every point [m].
+  double voxel_m = 0.05;
 
   std::string validate() const;
 
@@ -37,11 +42,12 @@ struct SubmapAssemblerParams {
     v("max_odom_gap_s", max_odom_gap_s);
     v("max_odom_age_s", max_odom_age_s);
     v("max_submap_points", max_submap_points);
+    v("voxel_m", voxel_m);
   }
 };
 
-/// A finished submap: cloud in its own frame S (gravity-aligned, origin at the sensor position
-/// at the anchor time, yaw from odometry) and its pose T_O_S.
+/// A finished submap: cloud in its own frame S (voxel centroids when voxel_m > 0) (gravity-aligned,
+/// origin at the sensor position at the anchor time, yaw from odometry) and its pose T_O_S.
 struct AssembledSubmap {
   int64_t id = -1;
   double stamp = 0.0;      ///< anchor time = centre of the window [s]
@@ -105,7 +111,15 @@ class SubmapAssembler {
   double last_cloud_stamp_ = -1.0;
   std::optional<double> t0_;  ///< start of window 0 of the current stream
   std::optional<Window> open_;
+  VoxelCentroidGrid voxels_;  ///< reused by close()
 };
+
+/// The assembler's voxel filter (voxel_m > 0): replaces the points of a submap in S by the
+/// centroids of the grid's voxels of S, in voxel key order. `grid` (made with voxel_m) is scratch,
+/// reused across submaps to keep its table. Exposed so that a caller can assemble with voxel_m 0
+/// and filter elsewhere (TrunkExtractionNodelet filters on its worker thread, not in the
+/// callback); the result is the same.
+void voxelFilterSubmap(VoxelCentroidGrid* grid, Cloud* cloud_S);
 
 /// Gravity-aligned submap pose from a body pose: position kept, roll and pitch removed, yaw of
 /// the body's x axis kept.
