@@ -15,18 +15,8 @@ namespace {
 using test::observe;
 using test::poseXyYaw;
 
-Descriptor describe(const Trunks& t, const std::string& robot, int64_t id, double stamp) {
-  Descriptor d = buildDescriptor(t, DescriptorParams{});
-  d.robot = robot;
-  d.submap_id = id;
-  d.stamp = stamp;
-  return d;
-}
-
-struct PairCase {
-  Descriptor q, c;
-  Pose T_c_q;
-};
+using test::describe;
+using test::PairCase;
 
 /// Overlapping submap pairs of random stands (400-800 stems/ha): candidate at a random place
 /// and heading, query 4-12 m away with any heading (including ~180 deg).
@@ -301,59 +291,17 @@ TEST(LoopDetector, RejectsDisjointPlacesOfRandomStands) {
   EXPECT_EQ(false_accepts, 0) << "of " << tried;
 }
 
-/// The same places of a jittered plantation: the correspondences cannot tell the lattice sites
-/// apart (ambiguous), the fit of all trunks can. max_fit_ambiguity = 0 is the control.
-TEST(LoopDetector, ResolvesOverlappingPairsOfAPlantationGridByFit) {
-  for (const double max_fit : {0.7, 0.0}) {
-    LoopDetectorParams params;
-    params.verification.max_fit_ambiguity = max_fit;
-    std::mt19937 rng(123);
-    std::uniform_real_distribution<double> yaw(-M_PI, M_PI), off(3.0, 8.0), pos(40, 140);
-    int accepted = 0, wrong = 0, resolved = 0;
-    const int n = 30;
-    for (int i = 0; i < n; ++i) {
-      const Trunks world = test::plantation(rng, 180, 180, 3.0, 0.15);
-      const Eigen::Vector2d b(pos(rng), pos(rng));
-      const double a = yaw(rng);
-      const Eigen::Vector2d qc = b + off(rng) * Eigen::Vector2d(std::cos(a), std::sin(a));
-      const Pose T_w_c = poseXyYaw(b.x(), b.y(), 0.0, yaw(rng));
-      const Pose T_w_q = poseXyYaw(qc.x(), qc.y(), 0.0, yaw(rng));
-      const Descriptor c = describe(observe(rng, world, b, T_w_c), "b", 1, 0.0);
-      const Descriptor q = describe(observe(rng, world, qc, T_w_q), "a", 0, 0.0);
-      Verification ver;
-      const auto lc = matchPair(q, c, params, nullptr, &ver);
-      if (!lc) continue;
-      ++accepted;
-      resolved += ver.fit_ambiguity >= 0.0;
-      const Pose T_c_q = T_w_c.inverse() * T_w_q;
-      if (test::yawError(lc->T_c_q, T_c_q) > 0.3 * M_PI / 180.0 ||
-          (lc->T_c_q.translation() - T_c_q.translation()).head<2>().norm() > 0.15) {
-        ++wrong;
-      }
-    }
-    std::printf(
-        "[ info ] plantation, max_fit_ambiguity %.1f: accepted %d/%d (%d resolved by fit)\n",
-        max_fit, accepted, n, resolved);
-    EXPECT_EQ(wrong, 0);
-    if (max_fit > 0.0) {
-      EXPECT_GE(accepted, 2 * n / 3);
-      EXPECT_GE(resolved, n / 3);
-    } else {
-      EXPECT_EQ(resolved, 0);
-      EXPECT_LT(accepted, n / 2);
-    }
-  }
-}
-
-/// As above, but a fifth of the query's trunk centres are 0.3 m off (partial arcs fitted
-/// badly): the right lattice site then pairs most trunks to a few cm and those to 0.3 m, an RMS
-/// of ~0.14 m, above a wrong site's. Its median residual still tells them apart.
-TEST(LoopDetector, LatticeFitJudgesTheMedianResidual) {
-  const LoopDetectorParams params;
-  std::mt19937 rng(321);
-  std::uniform_real_distribution<double> yaw(-M_PI, M_PI), off(3.0, 8.0), pos(40, 140);
+/// Overlapping places (3-8 m apart, any headings) of a jittered 3 m plantation, n pairs; every
+/// `bad_every`-th query trunk centre is moved 0.3 m (0: none). Counts the accepted loops, the
+/// wrong ones (> 0.3 deg or 0.15 m) and those resolved by the lattice fit.
+struct PlantationTrial {
   int accepted = 0, wrong = 0, resolved = 0;
-  const int n = 30;
+};
+PlantationTrial plantationTrial(const LoopDetectorParams& params, uint32_t seed, int n,
+                                size_t bad_every) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> yaw(-M_PI, M_PI), off(3.0, 8.0), pos(40, 140);
+  PlantationTrial out;
   for (int i = 0; i < n; ++i) {
     const Trunks world = test::plantation(rng, 180, 180, 3.0, 0.15);
     const Eigen::Vector2d b(pos(rng), pos(rng));
@@ -363,7 +311,7 @@ TEST(LoopDetector, LatticeFitJudgesTheMedianResidual) {
     const Pose T_w_q = poseXyYaw(qc.x(), qc.y(), 0.0, yaw(rng));
     const Descriptor c = describe(observe(rng, world, b, T_w_c), "b", 1, 0.0);
     Trunks tq = observe(rng, world, qc, T_w_q);
-    for (size_t k = 0; k < tq.size(); k += 5) {
+    for (size_t k = 0; bad_every > 0 && k < tq.size(); k += bad_every) {
       const double dir = yaw(rng);
       tq[k].x += 0.3 * std::cos(dir);
       tq[k].y += 0.3 * std::sin(dir);
@@ -372,19 +320,50 @@ TEST(LoopDetector, LatticeFitJudgesTheMedianResidual) {
     Verification ver;
     const auto lc = matchPair(q, c, params, nullptr, &ver);
     if (!lc) continue;
-    ++accepted;
-    resolved += ver.fit_ambiguity >= 0.0;
+    ++out.accepted;
+    out.resolved += ver.fit_ambiguity >= 0.0;
     const Pose T_c_q = T_w_c.inverse() * T_w_q;
     if (test::yawError(lc->T_c_q, T_c_q) > 0.3 * M_PI / 180.0 ||
         (lc->T_c_q.translation() - T_c_q.translation()).head<2>().norm() > 0.15) {
-      ++wrong;
+      ++out.wrong;
     }
   }
+  return out;
+}
+
+/// The same places of a jittered plantation: the correspondences cannot tell the lattice sites
+/// apart (ambiguous), the fit of all trunks can. max_fit_ambiguity = 0 is the control.
+TEST(LoopDetector, ResolvesOverlappingPairsOfAPlantationGridByFit) {
+  for (const double max_fit : {0.7, 0.0}) {
+    LoopDetectorParams params;
+    params.verification.max_fit_ambiguity = max_fit;
+    const int n = 30;
+    const PlantationTrial t = plantationTrial(params, 123, n, 0);
+    std::printf(
+        "[ info ] plantation, max_fit_ambiguity %.1f: accepted %d/%d (%d resolved by fit)\n",
+        max_fit, t.accepted, n, t.resolved);
+    EXPECT_EQ(t.wrong, 0);
+    if (max_fit > 0.0) {
+      EXPECT_GE(t.accepted, 2 * n / 3);
+      EXPECT_GE(t.resolved, n / 3);
+    } else {
+      EXPECT_EQ(t.resolved, 0);
+      EXPECT_LT(t.accepted, n / 2);
+    }
+  }
+}
+
+/// As above, but a fifth of the query's trunk centres are 0.3 m off (partial arcs fitted
+/// badly): the right lattice site then pairs most trunks to a few cm and those to 0.3 m, an RMS
+/// of ~0.14 m, above a wrong site's. Its median residual still tells them apart.
+TEST(LoopDetector, LatticeFitJudgesTheMedianResidual) {
+  const int n = 30;
+  const PlantationTrial t = plantationTrial(LoopDetectorParams{}, 321, n, 5);
   std::printf("[ info ] plantation, 20 %% bad centres: accepted %d/%d (%d resolved by fit)\n",
-              accepted, n, resolved);
-  EXPECT_EQ(wrong, 0);
-  EXPECT_GE(resolved, n / 3);
-  EXPECT_GE(accepted, n / 2);
+              t.accepted, n, t.resolved);
+  EXPECT_EQ(t.wrong, 0);
+  EXPECT_GE(t.resolved, n / 3);
+  EXPECT_GE(t.accepted, n / 2);
 }
 
 TEST(LoopDetector, RejectsDifferentPlacesOfAPlantationGrid) {

@@ -4,8 +4,10 @@
 
 #include <cmath>
 #include <random>
+#include <string>
 #include <vector>
 
+#include "dtif/core/descriptor.h"
 #include "dtif/core/types.h"
 
 namespace dtif::test {
@@ -98,6 +100,22 @@ inline Pose poseXyYaw(double x, double y, double z, double yaw) {
   T.translation() = Eigen::Vector3d(x, y, z);
   return T;
 }
+
+/// Descriptor of a trunk set with the default parameters and the given identity.
+inline Descriptor describe(const Trunks& t, const std::string& robot, int64_t id,
+                           double stamp = 0.0) {
+  Descriptor d = buildDescriptor(t, DescriptorParams{});
+  d.robot = robot;
+  d.submap_id = id;
+  d.stamp = stamp;
+  return d;
+}
+
+/// A query and a candidate descriptor with the true T_c_q.
+struct PairCase {
+  Descriptor q, c;
+  Pose T_c_q;
+};
 
 inline double yawError(const Pose& a, const Pose& b) {
   const Eigen::Matrix3d d = a.linear().transpose() * b.linear();

@@ -15,10 +15,7 @@ using test::observe;
 using test::poseXyYaw;
 
 Descriptor describe(const Trunks& t, int64_t id) {
-  Descriptor d = buildDescriptor(t, DescriptorParams{});
-  d.robot = id % 2 ? "b" : "a";
-  d.submap_id = id;
-  return d;
+  return test::describe(t, id % 2 ? "b" : "a", id);
 }
 
 double wrapDeg(double rad) { return std::fabs(std::remainder(rad, 2.0 * M_PI)) * 180.0 / M_PI; }
@@ -35,10 +32,7 @@ test::ObservationNoise halfSeen() {
   nz.false_ratio = 0.15;
   return nz;
 }
-struct SparseOverlap {
-  Descriptor q, c;
-  Pose T_c_q;
-};
+using SparseOverlap = test::PairCase;
 std::vector<SparseOverlap> sparseOverlaps(int n, uint32_t seed) {
   std::mt19937 rng(seed);
   std::uniform_real_distribution<double> yaw(-M_PI, M_PI), off(3.0, 8.0), pos(35.0, 65.0);
