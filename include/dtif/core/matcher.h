@@ -30,7 +30,7 @@ struct MatcherParams {
   /// Beyond the paper: when the triangles give no usable hypothesis, trunk pairs vote for a
   /// planar pose (pair_vote.h), and the best-fitting voted pose is verified like any other.
   bool vote_fallback = true;
-  double vote_max_pair_m = 8.0;   ///< longest trunk pair that votes [m]
+  double vote_max_pair_m = 6.0;   ///< longest trunk pair that votes [m]
   double vote_yaw_bin_deg = 2.0;  ///< yaw bin of the vote accumulator [deg]
   double vote_xy_bin_m = 0.5;     ///< translation bin of the vote accumulator [m]
 
