@@ -24,7 +24,7 @@ struct ScanContextParams {
   double max_height_m = 30.0;       ///< heights above ground are clamped to this [m]
   int min_occupied_bins = 30;       ///< fewer non-empty bins make the descriptor invalid [-]
   int candidates = 10;              ///< ring-key nearest neighbours compared in full [-]
-  double max_distance = 0.2;        ///< an answer needs a distance below this [0..1]
+  double max_distance = 0.3;        ///< an answer needs a distance below this [0..1]
   /// Empty when every field is usable, else the problems, one per line.
   std::string validate() const;
 };
