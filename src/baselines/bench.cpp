@@ -5,7 +5,6 @@
 #include <chrono>
 #include <cmath>
 #include <iomanip>
-#include <limits>
 #include <numeric>
 #include <random>
 #include <sstream>

@@ -2,7 +2,8 @@
 // Scan Context (G. Kim, A. Kim, IROS 2018): a polar grid around the submap origin whose bins
 // hold the highest point above the local ground, a rotation-invariant ring key for a k-nearest
 // pre-selection, and a column-shift search that gives the distance and the yaw. It recognises
-// places only (no translation). ROS-free; plain loops over the cloud, no PCL algorithms.
+// places only (no translation). ROS-free; plain loops over the cloud, no PCL algorithms. Every
+// function is pure: safe to call from several threads on shared const inputs.
 #pragma once
 
 #include <cstddef>
