@@ -1,6 +1,6 @@
 #!/usr/bin/python3
-"""Plots of `dtif bench` output (scripts/bench.sh): precision-recall over the inlier
-threshold, error distributions, time per stage vs trunks per submap, query time vs database
+"""Plots of `dtif bench` output (scripts/bench.sh): precision-recall over the acceptance
+threshold (inliers; scan context: its distance), error distributions, time per stage vs trunks per submap, query time vs database
 size. Usage: bench_plots.py <bench_dir>"""
 import csv
 import sys
@@ -32,14 +32,15 @@ def finish(fig, ax, path, xlabel, ylabel, log=()):
 
 def main(out):
     out = Path(out)
-    # Precision-recall over the acceptance threshold (all scenes pooled).
+    # Precision-recall over the acceptance threshold (all scenes pooled). Scan context and
+    # "dtif (place recognition)" count an answer as correct when it is a true loop.
     pr = defaultdict(lambda: defaultdict(lambda: [0, 0, 0]))  # method -> k -> [acc, tp, loops]
     loops = {}
     for r in rows(out / "summary.csv"):
         if r["scene"] != "all" and r["table"] == "back_end":
             loops[r["scene"]] = int(r["queries_with_loop"])
     for r in rows(out / "pr.csv"):
-        acc = pr[r["method"]][int(r["threshold"])]
+        acc = pr[r["method"]][float(r["threshold"])]
         acc[0] += int(r["accepted"])
         acc[1] += int(r["true_positives"])
         acc[2] += loops.get(r["scene"], 0)
@@ -49,7 +50,7 @@ def main(out):
         rec = [tp / lp if lp else 0 for _, (a, tp, lp) in pts]
         prec = [tp / a if a else 1.0 for _, (a, tp, lp) in pts]
         ax.plot(rec, prec, marker=".", label=method)
-    ax.set_title("Precision-recall over the inlier threshold (all scenes)")
+    ax.set_title("Precision-recall over the acceptance threshold (all scenes)")
     ax.set_xlim(0, 1)
     ax.set_ylim(0, 1.05)
     finish(fig, ax, out / "pr_curve.png", "recall", "precision")
@@ -80,8 +81,10 @@ def main(out):
     fig, ax = plt.subplots(figsize=(6, 4.5))
     tr = [int(r["trunks"]) for r in sub]
     for key, label in [("t_extract_ms", "trunk extraction"), ("t_desc_ms", "descriptor (incl. extraction)"),
-                       ("t_loop_ms", "loop query"), ("t_fpfh_ms", "FPFH features (baseline)")]:
-        ax.scatter(tr, [float(r[key]) for r in sub], s=8, label=label)
+                       ("t_loop_ms", "loop query"), ("t_fpfh_ms", "FPFH features (baseline)"),
+                       ("t_scan_context_ms", "scan context (baseline)")]:
+        if key in sub[0]:  # reports older than the scan-context baseline lack its column
+            ax.scatter(tr, [float(r[key]) for r in sub], s=8, label=label)
     finish(fig, ax, out / "time_vs_trunks.png", "trunks per submap", "ms per submap (one thread)",
            log="y")
 

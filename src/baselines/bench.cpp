@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <iomanip>
 #include <numeric>
 #include <random>
 #include <sstream>
@@ -43,6 +44,14 @@ struct PairResult {
 
 }  // namespace
 
+PrPoint prPoint(const std::string& method, double threshold, size_t accepted, size_t true_positives,
+                size_t loops) {
+  PrPoint p{method, threshold, accepted, true_positives};
+  p.precision = accepted ? static_cast<double>(true_positives) / accepted : 1.0;
+  p.recall = loops ? static_cast<double>(true_positives) / loops : 0.0;
+  return p;
+}
+
 PoseSolver makeBackEnd(const std::string& name, const PoseEstimatorParams& pose) {
   if (name == "dtif" || name == "dtif_unit") return {};
   if (name == "quatro") {
@@ -80,8 +89,9 @@ SceneBench runSceneBench(const Dataset& ds, const std::string& scene, const Dtif
   std::vector<std::unordered_set<int64_t>> cells(n);
   std::vector<std::shared_ptr<Descriptor>> descs(n);
   std::vector<FpfhFeaturesPtr> feats(n);
+  std::vector<ScanContext> scs(n);
   std::vector<EvalRow> base(n);
-  double bytes_sum = 0.0, fpfh_bytes_sum = 0.0;
+  double bytes_sum = 0.0, fpfh_bytes_sum = 0.0, sc_bytes_sum = 0.0;
 
   // One pass over the clouds: ground-truth cells, dtif's descriptor, the FPFH features.
   for (size_t i = 0; i < n; ++i) {
@@ -112,6 +122,12 @@ SceneBench runSceneBench(const Dataset& ds, const std::string& scene, const Dtif
       st.t_fpfh_ms = msSince(t0);
       st.fpfh_points = fpfhPoints(*feats[i]);
       fpfh_bytes_sum += static_cast<double>(fpfhBytes(*feats[i]));
+    }
+    if (options.place_recognition) {
+      t0 = Clock::now();
+      scs[i] = makeScanContext(*cloud, options.scan_context);
+      st.t_scan_context_ms = msSince(t0);
+      sc_bytes_sum += static_cast<double>(scs[i].bytes());
     }
     if (descs[i]->valid) out.descriptors.push_back(descs[i]);
     base[i].query = rec.id;
@@ -200,15 +216,75 @@ SceneBench runSceneBench(const Dataset& ds, const std::string& scene, const Dtif
     size_t loops = 0;
     for (const EvalRow& r : rows) loops += r.has_loop;
     for (int k = 3; k <= 60; ++k) {
-      PrPoint p{"dtif", k};
+      // dtif's TP rule, and place recognition's (a true loop, whatever the pose error).
+      size_t accepted = 0, tp = 0, true_loops = 0;
       for (const EvalRow& r : rows) {
         if (!r.accepted || r.inliers < k) continue;
-        ++p.accepted;
-        p.true_positives += r.true_positive;
+        ++accepted;
+        tp += r.true_positive;
+        true_loops += r.true_loop;
       }
-      p.precision = p.accepted ? static_cast<double>(p.true_positives) / p.accepted : 1.0;
-      p.recall = loops ? static_cast<double>(p.true_positives) / loops : 0.0;
-      out.pr.push_back(p);
+      out.pr.push_back(prPoint("dtif", k, accepted, tp, loops));
+      if (options.place_recognition) {
+        out.pr.push_back(prPoint("dtif (place recognition)", k, accepted, true_loops, loops));
+      }
+    }
+  }
+
+  // Place recognition: scan context on the sequential protocol (the same eligible database as
+  // dtif's), its best entry per query the answer, correct when the pair is a true loop; then
+  // dtif's sequential run scored the same way.
+  if (options.place_recognition) {
+    say("scan context");
+    const ScanContextParams& scp = options.scan_context;
+    std::vector<EvalRow> rows = base;
+    std::vector<ScanContextAnswer> answers(n);
+    std::vector<size_t> answer_j(n, n);
+    for (size_t i = 0; i < n; ++i) {
+      const auto t0 = Clock::now();
+      std::vector<const ScanContext*> db;
+      std::vector<size_t> db_j;
+      for (size_t j = 0; j < i; ++j) {
+        if (!eligiblePair(ds.submaps[i], ds.submaps[j], exclude_s)) continue;
+        db.push_back(&scs[j]);
+        db_j.push_back(j);
+      }
+      answers[i] = queryScanContext(scs[i], db, scp);
+      rows[i].t_loop_ms = msSince(t0);
+      rows[i].t_desc_ms = out.submaps[i].t_scan_context_ms;
+      rows[i].t_solver_ms = 0.0;
+      rows[i].trunks = 0;
+      rows[i].invalid_reason = scs[i].invalid_reason;
+      if (answers[i].index >= 0) answer_j[i] = db_j[answers[i].index];
+    }
+    auto isTrueLoop = [&](size_t i) {
+      return answer_j[i] < n && overlap[i][answer_j[i]] >= options.eval.true_loop_overlap;
+    };
+    for (size_t i = 0; i < n; ++i) {
+      if (answer_j[i] == n || !(answers[i].match.distance < scp.max_distance)) continue;
+      Pose T = Pose::Identity();  // yaw only: scan context estimates no translation
+      T.linear() = rotZ(answers[i].match.yaw_rad);
+      rows[i].candidate = ds.submaps[answer_j[i]].id;
+      rows[i].score = answers[i].match.distance;
+      scoreAcceptedLoop(gtPose(i, answer_j[i]), T, overlap[i][answer_j[i]], options.eval, &rows[i]);
+    }
+    size_t loops = 0;
+    for (const EvalRow& r : base) loops += r.has_loop;
+    for (int k = 1; k <= 50; ++k) {
+      const double thr = 0.02 * k;
+      size_t accepted = 0, correct = 0;
+      for (size_t i = 0; i < n; ++i) {
+        if (answer_j[i] == n || !(answers[i].match.distance < thr)) continue;
+        ++accepted;
+        correct += isTrueLoop(i);
+      }
+      out.pr.push_back(prPoint("scan context", thr, accepted, correct, loops));
+    }
+    out.place.push_back({"scan context", rows, sc_bytes_sum});
+    for (const MethodRun& run : out.runs) {
+      if (run.method == displayName("dtif") + " + dtif refinement") {
+        out.place.push_back({"dtif", run.rows, bytes_sum});
+      }
     }
   }
   if (!options.front_ends) return out;
@@ -316,8 +392,7 @@ SceneBench runSceneBench(const Dataset& ds, const std::string& scene, const Dtif
     out.runs.push_back(frontEndRun(method, res, t_loop, t_solver, t_desc_fpfh, fpfh_bytes_sum));
     // Its precision-recall over the inlier threshold.
     for (int k = 3; k <= 60; ++k) {
-      PrPoint p{method, k};
-      size_t loops = 0;
+      size_t loops = 0, accepted = 0, tp = 0;
       for (size_t i = 0; i < n; ++i) {
         loops += base[i].has_loop;
         const PairResult* best = nullptr;
@@ -327,12 +402,10 @@ SceneBench runSceneBench(const Dataset& ds, const std::string& scene, const Dtif
         if (!best) continue;
         EvalRow row;
         scoreAcceptedLoop(gtPose(i, best->j), best->T, overlap[i][best->j], options.eval, &row);
-        ++p.accepted;
-        p.true_positives += row.true_positive;
+        ++accepted;
+        tp += row.true_positive;
       }
-      p.precision = p.accepted ? static_cast<double>(p.true_positives) / p.accepted : 1.0;
-      p.recall = loops ? static_cast<double>(p.true_positives) / loops : 0.0;
-      out.pr.push_back(p);
+      out.pr.push_back(prPoint(method, k, accepted, tp, loops));
     }
   }
   return out;
@@ -402,6 +475,66 @@ std::vector<ScalingPoint> runScaling(const std::vector<std::shared_ptr<const Des
     out.push_back(p);
   }
   return out;
+}
+
+PlaceRecognitionSummary summarizePlaceRecognition(const std::vector<EvalRow>& rows,
+                                                  double bytes_sum) {
+  PlaceRecognitionSummary s;
+  s.submaps = rows.size();
+  std::vector<double> yaw;
+  for (const EvalRow& r : rows) {
+    s.queries_with_loop += r.has_loop;
+    s.t_desc_ms += r.t_desc_ms;
+    s.t_query_ms += r.t_loop_ms;
+    if (!r.accepted) continue;
+    ++s.answers;
+    if (!r.true_loop) continue;
+    ++s.correct;
+    if (r.err) yaw.push_back(r.err->yaw_deg);
+  }
+  if (s.answers) s.precision = static_cast<double>(s.correct) / s.answers;
+  if (s.queries_with_loop) s.recall = static_cast<double>(s.correct) / s.queries_with_loop;
+  if (!yaw.empty()) {
+    s.yaw_err_deg = std::accumulate(yaw.begin(), yaw.end(), 0.0) / yaw.size();
+    std::sort(yaw.begin(), yaw.end());
+    const size_t m = yaw.size() / 2;
+    s.yaw_err_median_deg = yaw.size() % 2 ? yaw[m] : 0.5 * (yaw[m - 1] + yaw[m]);
+  }
+  if (s.submaps) {
+    const double k = 1.0 / static_cast<double>(s.submaps);
+    s.t_desc_ms *= k;
+    s.t_query_ms *= k;
+    s.bytes_mean = bytes_sum * k;
+  }
+  return s;
+}
+
+std::string placeRecognitionHeader(const std::string& first) {
+  return "| " + first +
+         " | Precision | Recall | Correct/Ans./Loops | Yaw err. of correct, mean [deg] | Median "
+         "[deg] | Desc. ms | Query ms | Bytes |\n|---|---|---|---|---|---|---|---|---|\n";
+}
+
+std::string placeRecognitionRow(const PlaceRecognitionSummary& s, const std::string& method) {
+  std::ostringstream os;
+  os << std::fixed << std::setprecision(3);
+  auto opt = [&](const std::optional<double>& v) {
+    if (v) {
+      os << *v;
+    } else {
+      os << "-";
+    }
+    os << " | ";
+  };
+  os << "| " << method << " | ";
+  opt(s.precision);
+  opt(s.recall);
+  os << s.correct << '/' << s.answers << '/' << s.queries_with_loop << " | ";
+  opt(s.yaw_err_deg);
+  opt(s.yaw_err_median_deg);
+  os << s.t_desc_ms << " | " << s.t_query_ms << " | " << std::setprecision(0) << s.bytes_mean
+     << " |\n";
+  return os.str();
 }
 
 std::string tableRow(const EvalSummary& s, const std::string& method) {

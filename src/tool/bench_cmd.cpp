@@ -1,8 +1,10 @@
 // dtif bench <dataset_dir>... --out <dir> [--config params.yaml] [--back-ends a,b,...]
-//            [--no-front-ends] [--no-scaling] [--scaling-sizes 10,20,...]
+//            [--no-front-ends] [--no-scaling] [--no-pr] [--no-scan-context]
+//            [--scaling-sizes 10,20,...]
 // Issue #5: dtif against the paper's baselines on the protocol of DATASET.md. Writes
-// summary.csv (one row per scene and method), tables.md (front ends and back ends, per scene
-// and over all scenes), pr.csv, submaps.csv, scaling.csv and each method's results.csv.
+// summary.csv (one row per scene and method), tables.md (front ends, back ends and place
+// recognition, per scene and over all scenes), pr.csv, place_recognition.csv, submaps.csv,
+// scaling.csv, each method's results.csv and scan context's answers (<scene>/scan_context.csv).
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
@@ -76,7 +78,7 @@ void summaryCsvRow(std::ostream& os, const std::string& scene, const std::string
 
 int runBench(const Args& args) {
   const Options o = parseOptions(args, {"out", "config", "back-ends", "scaling-sizes"},
-                                 {"no-front-ends", "no-scaling", "no-pr"});
+                                 {"no-front-ends", "no-scaling", "no-pr", "no-scan-context"});
   if (o.positional.empty()) throw UsageError{"expected one or more dataset folders"};
   const auto out = o.get("out");
   if (!out) throw UsageError{"--out <dir> is required"};
@@ -85,6 +87,7 @@ int runBench(const Args& args) {
   if (auto b = o.get("back-ends")) opt.back_ends = splitList(*b);
   opt.front_ends = !o.has("no-front-ends");
   opt.pr_curve = !o.has("no-pr");
+  opt.place_recognition = !o.has("no-scan-context");
   std::vector<size_t> sizes{10, 20, 50, 100, 200, 500, 1000, 2000};
   if (auto s = o.get("scaling-sizes")) {
     sizes.clear();
@@ -93,13 +96,32 @@ int runBench(const Args& args) {
 
   const std::filesystem::path dir(*out);
   std::filesystem::create_directories(dir);
-  std::ofstream summary(dir / "summary.csv"), pr(dir / "pr.csv"), subs(dir / "submaps.csv");
+  std::ofstream summary(dir / "summary.csv"), pr(dir / "pr.csv"), subs(dir / "submaps.csv"),
+      place(dir / "place_recognition.csv");
   summary << std::setprecision(6)
           << "scene,table,method,roll_deg,pitch_deg,yaw_deg,rot_deg,x_m,y_m,z_m,trans_m,"
              "rmse_rot_deg,rmse_trans_m,desc_ms,loop_ms,total_ms,solver_ms,precision,recall,"
              "true_positives,accepted,queries_with_loop,bytes\n";
   pr << "scene,method,threshold,accepted,true_positives,precision,recall\n";
-  subs << "scene,id,points,trunks,bytes,t_extract_ms,t_desc_ms,t_loop_ms,fpfh_points,t_fpfh_ms\n";
+  subs << "scene,id,points,trunks,bytes,t_extract_ms,t_desc_ms,t_loop_ms,fpfh_points,t_fpfh_ms,"
+          "t_scan_context_ms\n";
+  place << std::setprecision(6)
+        << "scene,method,precision,recall,correct,answers,queries_with_loop,yaw_err_deg,"
+           "yaw_err_median_deg,desc_ms,query_ms,bytes\n";
+  auto placeCsvRow = [&](const std::string& scene, const std::string& method,
+                         const baselines::PlaceRecognitionSummary& s) {
+    place << scene << ",\"" << method << "\",";
+    auto opt = [&](const std::optional<double>& v) {
+      if (v) place << *v;
+      place << ',';
+    };
+    opt(s.precision);
+    opt(s.recall);
+    place << s.correct << ',' << s.answers << ',' << s.queries_with_loop << ',';
+    opt(s.yaw_err_deg);
+    opt(s.yaw_err_median_deg);
+    place << s.t_desc_ms << ',' << s.t_query_ms << ',' << s.bytes_mean << '\n';
+  };
 
   std::vector<baselines::SceneBench> scenes;
   std::vector<std::shared_ptr<const Descriptor>> pool;
@@ -132,7 +154,13 @@ int runBench(const Args& args) {
       subs << scene << ',' << st.id << ',' << st.points << ',' << st.trunks << ',' << st.bytes
            << ',' << st.t_extract_ms << ',' << st.t_desc_ms << ','
            << (dtif_run ? dtif_run->rows[i].t_loop_ms : 0.0) << ',' << st.fpfh_points << ','
-           << st.t_fpfh_ms << '\n';
+           << st.t_fpfh_ms << ',' << st.t_scan_context_ms << '\n';
+    }
+    for (const auto& run : sb.place) {
+      placeCsvRow(scene, run.method, baselines::summarizePlaceRecognition(run.rows, run.bytes_sum));
+      if (run.method == "scan context") {
+        writeResultsCsv((sdir / "scan_context.csv").string(), run.rows);
+      }
     }
     pool.insert(pool.end(), sb.descriptors.begin(), sb.descriptors.end());
     scenes.push_back(std::move(sb));
@@ -178,6 +206,31 @@ int runBench(const Args& args) {
     md << "\n";
   }
 
+  if (opt.place_recognition) {
+    md << "### Place recognition (sequential protocol; an answer is correct when its pair is a "
+          "true loop, whatever its pose error)\n\n"
+       << baselines::placeRecognitionHeader("Scene / method");
+    std::vector<std::string> order;
+    std::map<std::string, std::vector<EvalRow>> all_rows;
+    std::map<std::string, double> all_bytes;
+    for (const auto& sb : scenes) {
+      for (const auto& run : sb.place) {
+        md << baselines::placeRecognitionRow(
+            baselines::summarizePlaceRecognition(run.rows, run.bytes_sum),
+            sb.scene + ": " + run.method);
+        if (!all_rows.count(run.method)) order.push_back(run.method);
+        all_rows[run.method].insert(all_rows[run.method].end(), run.rows.begin(), run.rows.end());
+        all_bytes[run.method] += run.bytes_sum;
+      }
+    }
+    for (const auto& method : order) {
+      const auto s = baselines::summarizePlaceRecognition(all_rows[method], all_bytes[method]);
+      md << baselines::placeRecognitionRow(s, "**all scenes: " + method + "**");
+      placeCsvRow("all", method, s);
+    }
+    md << "\n";
+  }
+
   if (!o.has("no-scaling") && !pool.empty()) {
     std::cerr << "dtif bench: query time vs database size\n";
     std::vector<std::shared_ptr<const Descriptor>> queries;
@@ -202,7 +255,7 @@ int runBench(const Args& args) {
   }
   std::ofstream(dir / "tables.md") << md.str();
   std::cout << md.str();
-  if (!summary || !pr || !subs) throw DatasetError(*out + ": write failed");
+  if (!summary || !pr || !subs || !place) throw DatasetError(*out + ": write failed");
   return 0;
 }
 

@@ -24,9 +24,11 @@ constexpr const char* kUsage =
     "compares\n"
     "           them with a dtif eval run and reports the lag of the results\n"
     "  bench    <dataset_dir>... --out <dir> [--config <params.yaml>] [--back-ends a,b,...]\n"
-    "           [--no-front-ends] [--no-pr] [--no-scaling] [--scaling-sizes 10,20,...]\n"
+    "           [--no-front-ends] [--no-pr] [--no-scan-context] [--no-scaling]\n"
+    "           [--scaling-sizes 10,20,...]\n"
     "           dtif vs the paper's baselines (back ends: dtif, dtif_unit, quatro,\n"
-    "           svd_ransac, fgr; front end: FPFH); summary.csv, tables.md, pr.csv, ...\n";
+    "           svd_ransac, fgr; front end: FPFH; place recognition: scan context);\n"
+    "           summary.csv, tables.md, pr.csv, place_recognition.csv, ...\n";
 
 }  // namespace
 

@@ -8,10 +8,12 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "dtif/baselines/fpfh_registration.h"
+#include "dtif/baselines/scan_context.h"
 #include "dtif/core/config.h"
 #include "dtif/core/dataset.h"
 #include "dtif/core/evaluation.h"
@@ -25,7 +27,9 @@ struct BenchOptions {
   bool front_ends = true;  ///< also the FPFH baseline and dtif on the same pairs
   std::vector<std::string> fpfh_solvers{"quatro", "svd_ransac"};
   FpfhParams fpfh;
-  bool pr_curve = true;  ///< a loosely verified dtif run, swept over the inlier threshold
+  bool pr_curve = true;           ///< a loosely verified dtif run, swept over the inlier threshold
+  bool place_recognition = true;  ///< the scan-context baseline vs dtif as place recognition
+  ScanContextParams scan_context;
 };
 
 /// The solver of a back-end name (empty function for "dtif": estimatePose). Throws
@@ -44,25 +48,56 @@ struct MethodRun {
 struct SubmapStats {
   int64_t id = -1;
   size_t points = 0, trunks = 0, bytes = 0, fpfh_points = 0;
-  double t_extract_ms = 0.0;  ///< trunk extraction
-  double t_desc_ms = 0.0;     ///< extraction + descriptor (DATASET.md's desc)
-  double t_loop_ms = 0.0;     ///< dtif's query (DATASET.md's loop)
-  double t_fpfh_ms = 0.0;     ///< voxel grid + normals + FPFH
+  double t_extract_ms = 0.0;       ///< trunk extraction
+  double t_desc_ms = 0.0;          ///< extraction + descriptor (DATASET.md's desc)
+  double t_loop_ms = 0.0;          ///< dtif's query (DATASET.md's loop)
+  double t_fpfh_ms = 0.0;          ///< voxel grid + normals + FPFH
+  double t_scan_context_ms = 0.0;  ///< scan-context descriptor
 };
 
-/// Precision and recall when accepting only loops with at least `threshold` inliers.
+/// Precision and recall when accepting only loops with at least `threshold` inliers (scan
+/// context: answers with a distance below `threshold`).
 struct PrPoint {
   std::string method;
-  int threshold = 0;
+  double threshold = 0.0;
   size_t accepted = 0, true_positives = 0;
   double precision = 0.0, recall = 0.0;
 };
+/// A PrPoint from its counts: precision 1 without answers, recall 0 without loops.
+PrPoint prPoint(const std::string& method, double threshold, size_t accepted, size_t true_positives,
+                size_t loops);
+
+/// A method scored as place recognition: an accepted loop counts as correct when its pair is a
+/// true loop (overlap ground truth), whatever its pose error. rows: one per submap; t_desc_ms
+/// and t_loop_ms are the method's own; err->yaw_deg is meaningful, other errors are not for
+/// scan context (it estimates no translation: est_t* are 0).
+struct PlaceRecognitionRun {
+  std::string method;
+  std::vector<EvalRow> rows;
+  double bytes_sum = 0.0;  ///< descriptor bytes summed over the rows
+};
+
+struct PlaceRecognitionSummary {
+  size_t submaps = 0, answers = 0, correct = 0, queries_with_loop = 0;
+  std::optional<double> precision;           ///< correct / answers
+  std::optional<double> recall;              ///< correct / queries with a loop
+  std::optional<double> yaw_err_deg;         ///< mean |yaw error| of correct answers [deg]
+  std::optional<double> yaw_err_median_deg;  ///< their median [deg]
+  double t_desc_ms = 0.0, t_query_ms = 0.0;  ///< means per submap [ms]
+  double bytes_mean = 0.0;
+};
+PlaceRecognitionSummary summarizePlaceRecognition(const std::vector<EvalRow>& rows,
+                                                  double bytes_sum);
+/// The place-recognition table's markdown header and one row.
+std::string placeRecognitionHeader(const std::string& first);
+std::string placeRecognitionRow(const PlaceRecognitionSummary& s, const std::string& method);
 
 struct SceneBench {
   std::string scene;
   std::vector<MethodRun> runs;
   std::vector<SubmapStats> submaps;
   std::vector<PrPoint> pr;
+  std::vector<PlaceRecognitionRun> place;  ///< scan context, then dtif (if it ran as back end)
   std::vector<std::shared_ptr<const Descriptor>> descriptors;  ///< valid ones, for scaling
 };
 
