@@ -33,7 +33,7 @@ std::vector<PairRec> pairsOf(const Descriptor& d, double max_len) {
       const Eigen::Vector2d a(d.trunks[i].x, d.trunks[i].y), b(d.trunks[j].x, d.trunks[j].y);
       const Eigen::Vector2d e = b - a;
       const double len = e.norm();
-      if (len < kMinPairM || len > max_len) continue;
+      if (!(len >= kMinPairM && len <= max_len)) continue;  // also drops non-finite trunks
       out.push_back({len, e.x() / len, e.y() / len, 0.5 * (a + b), i, j});
     }
   }
@@ -102,8 +102,8 @@ std::vector<VotePeak> votePoses(const Descriptor& q, const Descriptor& c,
     b.count += 1.0, b.cos_sum += cy, b.sin_sum += sy, b.t_sum += t;
   };
   forCompatible([&](const PairRec& a, const PairRec& b) {
-    // yaw = direction of b - direction of a: a.i <-> b.i, a.j <-> b.j; yaw + pi: a.i <-> b.j, a.j
-    // <-> b.i.
+    // yaw = direction of b - direction of a pairs a.i with b.i and a.j with b.j;
+    // yaw + pi pairs a.i with b.j and a.j with b.i.
     const double cy = b.cos_a * a.cos_a + b.sin_a * a.sin_a;
     const double sy = b.sin_a * a.cos_a - b.cos_a * a.sin_a;
     vote(cy, sy, a.mid, b.mid);

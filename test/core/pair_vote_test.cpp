@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <limits>
 #include <random>
 
 #include "core/match_test_utils.h"
@@ -90,6 +91,13 @@ TEST(VotePoses, DeterministicAndEmptyWithoutPairs) {
   EXPECT_TRUE(votePoses(far, cases[0].c, params, 4).empty());
   EXPECT_TRUE(votePoses(close, cases[0].c, params, 4).empty());
   EXPECT_TRUE(votePoses(cases[0].q, cases[0].c, params, 0).empty());
+  // Non-finite trunks (a corrupt message) are skipped, never sorted or voted.
+  Descriptor with_nan = cases[0].q;
+  with_nan.trunks[0].x = std::numeric_limits<double>::quiet_NaN();
+  with_nan.trunks[1].y = std::numeric_limits<double>::infinity();
+  const auto clean = votePoses(with_nan, cases[0].c, params, 4);
+  ASSERT_FALSE(clean.empty());
+  for (const VotePeak& p : clean) EXPECT_TRUE(std::isfinite(p.yaw) && p.t.allFinite());
 }
 
 /// The fallback is what finds these pairs: without it the triangles give no hypothesis for most
