@@ -423,6 +423,7 @@ std::string DatabaseParams::validate() const {
   std::ostringstream err;
   if (!(exclude_recent_s >= 0.0)) err << "exclude_recent_s must be >= 0; ";
   if (max_candidates < 1) err << "max_candidates must be >= 1; ";
+  if (max_vote_candidates < 0) err << "max_vote_candidates must be >= 0; ";
   return err.str();
 }
 
@@ -718,14 +719,19 @@ std::optional<LoopClosure> LoopDetector::query(const Descriptor& q, QueryStats* 
   std::optional<LoopClosure> best;
   std::vector<MatchTriangle> tq;
   if (!cands.empty()) tq = matchTriangles(q, mp.neighbour_triangles);
-  for (const Cand& cd : cands) {
+  // Candidates past the best max_vote_candidates are matched without the vote fallback.
+  LoopDetectorParams no_votes = params_;
+  no_votes.matcher.vote_fallback = false;
+  for (size_t rank = 0; rank < cands.size(); ++rank) {
+    const Cand& cd = cands[rank];
     auto& tc = triangles_[cd.index];
     if (!tc) {
       tc = std::make_shared<const std::vector<MatchTriangle>>(
           matchTriangles(*entries_[cd.index], mp.neighbour_triangles));
     }
-    auto lc =
-        matchPair(q, *entries_[cd.index], params_, nullptr, nullptr, &st, &solver_, &tq, tc.get());
+    const bool votes = rank < static_cast<size_t>(params_.database.max_vote_candidates);
+    auto lc = matchPair(q, *entries_[cd.index], votes ? params_ : no_votes, nullptr, nullptr, &st,
+                        &solver_, &tq, tc.get());
     if (lc && (!best || lc->score > best->score)) best = std::move(lc);
   }
   return best;

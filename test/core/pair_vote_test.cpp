@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <limits>
+#include <memory>
 #include <random>
 
 #include "core/match_test_utils.h"
@@ -121,6 +122,26 @@ TEST(LoopDetector, VoteFallbackRecoversPairsThatShareFewTriangles) {
               cases.size(), found_without);
   EXPECT_GE(found_with, found_without + 5);
   EXPECT_GE(found_with, static_cast<int>(0.7 * cases.size()));
+}
+
+/// Through the database query: the vote fallback finds these loops; max_vote_candidates 0
+/// (no screened candidate may vote) turns it off.
+TEST(LoopDetector, DatabaseQueryUsesTheVoteFallback) {
+  LoopDetectorParams votes, none;
+  none.database.max_vote_candidates = 0;
+  ASSERT_GT(votes.database.max_vote_candidates, 0);
+  int found_votes = 0, found_none = 0;
+  const auto cases = sparseOverlaps(20, 12);
+  for (const SparseOverlap& s : cases) {
+    LoopDetector a(votes), b(none);
+    const auto c = std::make_shared<const Descriptor>(s.c);  // another robot's submap
+    ASSERT_TRUE(a.insert(c) && b.insert(c));
+    found_votes += static_cast<bool>(a.query(s.q));
+    found_none += static_cast<bool>(b.query(s.q));
+  }
+  std::printf("[ info ] database: %d/%zu with votes, %d without\n", found_votes, cases.size(),
+              found_none);
+  EXPECT_GE(found_votes, found_none + 4);
 }
 
 /// Different places of the same kind of dense stand, their 20 m windows 2-59 m apart: the vote

@@ -78,6 +78,10 @@ struct VerifierParams {
 struct DatabaseParams {
   double exclude_recent_s = 30.0;  ///< same-robot submaps closer in time are not loops [s]
   int max_candidates = 25;         ///< screened candidates passed to matching, best first
+  /// Of those, the best this many may fall back to pose voting (MatcherParams::vote_fallback)
+  /// when their triangles give no hypothesis: voting costs ~1 ms per candidate, the histogram
+  /// screening ranks the overlapping submaps first. 0: none.
+  int max_vote_candidates = 8;
 
   std::string validate() const;
 
@@ -85,6 +89,7 @@ struct DatabaseParams {
   void visit(V& v) {
     v("exclude_recent_s", exclude_recent_s);
     v("max_candidates", max_candidates);
+    v("max_vote_candidates", max_vote_candidates);
   }
 };
 
