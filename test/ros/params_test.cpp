@@ -50,9 +50,10 @@ void flatten(const YAML::Node& n, const std::string& prefix, std::vector<std::st
 
 TEST(StrictParams, DeclaredKeysComeFromVisit) {
   const auto keys = declaredKeys<DatabaseParams>("database");
-  ASSERT_EQ(keys.size(), 2u);
+  ASSERT_EQ(keys.size(), 3u);
   EXPECT_EQ(keys[0], "database/exclude_recent_s");
   EXPECT_EQ(keys[1], "database/max_candidates");
+  EXPECT_EQ(keys[2], "database/max_vote_candidates");
 }
 
 TEST(StrictParams, UnknownKeyUnderTheNamespaceIsReported) {
