@@ -278,12 +278,14 @@ Refined guidedRefine(const Descriptor& q, const Descriptor& c, const Pose& T0, d
 struct Fit {
   Pose T = Pose::Identity();
   double score = 0.0;
-  double median_xy = 0.0;  ///< median horizontal residual of the refined pairs [m]
+  double median_xy = 0.0;                  ///< median horizontal residual of the pairs [m]
+  std::vector<std::pair<int, int>> pairs;  ///< the refined mutual pairs under T
 };
 Fit fitPose(const Descriptor& q, const Descriptor& c, const Pose& T0, double radius) {
   Fit f;
   const Refined r = guidedRefine(q, c, T0, radius);
   f.T = r.T;
+  f.pairs = r.pairs;
   std::vector<double> residual;
   for (const auto& [i, j] : r.pairs) {
     const Eigen::Vector2d d = (r.T * Eigen::Vector3d(q.trunks[i].x, q.trunks[i].y, 0.0)).head<2>() -
@@ -568,10 +570,10 @@ std::vector<Correspondence> voteCorrespondences(const Descriptor& q, const Descr
     *reason = "ambiguous votes";
     return {};
   }
-  // Radii are not compared (see votePoses): the pairs' geometry carries the evidence.
-  const Refined ref = guidedRefine(q, c, fits[best].T, radius);
+  // The best fit's own refined pairs (fitPose already ran the guided refinement). Radii are not
+  // compared (see votePoses): the pairs' geometry carries the evidence.
   std::vector<Correspondence> corrs;
-  for (const auto& [i, j] : ref.pairs) {
+  for (const auto& [i, j] : fits[best].pairs) {
     const Trunk &a = q.trunks[i], &b = c.trunks[j];
     Correspondence k;
     k.iq = i, k.ic = j;
