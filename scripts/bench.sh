@@ -13,7 +13,7 @@ OUT="${1:-${DTIF_REPO}/bench/$(date +%Y-%m-%d)}"
 shift || true
 dtif_scenes "$@"
 
-dtif_build > "${DTIF_WS}/build.log" 2>&1 || { cat "${DTIF_WS}/build.log"; exit 1; }
+dtif_build_logged
 bash "${DTIF_REPO}/scripts/install_deps.sh" python3-matplotlib  # the plots (Debian's, never pip)
 mkdir -p "${OUT}"
 DATASETS=()

@@ -21,6 +21,11 @@ dtif_build() {
   (cd "${DTIF_WS}" && catkin_make -j"${DTIF_JOBS}" "${DTIF_CMAKE_ARGS[@]}" "$@")
 }
 
+# dtif_build with its output in .ws/build.log, printed only when the build fails (then exits).
+dtif_build_logged() {
+  dtif_build "$@" > "${DTIF_WS}/build.log" 2>&1 || { cat "${DTIF_WS}/build.log"; exit 1; }
+}
+
 # Sources the workspace (roslaunch, rosrun find dtif); catkin's setup script reads unset variables.
 dtif_source_ws() {
   set +u

@@ -17,7 +17,7 @@ START_S="$(date +%s)"
 NAME="$(basename "${SCENE}" .yaml)"
 OUT="${DTIF_WS}/demo/${NAME}"
 
-dtif_build > "${DTIF_WS}/build.log" 2>&1 || { cat "${DTIF_WS}/build.log"; exit 1; }
+dtif_build_logged
 dtif_source_ws
 # The simulation is reused when this scene was already simulated by the same dtif binary with
 # the same bag options (a few minutes saved on a re-run); otherwise it is made anew.

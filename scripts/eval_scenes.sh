@@ -9,7 +9,7 @@ OUT="${1:-${DTIF_WS}/scenes}"
 shift || true
 dtif_scenes "$@"
 
-dtif_build > "${DTIF_WS}/build.log" 2>&1 || { cat "${DTIF_WS}/build.log"; exit 1; }
+dtif_build_logged
 mkdir -p "${OUT}"
 TABLE="${OUT}/table.md"
 : > "${TABLE}.rows"

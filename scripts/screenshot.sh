@@ -16,7 +16,7 @@ NAME="$(basename "${SCENE}" .yaml)"
 OUT="${DTIF_WS}/demo/${NAME}"
 
 bash "${DTIF_REPO}/scripts/install_deps.sh" rviz xvfb imagemagick libgl1-mesa-dri
-dtif_build > "${DTIF_WS}/build.log" 2>&1 || { cat "${DTIF_WS}/build.log"; exit 1; }
+dtif_build_logged
 dtif_source_ws
 if [ ! -f "${OUT}/${NAME}.bag" ] || [ ! -f "${OUT}/dataset/submaps.csv" ]; then
   rm -rf "${OUT}"
