@@ -31,8 +31,8 @@ constexpr double kMinXyVar = 0.02 * 0.02;
 constexpr double kMinZVar = 0.03 * 0.03;
 /// t_z with no seen stem base on both sides: a guess of a few metres [m^2].
 constexpr double kUnobservedZVar = 3.0 * 3.0;
-/// Roll/pitch fitted to seen stem bases (VerifierParams::tilt_min_pairs): (0.15 deg)^2.
-constexpr double kFittedTiltVar = (0.15 * M_PI / 180.0) * (0.15 * M_PI / 180.0);
+/// Floor on the variance of a roll/pitch fitted to seen stem bases: (0.05 deg)^2.
+constexpr double kMinFittedTiltVar = (0.05 * M_PI / 180.0) * (0.05 * M_PI / 180.0);
 constexpr double kMinYawVar = (0.1 * M_PI / 180.0) * (0.1 * M_PI / 180.0);
 
 using P2 = Eigen::Vector2d;
@@ -121,10 +121,10 @@ std::vector<std::pair<int, int>> mutualPairs(const std::vector<P2>& pq, const st
 /// wrong a median picks one of them.
 /// Returns the RMS elevation residual over the pairs used [m]; `z_pairs` receives the number of
 /// seen-base pairs that agree with the mode (0: t_z is a guess), `tilted` whether roll/pitch
-/// were fitted.
+/// were fitted and `tilt_var` their posterior variances (roll, pitch) [rad^2].
 double refineElevation(const Descriptor& q, const Descriptor& c,
                        const std::vector<std::pair<int, int>>& pairs, const VerifierParams& params,
-                       Pose* T, int* z_pairs, bool* tilted) {
+                       Pose* T, int* z_pairs, bool* tilted, Eigen::Vector2d* tilt_var) {
   std::vector<std::pair<int, int>> use;
   for (const auto& [i, j] : pairs)
     if (q.trunks[i].base_seen && c.trunks[j].base_seen) use.emplace_back(i, j);
@@ -189,8 +189,17 @@ double refineElevation(const Descriptor& q, const Descriptor& c,
   // a wrong base is decimetres off).
   constexpr double kTukeyC = 0.15;
   Eigen::Vector3d s(z_mode, 0.0, 0.0);  // dz = s0 + s1 (x - mean.x) + s2 (y - mean.y)
+  // Zero-mean prior on the slopes: (sigma_base / sigma_tilt)^2 per slope, in units of a
+  // full-weight pair.
+  double prior = 0.0;
+  if (params.tilt_prior_deg > 0.0) {
+    const double sigma_tilt = std::tan(params.tilt_prior_deg * M_PI / 180.0);
+    prior = (params.base_sigma_m / sigma_tilt) * (params.base_sigma_m / sigma_tilt);
+  }
+  Eigen::Matrix3d info = Eigen::Matrix3d::Identity();
   for (int it = 0; it < 10; ++it) {
     Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+    A(1, 1) = A(2, 2) = prior;
     Eigen::Vector3d b = Eigen::Vector3d::Zero();
     for (size_t k = 0; k < xy.size(); ++k) {
       const Eigen::Vector3d J(1.0, xy[k].x() - mean.x(), xy[k].y() - mean.y());
@@ -201,6 +210,7 @@ double refineElevation(const Descriptor& q, const Descriptor& c,
       b += w * J * dz[k];
     }
     if (A.determinant() <= 1e-9) return rmsZ();
+    info = A;
     const Eigen::Vector3d next = A.ldlt().solve(b);
     if (!next.allFinite()) return rmsZ();
     const bool done = (next - s).norm() < 1e-7;
@@ -222,6 +232,11 @@ double refineElevation(const Descriptor& q, const Descriptor& c,
   T_tilt.translation() = centre - R_tilt * centre + Eigen::Vector3d(0, 0, s(0) - z_mode);
   *T = T_tilt * *T;
   *tilted = true;
+  // Information in units of a full-weight pair of std dev base_sigma_m; s2 is the roll
+  // (about x), s1 the pitch.
+  const Eigen::Matrix3d post = info.inverse() * params.base_sigma_m * params.base_sigma_m;
+  *tilt_var = Eigen::Vector2d(std::max(post(2, 2), kMinFittedTiltVar),
+                              std::max(post(1, 1), kMinFittedTiltVar));
   return rmsZ();
 }
 
@@ -412,6 +427,9 @@ std::string VerifierParams::validate() const {
   if (tilt_min_pairs > 0 && tilt_min_pairs < 4) err << "tilt_min_pairs must be 0 or >= 4; ";
   if (!(tilt_min_spread_m >= 0.0)) err << "tilt_min_spread_m must be >= 0; ";
   if (!(max_tilt_deg > 0.0 && max_tilt_deg <= 10.0)) err << "max_tilt_deg must be in (0, 10]; ";
+  if (!(tilt_prior_deg >= 0.0 && tilt_prior_deg <= 10.0))
+    err << "tilt_prior_deg must be in [0, 10] (0: no prior); ";
+  if (!(base_sigma_m > 0.0)) err << "base_sigma_m must be > 0; ";
   if (!(min_overlap >= 0.0 && min_overlap <= 1.0)) err << "min_overlap must be in [0, 1]; ";
   if (!(max_fit_median_m > 0.0)) err << "max_fit_median_m must be > 0; ";
   if (min_z_pairs < 0) err << "min_z_pairs must be >= 0; ";
@@ -478,7 +496,11 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
   }
 
   Refined ref = guidedRefine(q, c, T_hyp, params.match_radius_m);
-  v.rms_z_m = refineElevation(q, c, ref.pairs, params, &ref.T, &v.z_pairs, &v.tilt_fitted);
+  Eigen::Vector2d tilt_var = Eigen::Vector2d::Zero();
+  v.rms_z_m =
+      refineElevation(q, c, ref.pairs, params, &ref.T, &v.z_pairs, &v.tilt_fitted, &tilt_var);
+  v.roll_var = tilt_var.x();
+  v.pitch_var = tilt_var.y();
   v.T_c_q = ref.T;
   v.pairs = ref.pairs;
   v.rms_xy_m = ref.rms_xy;
@@ -665,7 +687,8 @@ std::optional<LoopClosure> matchPair(const Descriptor& q, const Descriptor& c,
   lc.covariance(2, 2) = ver.z_pairs > 0
                             ? std::max(ver.rms_z_m * ver.rms_z_m / ver.z_pairs, kMinZVar)
                             : kUnobservedZVar;
-  lc.covariance(3, 3) = lc.covariance(4, 4) = ver.tilt_fitted ? kFittedTiltVar : kRollPitchVar;
+  lc.covariance(3, 3) = ver.tilt_fitted ? ver.roll_var : kRollPitchVar;
+  lc.covariance(4, 4) = ver.tilt_fitted ? ver.pitch_var : kRollPitchVar;
   lc.covariance(5, 5) = std::max(lever2 > 0 ? s2 / lever2 : 1.0, kMinYawVar);
   return lc;
 }

@@ -94,6 +94,57 @@ Pose tilted(const Pose& T, double roll_deg, double pitch_deg) {
   return out;
 }
 
+/// Only a few stem bases close together seen on both sides (dense understory): the plain
+/// least-squares tilt follows their noise, the 4-DoF model leaves the odometry's tilt; the
+/// prior on the residual tilt (tilt_prior_deg, a MAP fit) does better than both.
+TEST(LoopDetector, TiltPriorSteadiesFewCloseBases) {
+  struct Variant {
+    const char* name;
+    int min_pairs;
+    double prior_deg;
+    double sum_rot = 0.0;
+    int accepted = 0;
+  };
+  std::vector<Variant> variants = {{"MAP", 4, 0.5}, {"least squares", 4, 0.0}, {"4-DoF", 0, 0.5}};
+  for (Variant& var : variants) {
+    LoopDetectorParams params;
+    params.verification.tilt_min_pairs = var.min_pairs;
+    params.verification.tilt_min_spread_m = 0.0;
+    params.verification.tilt_prior_deg = var.prior_deg;
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<double> yaw(-M_PI, M_PI), tilt(-0.5, 0.5);
+    test::ObservationNoise nz;
+    nz.z_sigma_m = 0.05;
+    const Eigen::Vector2d seen_centre(53.0, 48.5);  // between the two submaps
+    auto hideFar = [&](Descriptor* d, const Pose& T_w_s) {
+      for (Trunk& t : d->trunks) {
+        const Eigen::Vector3d w = T_w_s * Eigen::Vector3d(t.x, t.y, t.z);
+        t.base_seen = (w.head<2>() - seen_centre).norm() < 6.0;
+      }
+    };
+    for (int i = 0; i < 30; ++i) {
+      const Trunks world = test::randomStand(rng, 100, 100, 600);
+      const Eigen::Vector2d cc(50, 50), qc(56, 47);
+      const Pose T_w_c = tilted(poseXyYaw(cc.x(), cc.y(), 0.5, yaw(rng)), tilt(rng), tilt(rng));
+      const Pose T_w_q = tilted(poseXyYaw(qc.x(), qc.y(), -0.3, yaw(rng)), tilt(rng), tilt(rng));
+      Descriptor c = describe(observe(rng, world, cc, T_w_c, nz), "a", 0, 0.0);
+      Descriptor q = describe(observe(rng, world, qc, T_w_q, nz), "b", 1, 0.0);
+      hideFar(&c, T_w_c);
+      hideFar(&q, T_w_q);
+      const auto lc = matchPair(q, c, params);
+      if (!lc) continue;
+      ++var.accepted;
+      var.sum_rot += rotationErrorDeg(lc->T_c_q, T_w_c.inverse() * T_w_q);
+    }
+    std::printf("[ info ] %s: accepted %d/30, rotation error %.3f deg\n", var.name, var.accepted,
+                var.sum_rot / std::max(1, var.accepted));
+    ASSERT_GE(var.accepted, 25) << var.name;
+  }
+  const double map = variants[0].sum_rot / variants[0].accepted;
+  EXPECT_LT(map, variants[1].sum_rot / variants[1].accepted);
+  EXPECT_LT(map, variants[2].sum_rot / variants[2].accepted);
+}
+
 /// Hidden stem bases (sensor's lower field-of-view limit, occlusion): the extractor flags them
 /// and reports extrapolated terrain, too high. Here the query saw half its bases too high (it
 /// walked downhill), the candidate a fifth. Elevation must come from seen bases only.

@@ -34,9 +34,14 @@ struct VerifierParams {
   /// (a few tenths of a degree). With at least this many refined pairs whose stem bases were
   /// both seen, the refinement fits the tilt to their elevations; 0 keeps the paper's 4-DoF
   /// model (Eq. 3.1).
-  int tilt_min_pairs = 8;
-  double tilt_min_spread_m = 4.0;  ///< the pairs' horizontal spread (smaller std dev) at least [m]
+  int tilt_min_pairs = 4;
+  double tilt_min_spread_m = 0.0;  ///< the pairs' horizontal spread (smaller std dev) at least [m]
   double max_tilt_deg = 2.0;       ///< a larger fitted tilt is not trusted; 4-DoF kept [deg]
+  /// Prior on the residual tilt between two submaps (std dev per axis; the front end's
+  /// levelling error, ~0.3 deg per submap): the fit is a MAP estimate that shrinks towards no
+  /// tilt when the pairs are few or close together. 0: plain least squares [deg].
+  double tilt_prior_deg = 0.5;
+  double base_sigma_m = 0.05;  ///< std dev of a seen stem base's elevation (weighs the prior) [m]
   /// Overlap of the aligned footprints (occupied cells at trunk height, DATASET.md's measure)
   /// at least; pairs without footprints (trunk maps) skip the check [0..1].
   double min_overlap = 0.3;
@@ -68,6 +73,8 @@ struct VerifierParams {
     v("tilt_min_pairs", tilt_min_pairs);
     v("tilt_min_spread_m", tilt_min_spread_m);
     v("max_tilt_deg", max_tilt_deg);
+    v("tilt_prior_deg", tilt_prior_deg);
+    v("base_sigma_m", base_sigma_m);
     v("min_overlap", min_overlap);
     v("max_fit_ambiguity", max_fit_ambiguity);
     v("max_fit_median_m", max_fit_median_m);
@@ -145,6 +152,8 @@ struct Verification {
   double rms_z_m = 0.0;                    ///< RMS elevation residual of the z pairs [m]
   int z_pairs = 0;  ///< pairs with both stem bases seen that agree on t_z (0: t_z unobserved)
   bool tilt_fitted = false;      ///< residual roll/pitch estimated from those pairs
+  double roll_var = 0.0;         ///< when fitted: posterior variance of the roll [rad^2]
+  double pitch_var = 0.0;        ///< when fitted: posterior variance of the pitch [rad^2]
   double overlap = -1.0;         ///< overlap of the aligned footprints; -1 when not measured
   double fit_ambiguity = -1.0;   ///< runner-up / best lattice fit; -1 when not needed
   std::string reason;            ///< why rejected (empty when accepted)
