@@ -53,15 +53,18 @@ dtif_scenes() {
   fi
 }
 
-# Simulates scene $1 (seed 1) into $2/dataset, with $2/scene.png and $2/simulate.log, unless $2
-# holds a dataset newer than the scene file (the datasets of eval_scenes.sh and bench.sh).
+# Simulates scene $1 with seed $3 (default 1) into $2/dataset, with $2/scene.png and
+# $2/simulate.log, unless $2 holds a dataset of that seed newer than the scene file (the
+# datasets of eval_scenes.sh and bench.sh).
 dtif_scene_dataset() {
-  local scene="$1" dir="$2"
-  if [ ! -f "${dir}/dataset/submaps.csv" ] || [ "${scene}" -nt "${dir}/dataset/submaps.csv" ]; then
+  local scene="$1" dir="$2" seed="${3:-1}"
+  if [ ! -f "${dir}/dataset/submaps.csv" ] || [ "${scene}" -nt "${dir}/dataset/submaps.csv" ] \
+    || [ "$(cat "${dir}/seed" 2>/dev/null || echo 1)" != "${seed}" ]; then
     rm -rf "${dir}"
     mkdir -p "${dir}"
-    echo "== $(basename "${scene}" .yaml): simulating" >&2
-    "${DTIF_BIN}" simulate "${scene}" --out "${dir}/dataset" --seed 1 --png "${dir}/scene.png" \
-      | tee "${dir}/simulate.log" >&2
+    echo "== $(basename "${scene}" .yaml): simulating (seed ${seed})" >&2
+    "${DTIF_BIN}" simulate "${scene}" --out "${dir}/dataset" --seed "${seed}" \
+      --png "${dir}/scene.png" | tee "${dir}/simulate.log" >&2
+    echo "${seed}" > "${dir}/seed"
   fi
 }
