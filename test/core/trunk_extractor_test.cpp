@@ -163,7 +163,7 @@ TEST(TrunkExtractor, VisitListsEveryKeyOnce) {
   std::vector<std::string> keys;
   auto v = [&](const char* k, auto&) { keys.push_back(k); };
   p.visit(v);
-  EXPECT_EQ(keys.size(), 29u);
+  EXPECT_EQ(keys.size(), 31u);
   std::sort(keys.begin(), keys.end());
   EXPECT_EQ(std::unique(keys.begin(), keys.end()), keys.end());
 }
@@ -256,6 +256,54 @@ TEST(TrunkExtractor, SeenBasesAreMeasuredHiddenBasesAreFlagged) {
   const auto all = extractTrunks(full.cloud, TrunkExtractorParams());
   EXPECT_EQ(all.stats.unseen_bases, 0u);
   for (const Trunk& t : all.trunks) EXPECT_TRUE(t.base_seen);
+}
+
+// Dense understory: a mat of low vegetation 0.6 m high hides the ground and the stem's foot,
+// and from above it looks like ground. A few returns through gaps in the ring around the stem
+// show lower ground, so the base on the mat must not count as seen (it would be 0.6 m high).
+TEST(TrunkExtractor, BaseOnAVegetationMatIsNotSeen) {
+  auto makePlot = [](bool gaps) {
+    Plot plot(0.0, 0.0, 31);
+    std::mt19937 rng(32);
+    std::uniform_real_distribution<double> u(-0.05, 0.05), ang(-kPi, kPi), rad(0.5, 1.3);
+    std::normal_distribution<double> nz(0.0, 0.02);
+    for (double x = -10; x <= 10; x += 0.1) {
+      for (double y = -10; y <= 10; y += 0.1) {
+        const double px = x + u(rng), py = y + u(rng);
+        const bool mat = std::abs(px) < 6.0 && std::abs(py) < 6.0;
+        if (mat && std::hypot(px, py) < 0.2) continue;  // the stem stands through the mat
+        plot.push(px, py, plot.groundZ(px, py) + (mat ? 0.6 : 0.0) + nz(rng));
+      }
+    }
+    if (gaps) {
+      for (int k = 0; k < 8; ++k) {
+        const double a = ang(rng), r = rad(rng);
+        const double px = r * std::cos(a), py = r * std::sin(a);
+        plot.push(px, py, plot.groundZ(px, py) + nz(rng));
+      }
+    }
+    plot.addStem({0.0, 0.0, 0.15}, 8.0, 0.01, 0.04, /*h0=*/0.6);
+    return plot;
+  };
+  const Plot with_gaps = makePlot(true);
+  const auto res = extractTrunks(with_gaps.cloud, TrunkExtractorParams());
+  const int k = nearest(res.trunks, 0.0, 0.0, 0.3);
+  ASSERT_GE(k, 0);
+  EXPECT_FALSE(res.trunks[k].base_seen);
+  // Without the check the base on the mat counts as seen, 0.6 m too high.
+  TrunkExtractorParams no_check;
+  no_check.max_base_below_points = 1000000;
+  const auto unchecked = extractTrunks(with_gaps.cloud, no_check);
+  const int ku = nearest(unchecked.trunks, 0.0, 0.0, 0.3);
+  ASSERT_GE(ku, 0);
+  EXPECT_TRUE(unchecked.trunks[ku].base_seen);
+  EXPECT_NEAR(unchecked.trunks[ku].z, with_gaps.groundZ(0.0, 0.0) + 0.6, 0.1);
+  // Where nothing shows through the mat there is nothing to contradict it (a known limit).
+  const Plot no_gaps = makePlot(false);
+  const auto closed = extractTrunks(no_gaps.cloud, TrunkExtractorParams());
+  const int kc = nearest(closed.trunks, 0.0, 0.0, 0.3);
+  ASSERT_GE(kc, 0);
+  EXPECT_TRUE(closed.trunks[kc].base_seen);
 }
 
 TEST(TrunkExtractor, FootprintHoldsWhatStandsAboveTheGround) {

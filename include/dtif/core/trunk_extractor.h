@@ -47,6 +47,10 @@ struct TrunkExtractorParams {
   double base_max_dh_m = 0.4;           ///< ring points farther from the local ground are not
                                         ///< ground (shrubs, logs, noise) [m]
   int min_base_points = 8;              ///< ring points needed, else the grid ground is used
+  double base_below_m = 0.3;            ///< a ring point this far below the base plane is lower
+                                        ///< ground than the base [m]
+  int max_base_below_points = 2;        ///< more such points: the base is not seen (it sits on a
+                                        ///< shrub or log)
   int max_fits_per_candidate = 3;       ///< circles tried per candidate (trunks merged by
                                         ///< close spacing or undergrowth)
   double footprint_cell_m = 1.0;        ///< cell of the submap's footprint (occupied cells of
@@ -84,6 +88,8 @@ struct TrunkExtractorParams {
     v("max_fit_rms_m", max_fit_rms_m);
     v("base_max_dh_m", base_max_dh_m);
     v("min_base_points", min_base_points);
+    v("base_below_m", base_below_m);
+    v("max_base_below_points", max_base_below_points);
     v("max_fits_per_candidate", max_fits_per_candidate);
     v("footprint_cell_m", footprint_cell_m);
   }
