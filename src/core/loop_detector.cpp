@@ -31,6 +31,10 @@ constexpr double kMinXyVar = 0.02 * 0.02;
 constexpr double kMinZVar = 0.03 * 0.03;
 /// t_z with no seen stem base on both sides: a guess of a few metres [m^2].
 constexpr double kUnobservedZVar = 3.0 * 3.0;
+/// t_z from a single pair of seen bases (min_z_pairs 1): a base flagged seen still sits on a
+/// shrub or log, 0.45-1.6 m high, for 6 % of the trunks in the dense understory scene and 2 %
+/// in the mixed one, so one pair gets a decimetre-level variance, not its own zero residual.
+constexpr double kSinglePairZVar = 0.3 * 0.3;
 /// Floor on the variance of a roll/pitch fitted to seen stem bases: (0.05 deg)^2.
 constexpr double kMinFittedTiltVar = (0.05 * M_PI / 180.0) * (0.05 * M_PI / 180.0);
 constexpr double kMinYawVar = (0.1 * M_PI / 180.0) * (0.1 * M_PI / 180.0);
@@ -121,10 +125,13 @@ std::vector<std::pair<int, int>> mutualPairs(const std::vector<P2>& pq, const st
 /// wrong a median picks one of them.
 /// Returns the RMS elevation residual over the pairs used [m]; `z_pairs` receives the number of
 /// seen-base pairs that agree with the mode (0: t_z is a guess), `tilted` whether roll/pitch
-/// were fitted and `tilt_var` their posterior variances (roll, pitch) [rad^2].
+/// were fitted and `tilt_var` their posterior variances (roll, pitch) [rad^2]; `z_ambiguity`
+/// the size of the largest group of seen-base pairs agreeing on another t_z over the mode's
+/// (0 when none; unchanged when no base pair was seen).
 double refineElevation(const Descriptor& q, const Descriptor& c,
                        const std::vector<std::pair<int, int>>& pairs, const VerifierParams& params,
-                       Pose* T, int* z_pairs, bool* tilted, Eigen::Vector2d* tilt_var) {
+                       Pose* T, int* z_pairs, bool* tilted, Eigen::Vector2d* tilt_var,
+                       double* z_ambiguity) {
   std::vector<std::pair<int, int>> use;
   for (const auto& [i, j] : pairs)
     if (q.trunks[i].base_seen && c.trunks[j].base_seen) use.emplace_back(i, j);
@@ -172,6 +179,19 @@ double refineElevation(const Descriptor& q, const Descriptor& c,
   }
   const double z_mode = swz / sw;  // the robust start value of the tilt fit below
   if (seen) *z_pairs = agree;
+  // Runner-up elevation: the largest group of the other pairs that agree among themselves. Two
+  // neighbouring stems whose bases both sit on one shrub or log agree on a wrong t_z as well
+  // as two good ones agree on the right one.
+  if (seen) {
+    int second = 0;
+    for (double z0 : dz) {
+      if (std::abs(z0 - mode) < kZWindow) continue;
+      int n = 0;
+      for (double z1 : dz) n += std::abs(z1 - mode) >= kZWindow && std::abs(z1 - z0) < kZWindow;
+      second = std::max(second, n);
+    }
+    *z_ambiguity = static_cast<double>(second) / std::max(agree, 1);
+  }
   T->translation().z() += z_mode;
 
   if (!seen || params.tilt_min_pairs <= 0 || static_cast<int>(use.size()) < params.tilt_min_pairs)
@@ -433,6 +453,7 @@ std::string VerifierParams::validate() const {
   if (!(min_overlap >= 0.0 && min_overlap <= 1.0)) err << "min_overlap must be in [0, 1]; ";
   if (!(max_fit_median_m > 0.0)) err << "max_fit_median_m must be > 0; ";
   if (min_z_pairs < 0) err << "min_z_pairs must be >= 0; ";
+  if (!(max_z_ambiguity >= 0.0)) err << "max_z_ambiguity must be >= 0; ";
   if (!(max_fit_ambiguity >= 0.0 && max_fit_ambiguity < 1.0)) {
     err << "max_fit_ambiguity must be in [0, 1) (0: ambiguous hypotheses are rejected); ";
   }
@@ -497,8 +518,8 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
 
   Refined ref = guidedRefine(q, c, T_hyp, params.match_radius_m);
   Eigen::Vector2d tilt_var = Eigen::Vector2d::Zero();
-  v.rms_z_m =
-      refineElevation(q, c, ref.pairs, params, &ref.T, &v.z_pairs, &v.tilt_fitted, &tilt_var);
+  v.rms_z_m = refineElevation(q, c, ref.pairs, params, &ref.T, &v.z_pairs, &v.tilt_fitted,
+                              &tilt_var, &v.z_ambiguity);
   v.roll_var = tilt_var.x();
   v.pitch_var = tilt_var.y();
   v.T_c_q = ref.T;
@@ -515,6 +536,7 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
   if (shift > params.match_radius_m) return reject("refinement diverged");
   if (static_cast<int>(ref.pairs.size()) < params.min_inliers) return reject("few inliers");
   if (v.z_pairs < params.min_z_pairs) return reject("elevation unobserved");
+  if (v.z_ambiguity > params.max_z_ambiguity) return reject("elevation ambiguous");
   if (ref.rms_xy > params.max_rms_xy_m) return reject("large residual");
 
   // Co-visibility: after alignment, trunks of one submap inside the other's footprint (convex
@@ -684,9 +706,10 @@ std::optional<LoopClosure> matchPair(const Descriptor& q, const Descriptor& c,
   lc.covariance.setZero();
   lc.covariance(0, 0) = lc.covariance(1, 1) = std::max(s2 / n, kMinXyVar);
   // No pair with both stem bases seen: t_z is extrapolated terrain, not a measurement.
-  lc.covariance(2, 2) = ver.z_pairs > 0
+  lc.covariance(2, 2) = ver.z_pairs > 1
                             ? std::max(ver.rms_z_m * ver.rms_z_m / ver.z_pairs, kMinZVar)
-                            : kUnobservedZVar;
+                        : ver.z_pairs == 1 ? kSinglePairZVar
+                                           : kUnobservedZVar;
   lc.covariance(3, 3) = ver.tilt_fitted ? ver.roll_var : kRollPitchVar;
   lc.covariance(4, 4) = ver.tilt_fitted ? ver.pitch_var : kRollPitchVar;
   lc.covariance(5, 5) = std::max(lever2 > 0 ? s2 / lever2 : 1.0, kMinYawVar);

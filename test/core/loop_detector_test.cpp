@@ -186,13 +186,15 @@ TEST(LoopDetector, ElevationComesFromSeenBasesOnly) {
         "mean %.3f max %.3f m\n",
         flag ? "flagged" : "unflagged", accepted, cases.size(), unobserved, sum_z / accepted,
         max_z);
-    ASSERT_GE(accepted, 20);
     if (flag) {
+      ASSERT_GE(accepted, 20);
       EXPECT_LE(unobserved, 3);
       EXPECT_LT(sum_z / accepted, 0.05);
       EXPECT_LT(max_z, 0.2);
     } else {
-      // The control: unflagged, wrong bases still corrupt t_z (the mode absorbs some of them).
+      // The control: unflagged, wrong bases still corrupt t_z (the mode absorbs some of them,
+      // max_z_ambiguity rejects about half of these loops).
+      ASSERT_GE(accepted, 10);
       EXPECT_GT(max_z, 0.5);
       EXPECT_GT(sum_z / accepted, 0.1);
     }
@@ -202,6 +204,7 @@ TEST(LoopDetector, ElevationComesFromSeenBasesOnly) {
 /// Bases flagged seen can still be wrong (a shrub under the stem, dense understory): t_z is the
 /// mode of the seen pairs' elevation differences, so 3 right pairs outvote 3 wrong ones that
 /// disagree with each other (their median would be a wrong one), and only agreeing pairs count.
+/// (Wrong ones that agree with each other are AgreeingWrongBasesMakeTheElevationAmbiguous.)
 TEST(LoopDetector, ElevationIsTheModeOfSeenBasePairs) {
   const LoopDetectorParams params;
   int checked = 0;
@@ -210,7 +213,7 @@ TEST(LoopDetector, ElevationIsTheModeOfSeenBasePairs) {
     if (!matchPair(pc.q, pc.c, params, nullptr, &ver) || ver.pairs.size() < 8) continue;
     for (Trunk& t : pc.q.trunks) t.base_seen = false;
     for (Trunk& t : pc.c.trunks) t.base_seen = false;
-    const double lift[] = {0.0, 0.0, 0.0, 0.7, 1.1, 1.4};
+    const double lift[] = {0.0, 0.0, 0.0, 0.6, 1.2, 1.8};
     for (int k = 0; k < 6; ++k) {
       const auto [i, j] = ver.pairs[k];
       pc.q.trunks[i].base_seen = pc.c.trunks[j].base_seen = true;
@@ -221,6 +224,49 @@ TEST(LoopDetector, ElevationIsTheModeOfSeenBasePairs) {
     ASSERT_TRUE(lc.has_value()) << v2.reason;
     EXPECT_EQ(v2.z_pairs, 3);
     EXPECT_LT(std::fabs(lc->T_c_q.translation().z() - pc.T_c_q.translation().z()), 0.1);
+    ++checked;
+  }
+  EXPECT_GE(checked, 10);
+}
+
+/// Two neighbouring stems whose bases both sit on one shrub agree on a wrong t_z as well as two
+/// good pairs agree on the right one: 2 against 2 is rejected as ambiguous, 3 against 2 too,
+/// 2 against 1 is not. A lone seen pair fixes t_z but is reported with a 0.3 m std dev.
+TEST(LoopDetector, AgreeingWrongBasesMakeTheElevationAmbiguous) {
+  const LoopDetectorParams params;
+  struct Case {
+    int right, wrong;
+    bool accepted;
+  };
+  const Case cases[] = {{2, 2, false}, {3, 2, false}, {2, 1, true}, {1, 0, true}};
+  int checked = 0;
+  for (PairCase& pc : overlappingPairs(20, 4343)) {
+    Verification ver;
+    if (!matchPair(pc.q, pc.c, params, nullptr, &ver) || ver.pairs.size() < 8) continue;
+    for (const Case& cs : cases) {
+      Descriptor q = pc.q, c = pc.c;
+      for (Trunk& t : q.trunks) t.base_seen = false;
+      for (Trunk& t : c.trunks) t.base_seen = false;
+      for (int k = 0; k < cs.right + cs.wrong; ++k) {
+        const auto [i, j] = ver.pairs[k];
+        q.trunks[i].base_seen = c.trunks[j].base_seen = true;
+        if (k >= cs.right) q.trunks[i].z += 1.6;  // both on one shrub, 1.6 m up
+      }
+      Verification v2;
+      const auto lc = matchPair(q, c, params, nullptr, &v2);
+      EXPECT_EQ(lc.has_value(), cs.accepted)
+          << cs.right << " right, " << cs.wrong << " wrong pairs: " << v2.reason;
+      if (!cs.accepted) {
+        EXPECT_NE(v2.reason.find("elevation ambiguous"), std::string::npos) << v2.reason;
+        continue;
+      }
+      if (!lc) continue;
+      EXPECT_LT(std::fabs(lc->T_c_q.translation().z() - pc.T_c_q.translation().z()), 0.1);
+      if (cs.right == 1) {
+        EXPECT_EQ(v2.z_pairs, 1);
+        EXPECT_NEAR(lc->covariance(2, 2), 0.09, 1e-9);
+      }
+    }
     ++checked;
   }
   EXPECT_GE(checked, 10);

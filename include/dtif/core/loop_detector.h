@@ -53,10 +53,15 @@ struct VerifierParams {
   /// lattice pairs the trunks only to the planting jitter (0.15 m: median ~0.2 m), the right
   /// one to the centre noise (~0.04 m) [m].
   double max_fit_median_m = 0.08;
-  /// Refined pairs whose stem bases were both seen and agree on t_z at least: fewer leave t_z a
-  /// guess (one wrong base decides it), and the loop is rejected rather than reported with a
-  /// wrong elevation.
-  int min_z_pairs = 2;
+  /// Refined pairs whose stem bases were both seen and agree on t_z at least; with none t_z is
+  /// a guess and the loop is rejected rather than reported with a wrong elevation. One pair is
+  /// enough once bases on vegetation are flagged (TrunkExtractorParams::max_base_below_points)
+  /// and a disagreeing pair makes the elevation ambiguous (max_z_ambiguity): over 3 seeds of
+  /// the six scenes 16 more loops, none false; a lone pair's t_z gets a 0.3 m std dev.
+  int min_z_pairs = 1;
+  /// Another group of seen-base pairs agreeing on a different t_z, over the mode's pairs, at
+  /// most this; else the loop is rejected as `elevation ambiguous` (two stems on one shrub).
+  double max_z_ambiguity = 0.5;
 
   std::string validate() const;
 
@@ -79,6 +84,7 @@ struct VerifierParams {
     v("max_fit_ambiguity", max_fit_ambiguity);
     v("max_fit_median_m", max_fit_median_m);
     v("min_z_pairs", min_z_pairs);
+    v("max_z_ambiguity", max_z_ambiguity);
   }
 };
 
@@ -152,6 +158,7 @@ struct Verification {
   double rms_z_m = 0.0;                    ///< RMS elevation residual of the z pairs [m]
   int z_pairs = 0;  ///< pairs with both stem bases seen that agree on t_z (0: t_z unobserved)
   bool tilt_fitted = false;      ///< residual roll/pitch estimated from those pairs
+  double z_ambiguity = -1.0;     ///< runner-up / mode group of seen-base pairs; -1: none seen
   double roll_var = 0.0;         ///< when fitted: posterior variance of the roll [rad^2]
   double pitch_var = 0.0;        ///< when fitted: posterior variance of the pitch [rad^2]
   double overlap = -1.0;         ///< overlap of the aligned footprints; -1 when not measured
