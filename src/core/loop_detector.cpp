@@ -123,21 +123,19 @@ std::vector<std::pair<int, int>> mutualPairs(const std::vector<P2>& pq, const st
 /// t_z starts from the mode of the pairs' elevation differences, not their median: in dense
 /// understory a "seen" base can sit on a shrub, decimetres high, and when half of a few pairs are
 /// wrong a median picks one of them.
-/// Returns the RMS elevation residual over the pairs used [m]; `z_pairs` receives the number of
-/// seen-base pairs that agree with the mode (0: t_z is a guess), `tilted` whether roll/pitch
-/// were fitted and `tilt_var` their posterior variances (roll, pitch) [rad^2]; `z_ambiguity`
-/// the size of the largest group of seen-base pairs agreeing on another t_z over the mode's
-/// (0 when none; unchanged when no base pair was seen).
+/// Returns the RMS elevation residual over the pairs used [m] and fills v's elevation fields:
+/// z_pairs, the seen-base pairs that agree with the mode (0: t_z is a guess); z_ambiguity, the
+/// largest group of seen-base pairs agreeing on another t_z over the mode's (left as is when
+/// no base pair was seen); tilt_fitted, and then roll_var and pitch_var.
 double refineElevation(const Descriptor& q, const Descriptor& c,
                        const std::vector<std::pair<int, int>>& pairs, const VerifierParams& params,
-                       Pose* T, int* z_pairs, bool* tilted, Eigen::Vector2d* tilt_var,
-                       double* z_ambiguity) {
+                       Pose* T, Verification* v) {
   std::vector<std::pair<int, int>> use;
   for (const auto& [i, j] : pairs)
     if (q.trunks[i].base_seen && c.trunks[j].base_seen) use.emplace_back(i, j);
   const bool seen = !use.empty();
-  *z_pairs = static_cast<int>(use.size());
-  *tilted = false;
+  v->z_pairs = static_cast<int>(use.size());
+  v->tilt_fitted = false;
   if (!seen) use = pairs;
   if (use.empty()) return 0.0;
   const auto rmsZ = [&]() {
@@ -178,7 +176,7 @@ double refineElevation(const Descriptor& q, const Descriptor& c,
     agree += std::abs(z1 - mode) < kZWindow;
   }
   const double z_mode = swz / sw;  // the robust start value of the tilt fit below
-  if (seen) *z_pairs = agree;
+  if (seen) v->z_pairs = agree;
   // Runner-up elevation: the largest group of the other pairs that agree among themselves. Two
   // neighbouring stems whose bases both sit on one shrub or log agree on a wrong t_z as well
   // as two good ones agree on the right one.
@@ -190,7 +188,7 @@ double refineElevation(const Descriptor& q, const Descriptor& c,
       for (double z1 : dz) n += std::abs(z1 - mode) >= kZWindow && std::abs(z1 - z0) < kZWindow;
       second = std::max(second, n);
     }
-    *z_ambiguity = static_cast<double>(second) / std::max(agree, 1);
+    v->z_ambiguity = static_cast<double>(second) / std::max(agree, 1);
   }
   T->translation().z() += z_mode;
 
@@ -251,12 +249,12 @@ double refineElevation(const Descriptor& q, const Descriptor& c,
   T_tilt.linear() = R_tilt;
   T_tilt.translation() = centre - R_tilt * centre + Eigen::Vector3d(0, 0, s(0) - z_mode);
   *T = T_tilt * *T;
-  *tilted = true;
+  v->tilt_fitted = true;
   // Information in units of a full-weight pair of std dev base_sigma_m; s2 is the roll
   // (about x), s1 the pitch.
   const Eigen::Matrix3d post = info.inverse() * params.base_sigma_m * params.base_sigma_m;
-  *tilt_var = Eigen::Vector2d(std::max(post(2, 2), kMinFittedTiltVar),
-                              std::max(post(1, 1), kMinFittedTiltVar));
+  v->roll_var = std::max(post(2, 2), kMinFittedTiltVar);
+  v->pitch_var = std::max(post(1, 1), kMinFittedTiltVar);
   return rmsZ();
 }
 
@@ -517,11 +515,7 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
   }
 
   Refined ref = guidedRefine(q, c, T_hyp, params.match_radius_m);
-  Eigen::Vector2d tilt_var = Eigen::Vector2d::Zero();
-  v.rms_z_m = refineElevation(q, c, ref.pairs, params, &ref.T, &v.z_pairs, &v.tilt_fitted,
-                              &tilt_var, &v.z_ambiguity);
-  v.roll_var = tilt_var.x();
-  v.pitch_var = tilt_var.y();
+  v.rms_z_m = refineElevation(q, c, ref.pairs, params, &ref.T, &v);
   v.T_c_q = ref.T;
   v.pairs = ref.pairs;
   v.rms_xy_m = ref.rms_xy;
