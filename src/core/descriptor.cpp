@@ -155,7 +155,7 @@ void finishDescriptor(Descriptor& d, const DescriptorParams& params) {
 // ---- wire format helpers ---------------------------------------------------------------------
 
 constexpr uint32_t kMagic = 0x46495444;  // "DTIF" little endian
-constexpr uint16_t kVersion = 2;         // 2: base_seen bits
+constexpr uint16_t kVersion = 3;         // 2: base_seen bits; 3: ground map
 
 /// FNV-1a: detects truncated or flipped bytes (the radio link and files both corrupt data).
 uint32_t fnv1a(const uint8_t* p, size_t n) {
@@ -259,6 +259,7 @@ Triangle makeCanonicalTriangle(const Trunks& trunks, int a, int b, int c) {
 Descriptor describeSubmap(const TrunkExtractionResult& extraction, const DescriptorParams& params) {
   Descriptor d = buildDescriptor(extraction.trunks, params);
   d.footprint = extraction.footprint;
+  d.ground_map = extraction.ground_map;
   return d;
 }
 
@@ -334,7 +335,8 @@ Descriptor buildDescriptor(const Trunks& input, const DescriptorParams& params) 
 //            ceil(n / 8) bytes of base_seen bits (trunk i: byte i / 8, bit i % 8);
 //            u32 n_faces; n x u16[3] canonical vertex indices;
 //            u8 n_edge_bins, bins x u8; u8 n_radius_bins, bins x u8  (value * 255, rounded);
-//            f32 footprint cell (0: none) [, i32 x0, y0; u16 width, height; ceil(w h / 8) bytes]
+//            f32 footprint cell (0: none) [, i32 x0, y0; u16 width, height; ceil(w h / 8) bytes];
+//            u32 ground map bytes (0: none), encodeGroundMap's bytes
 std::vector<uint8_t> encodeDescriptor(const Descriptor& d) {
   if (d.trunks.size() > 65535) throw std::runtime_error("descriptor has more than 65535 trunks");
   Writer w;
@@ -385,6 +387,9 @@ std::vector<uint8_t> encodeDescriptor(const Descriptor& d) {
     w.put<uint16_t>(static_cast<uint16_t>(f.height));
     for (uint8_t b : f.bits) w.put<uint8_t>(b);
   }
+  const std::vector<uint8_t> ground = encodeGroundMap(d.ground_map);
+  w.put<uint32_t>(static_cast<uint32_t>(ground.size()));
+  for (uint8_t b : ground) w.put<uint8_t>(b);
   Writer out;
   out.put<uint32_t>(kMagic);
   out.put<uint16_t>(kVersion);
@@ -471,6 +476,12 @@ Descriptor decodeDescriptor(const std::vector<uint8_t>& bytes, const DescriptorP
     f.bits.resize(nbytes);
     for (uint8_t& b : f.bits) b = r.get<uint8_t>();
   }
+  const uint32_t ground_bytes = r.get<uint32_t>();
+  if (ground_bytes > r.remaining())
+    throw std::runtime_error("descriptor ground map exceeds the payload");
+  std::vector<uint8_t> ground(ground_bytes);
+  for (uint8_t& b : ground) b = r.get<uint8_t>();
+  d.ground_map = decodeGroundMap(ground.data(), ground.size());
   if (r.remaining() != 0) throw std::runtime_error("descriptor has trailing bytes");
   d.valid = (flags & 1) != 0;
   // A descriptor valid under the sender's params but too small for ours is not retrievable.

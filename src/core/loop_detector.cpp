@@ -35,6 +35,9 @@ constexpr double kUnobservedZVar = 3.0 * 3.0;
 /// shrub or log, 0.45-1.6 m high, for 6 % of the trunks in the dense understory scene and 2 %
 /// in the mixed one, so one pair gets a decimetre-level variance, not its own zero residual.
 constexpr double kSinglePairZVar = 0.3 * 0.3;
+/// t_z from the ground maps: hundreds of agreeing cells, but 5 cm steps and the cells' slope
+/// (a 0.5 m cell spans 0.18 m of a 20 deg slope) bound it at a few centimetres.
+constexpr double kGroundZVar = 0.05 * 0.05;
 /// Floor on the variance of a roll/pitch fitted to seen stem bases: (0.05 deg)^2.
 constexpr double kMinFittedTiltVar = (0.05 * M_PI / 180.0) * (0.05 * M_PI / 180.0);
 constexpr double kMinYawVar = (0.1 * M_PI / 180.0) * (0.1 * M_PI / 180.0);
@@ -452,6 +455,11 @@ std::string VerifierParams::validate() const {
   if (!(max_fit_median_m > 0.0)) err << "max_fit_median_m must be > 0; ";
   if (min_z_pairs < 0) err << "min_z_pairs must be >= 0; ";
   if (!(max_z_ambiguity >= 0.0)) err << "max_z_ambiguity must be >= 0; ";
+  if (min_ground_cells < 0) err << "min_ground_cells must be >= 0; ";
+  if (!(ground_window_m > 0.0 && ground_window_m <= 1.0))
+    err << "ground_window_m must be in (0, 1]; ";
+  if (!(max_ground_ambiguity >= 0.0 && max_ground_ambiguity <= 1.0))
+    err << "max_ground_ambiguity must be in [0, 1]; ";
   if (!(max_fit_ambiguity >= 0.0 && max_fit_ambiguity < 1.0)) {
     err << "max_fit_ambiguity must be in [0, 1) (0: ambiguous hypotheses are rejected); ";
   }
@@ -529,8 +537,23 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
   }
   if (shift > params.match_radius_m) return reject("refinement diverged");
   if (static_cast<int>(ref.pairs.size()) < params.min_inliers) return reject("few inliers");
-  if (v.z_pairs < params.min_z_pairs) return reject("elevation unobserved");
-  if (v.z_ambiguity > params.max_z_ambiguity) return reject("elevation ambiguous");
+  if (v.z_pairs < params.min_z_pairs) {
+    // No pair of seen bases: where both submaps saw the same lowest surface (ground, a log),
+    // their ground maps differ by t_z.
+    if (params.min_ground_cells <= 0 || q.ground_map.empty() || c.ground_map.empty())
+      return reject("elevation unobserved");
+    const GroundElevation g =
+        groundElevation(q.ground_map, c.ground_map, ref.T, params.ground_window_m);
+    v.ground_ambiguity = g.ok ? g.ambiguity : -1.0;
+    if (!g.ok || g.support < params.min_ground_cells) return reject("elevation unobserved");
+    if (g.ambiguity > params.max_ground_ambiguity) return reject("elevation ambiguous");
+    ref.T.translation().z() += g.dz_m;
+    v.T_c_q = ref.T;
+    v.ground_cells = g.support;
+    v.ground_sigma_m = g.spread_m;
+  } else if (v.z_ambiguity > params.max_z_ambiguity) {
+    return reject("elevation ambiguous");
+  }
   if (ref.rms_xy > params.max_rms_xy_m) return reject("large residual");
 
   // Co-visibility: after alignment, trunks of one submap inside the other's footprint (convex
@@ -700,10 +723,12 @@ std::optional<LoopClosure> matchPair(const Descriptor& q, const Descriptor& c,
   lc.covariance.setZero();
   lc.covariance(0, 0) = lc.covariance(1, 1) = std::max(s2 / n, kMinXyVar);
   // No pair with both stem bases seen: t_z is extrapolated terrain, not a measurement.
-  lc.covariance(2, 2) = ver.z_pairs > 1
-                            ? std::max(ver.rms_z_m * ver.rms_z_m / ver.z_pairs, kMinZVar)
-                        : ver.z_pairs == 1 ? kSinglePairZVar
-                                           : kUnobservedZVar;
+  lc.covariance(2, 2) =
+      ver.z_pairs > 1 ? std::max(ver.rms_z_m * ver.rms_z_m / ver.z_pairs, kMinZVar)
+      : ver.ground_cells > 0
+          ? std::max(ver.ground_sigma_m * ver.ground_sigma_m / ver.ground_cells, kGroundZVar)
+      : ver.z_pairs == 1 ? kSinglePairZVar
+                         : kUnobservedZVar;
   lc.covariance(3, 3) = ver.tilt_fitted ? ver.roll_var : kRollPitchVar;
   lc.covariance(4, 4) = ver.tilt_fitted ? ver.pitch_var : kRollPitchVar;
   lc.covariance(5, 5) = std::max(lever2 > 0 ? s2 / lever2 : 1.0, kMinYawVar);

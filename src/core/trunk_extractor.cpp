@@ -16,6 +16,7 @@
 #include <sstream>
 
 #include "dtif/core/evaluation.h"
+#include "dtif/core/ground_map.h"
 
 namespace dtif {
 namespace {
@@ -280,6 +281,14 @@ std::string TrunkExtractorParams::validate() const {
   if (max_fits_per_candidate < 1) err << "max_fits_per_candidate must be >= 1; ";
   if (!(footprint_cell_m >= 0.0 && footprint_cell_m <= 20.0))
     err << "footprint_cell_m must be in [0, 20] (0: no footprint); ";
+  if (!(ground_map_cell_m >= 0.0 && ground_map_cell_m <= 20.0))
+    err << "ground_map_cell_m must be in [0, 20] (0: no ground map); ";
+  if (!(ground_map_z_step_m >= 0.001 && ground_map_z_step_m <= 1.0))
+    err << "ground_map_z_step_m must be in [0.001, 1]; ";
+  if (ground_map_min_points < 1) err << "ground_map_min_points must be >= 1; ";
+  if (!(ground_map_margin_m >= 0.0)) err << "ground_map_margin_m must be >= 0; ";
+  if (!(ground_map_below_seen >= 0.0 && ground_map_below_seen <= 1.01))
+    err << "ground_map_below_seen must be in [0, 1.01]; ";
   std::string s = err.str();
   if (s.size() >= 2) s.resize(s.size() - 2);
   return s;
@@ -893,6 +902,24 @@ TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorPara
   // Stable output order, independent of the candidate numbering.
   std::sort(result.trunks.begin(), result.trunks.end(),
             [](const Trunk& a, const Trunk& b) { return a.x != b.x ? a.x < b.x : a.y < b.y; });
+
+  // --- Ground map: when too few stem bases were seen to fix a loop's elevation (steep slopes
+  // seen from a helmet), the lowest surface of the whole submap has to.
+  const size_t seen = static_cast<size_t>(std::count_if(
+      result.trunks.begin(), result.trunks.end(), [](const Trunk& t) { return t.base_seen; }));
+  if (p.ground_map_cell_m > 0.0 && !result.trunks.empty() &&
+      static_cast<double>(seen) < p.ground_map_below_seen * result.trunks.size()) {
+    // Only around the trunks: loops align trunks, so only there can two maps overlap.
+    Eigen::Vector2d lo(result.trunks[0].x, result.trunks[0].y), hi = lo;
+    for (const Trunk& t : result.trunks) {
+      lo = lo.cwiseMin(Eigen::Vector2d(t.x, t.y));
+      hi = hi.cwiseMax(Eigen::Vector2d(t.x, t.y));
+    }
+    const Eigen::Vector2d margin = Eigen::Vector2d::Constant(p.ground_map_margin_m);
+    result.ground_map = makeGroundMap(
+        X.data(), Y.data(), Z.data(), n, Eigen::Vector3d(ox, oy, oz), lo - margin, hi + margin,
+        p.ground_map_cell_m, p.ground_map_z_step_m, static_cast<uint32_t>(p.ground_map_min_points));
+  }
   return result;
 }
 

@@ -94,6 +94,7 @@ dtif_msgs::TrunkDescriptor toMsg(const Descriptor& d, const Pose& T_O_S,
     m.footprint_height = static_cast<uint16_t>(f.height);
     m.footprint_bits = f.bits;
   }
+  m.ground_map = encodeGroundMap(d.ground_map);
   return m;
 }
 
@@ -153,6 +154,11 @@ bool fromMsg(const dtif_msgs::TrunkDescriptor& msg, Descriptor* d, Pose* T_O_S,
     if (!out.footprint.wellFormed()) {
       return fail(error, "footprint bitmap does not match its width x height");
     }
+  }
+  try {
+    out.ground_map = decodeGroundMap(msg.ground_map.data(), msg.ground_map.size());
+  } catch (const std::exception& e) {
+    return fail(error, std::string("ground_map: ") + e.what());
   }
   Pose T = Pose::Identity();
   std::string pose_error;

@@ -8,6 +8,7 @@
 #include <random>
 #include <stdexcept>
 
+#include "core/ground_test_utils.h"
 #include "core/match_test_utils.h"
 
 namespace dtif {
@@ -193,6 +194,17 @@ TEST(Descriptor, WireRoundTripSmallAndExact) {
   plain.footprint = Footprint{};
   EXPECT_EQ(encodeDescriptor(plain).size(), bytes.size() - 12 - d.footprint.bits.size());
   EXPECT_TRUE(decodeDescriptor(encodeDescriptor(plain), DescriptorParams{}).footprint.empty());
+  // A ground map travels along (encodeGroundMap's bytes after a length).
+  Descriptor grounded = d;
+  std::mt19937 grng(8);
+  grounded.ground_map = test::mapOf(test::hillyGround(grng, Eigen::Vector2d(0, 0), 10.0, false),
+                                    Pose::Identity(), 0.5, 0.05);
+  ASSERT_GT(grounded.ground_map.count(), 500u);
+  const std::vector<uint8_t> gbytes = encodeDescriptor(grounded);
+  EXPECT_EQ(gbytes.size(), bytes.size() + encodeGroundMap(grounded.ground_map).size());
+  const Descriptor g = decodeDescriptor(gbytes, DescriptorParams{});
+  EXPECT_EQ(g.ground_map.z, grounded.ground_map.z);
+  EXPECT_EQ(g.ground_map.width, grounded.ground_map.width);
 }
 
 TEST(Descriptor, DecodeRejectsMalformedBytes) {

@@ -7,6 +7,7 @@
 #include <random>
 #include <stdexcept>
 
+#include "core/ground_test_utils.h"
 #include "core/match_test_utils.h"
 
 namespace dtif {
@@ -201,6 +202,44 @@ TEST(LoopDetector, ElevationComesFromSeenBasesOnly) {
   }
 }
 
+/// No stem base seen in either submap (a steep slope seen from a helmet): t_z comes from the
+/// ground maps when both carry one, else the loop is rejected rather than given a guessed t_z.
+TEST(LoopDetector, ElevationFromGroundMapsWhenNoBaseIsSeen) {
+  const LoopDetectorParams params;
+  std::mt19937 rng(31);
+  int with_maps = 0, checked = 0;
+  for (PairCase& pc : overlappingPairs(12, 515)) {
+    for (Trunk& t : pc.q.trunks) t.base_seen = false;
+    for (Trunk& t : pc.c.trunks) t.base_seen = false;
+    Verification ver;
+    const auto none = matchPair(pc.q, pc.c, params, nullptr, &ver);
+    EXPECT_FALSE(none.has_value());
+    if (ver.reason != "elevation unobserved") continue;  // rejected before the elevation
+    ++checked;
+    // Both maps of one hilly slope; the query sees no ground 6 m downhill of its centre.
+    const Pose T_W_c = Pose::Identity(), T_W_q = pc.T_c_q;  // world = candidate frame
+    pc.c.ground_map =
+        test::mapOf(test::hillyGround(rng, Eigen::Vector2d::Zero(), 14.0, true), T_W_c, 0.5, 0.05);
+    pc.q.ground_map = test::mapOf(
+        test::hillyGround(rng, T_W_q.translation().head<2>(), 14.0, false, 6.0), T_W_q, 0.5, 0.05);
+    Verification v2;
+    const auto lc = matchPair(pc.q, pc.c, params, nullptr, &v2);
+    ASSERT_TRUE(lc.has_value()) << v2.reason;
+    EXPECT_EQ(v2.z_pairs, 0);
+    EXPECT_GE(v2.ground_cells, params.verification.min_ground_cells);
+    EXPECT_NEAR(lc->T_c_q.translation().z(), pc.T_c_q.translation().z(), 0.05);
+    EXPECT_LE(lc->covariance(2, 2), 0.01);
+    ++with_maps;
+    // One map alone fixes nothing.
+    pc.c.ground_map = GroundMap();
+    Verification v3;
+    EXPECT_FALSE(matchPair(pc.q, pc.c, params, nullptr, &v3).has_value());
+    EXPECT_EQ(v3.reason, "elevation unobserved");
+  }
+  EXPECT_GE(checked, 8);
+  EXPECT_EQ(with_maps, checked);
+}
+
 /// Bases flagged seen can still be wrong (a shrub under the stem, dense understory): t_z is the
 /// mode of the seen pairs' elevation differences, so 3 right pairs outvote 3 wrong ones that
 /// disagree with each other (their median would be a wrong one), and only agreeing pairs count.
@@ -219,6 +258,10 @@ TEST(LoopDetector, ElevationIsTheModeOfSeenBasePairs) {
       pc.q.trunks[i].base_seen = pc.c.trunks[j].base_seen = true;
       pc.c.trunks[j].z += lift[k];
     }
+    const GroundElevation gdbg = groundElevation(pc.q.ground_map, pc.c.ground_map, pc.T_c_q, 0.15);
+    std::printf("DBG q %zu c %zu support %d compared %d amb %.2f dz %.3f\n",
+                pc.q.ground_map.count(), pc.c.ground_map.count(), gdbg.support, gdbg.compared,
+                gdbg.ambiguity, gdbg.dz_m);
     Verification v2;
     const auto lc = matchPair(pc.q, pc.c, params, nullptr, &v2);
     ASSERT_TRUE(lc.has_value()) << v2.reason;

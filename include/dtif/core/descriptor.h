@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "dtif/core/footprint.h"
+#include "dtif/core/ground_map.h"
 #include "dtif/core/types.h"
 
 namespace dtif {
@@ -65,6 +66,9 @@ struct Descriptor {
   /// Occupied cells at trunk height (from extraction; empty for trunk maps such as field
   /// inventories). Lets verification measure the overlap of an aligned pair.
   Footprint footprint;
+  /// Lowest point per cell (from extraction, only when few stem bases were seen): fixes the
+  /// elevation of a loop that no pair of seen bases fixes. Empty otherwise.
+  GroundMap ground_map;
 };
 
 /// Encodes one face canonically from trunk centres (Eq. 3.2) and radii (Eq. 3.3).

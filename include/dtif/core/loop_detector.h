@@ -62,6 +62,14 @@ struct VerifierParams {
   /// Another group of seen-base pairs agreeing on a different t_z, over the mode's pairs, at
   /// most this; else the loop is rejected as `elevation ambiguous` (two stems on one shrub).
   double max_z_ambiguity = 0.5;
+  /// A loop without such a pair takes t_z from the submaps' ground maps (lowest point per
+  /// cell, TrunkExtractorParams::ground_map_cell_m) when at least this many cells agree on it
+  /// within ground_window_m; 0: never, such loops are rejected as `elevation unobserved`.
+  int min_ground_cells = 100;
+  double ground_window_m = 0.15;  ///< cells within this of the mode agree [m]
+  /// The highest other difference (more than 2 ground_window_m away) over the mode, at most;
+  /// a wrong horizontal pose gives a flat histogram [0..1].
+  double max_ground_ambiguity = 0.6;
 
   std::string validate() const;
 
@@ -85,6 +93,9 @@ struct VerifierParams {
     v("max_fit_median_m", max_fit_median_m);
     v("min_z_pairs", min_z_pairs);
     v("max_z_ambiguity", max_z_ambiguity);
+    v("min_ground_cells", min_ground_cells);
+    v("ground_window_m", ground_window_m);
+    v("max_ground_ambiguity", max_ground_ambiguity);
   }
 };
 
@@ -159,6 +170,9 @@ struct Verification {
   int z_pairs = 0;  ///< pairs with both stem bases seen that agree on t_z (0: t_z unobserved)
   bool tilt_fitted = false;      ///< residual roll/pitch estimated from those pairs
   double z_ambiguity = -1.0;     ///< runner-up / mode group of seen-base pairs; -1: none seen
+  int ground_cells = 0;          ///< ground-map cells that fixed t_z (0: not used)
+  double ground_ambiguity = -1;  ///< runner-up / mode of the ground-map differences; -1: none
+  double ground_sigma_m = 0.0;   ///< std dev of the agreeing ground-map differences [m]
   double roll_var = 0.0;         ///< when fitted: posterior variance of the roll [rad^2]
   double pitch_var = 0.0;        ///< when fitted: posterior variance of the pitch [rad^2]
   double overlap = -1.0;         ///< overlap of the aligned footprints; -1 when not measured
