@@ -7,19 +7,14 @@
 #include <stdexcept>
 
 #include "core/ground_test_utils.h"
+#include "core/match_test_utils.h"
 
 namespace dtif {
 namespace {
 
 using test::hillyGround;
 using test::mapOf;
-
-Pose xyzYaw(double x, double y, double z, double yaw) {
-  Pose T = Pose::Identity();
-  T.linear() = rotZ(yaw);
-  T.translation() = Eigen::Vector3d(x, y, z);
-  return T;
-}
+using test::poseXyYaw;
 
 TEST(GroundMap, KeepsTheLowestPointPerCellAndSkipsSparseCells) {
   const std::vector<float> x{0.1f, 0.2f, 0.3f, 1.2f, 1.3f, NAN, 5.0f};
@@ -50,7 +45,7 @@ TEST(GroundMap, KeepsTheLowestPointPerCellAndSkipsSparseCells) {
 
 TEST(GroundMap, EncodeDecodeRoundTripIncludingLargeSteps) {
   std::mt19937 rng(5);
-  Pose T_W_S = xyzYaw(3.0, -4.0, 12.0, 0.4);
+  Pose T_W_S = poseXyYaw(3.0, -4.0, 12.0, 0.4);
   GroundMap m = mapOf(hillyGround(rng, Eigen::Vector2d(20, 20), 15.0, true), T_W_S, 0.5, 0.05);
   ASSERT_GT(m.count(), 1000u);
   // A cliff of 20 m: more than a byte's worth of steps, so the escape code is used.
@@ -97,7 +92,7 @@ TEST(GroundMap, MalformedBytesThrow) {
 /// the right horizontal pose the maps agree on t_z to centimetres; under a wrong one they do not.
 TEST(GroundMap, ElevationOfTwoViewsAndNoneUnderAWrongPose) {
   std::mt19937 rng(11);
-  const Pose T_W_q = xyzYaw(18.0, 22.0, 3.0, 0.7), T_W_c = xyzYaw(24.0, 20.0, -1.5, -2.2);
+  const Pose T_W_q = poseXyYaw(18.0, 22.0, 3.0, 0.7), T_W_c = poseXyYaw(24.0, 20.0, -1.5, -2.2);
   const auto world_q = hillyGround(rng, Eigen::Vector2d(18, 22), 16.0, false);
   const auto world_c = hillyGround(rng, Eigen::Vector2d(24, 20), 16.0, false);
   const GroundMap q = mapOf(world_q, T_W_q, 0.5, 0.05), c = mapOf(world_c, T_W_c, 0.5, 0.05);
