@@ -8,7 +8,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstring>
 #include <limits>
 #include <numeric>
 #include <set>
@@ -16,6 +15,7 @@
 #include <stdexcept>
 #include <utility>
 
+#include "byte_io.h"
 #include "dtif/core/trunk_extractor.h"
 
 namespace dtif {
@@ -157,58 +157,11 @@ void finishDescriptor(Descriptor& d, const DescriptorParams& params) {
 constexpr uint32_t kMagic = 0x46495444;  // "DTIF" little endian
 constexpr uint16_t kVersion = 3;         // 2: base_seen bits; 3: ground map
 
-/// FNV-1a: detects truncated or flipped bytes (the radio link and files both corrupt data).
-uint32_t fnv1a(const uint8_t* p, size_t n) {
-  uint32_t h = 2166136261u;
-  for (size_t i = 0; i < n; ++i) {
-    h ^= p[i];
-    h *= 16777619u;
-  }
-  return h;
-}
-
-class Writer {
- public:
-  template <class T>
-  void put(T v) {
-    uint8_t b[sizeof(T)];
-    std::memcpy(b, &v, sizeof(T));  // little-endian hosts only (x86-64, aarch64)
-    bytes.insert(bytes.end(), b, b + sizeof(T));
-  }
-  void putString(const std::string& s) {
-    put<uint16_t>(static_cast<uint16_t>(std::min<size_t>(s.size(), 65535)));
-    bytes.insert(bytes.end(), s.begin(), s.begin() + std::min<size_t>(s.size(), 65535));
-  }
-  std::vector<uint8_t> bytes;
-};
-
-class Reader {
- public:
-  Reader(const uint8_t* p, size_t n) : p_(p), n_(n) {}
-  template <class T>
-  T get() {
-    need(sizeof(T));
-    T v;
-    std::memcpy(&v, p_ + pos_, sizeof(T));
-    pos_ += sizeof(T);
-    return v;
-  }
-  std::string getString() {
-    const uint16_t n = get<uint16_t>();
-    need(n);
-    std::string s(reinterpret_cast<const char*>(p_ + pos_), n);
-    pos_ += n;
-    return s;
-  }
-  size_t remaining() const { return n_ - pos_; }
-
- private:
-  void need(size_t k) {
-    if (n_ - pos_ < k) throw std::runtime_error("descriptor bytes truncated");
-  }
-  const uint8_t* p_;
-  size_t n_;
-  size_t pos_ = 0;
+using detail::fnv1a;  // detects truncated or flipped bytes (radio link and files corrupt data)
+using Writer = detail::ByteWriter;
+/// Reads a descriptor; running past the end is "descriptor bytes truncated".
+struct Reader : detail::ByteReader {
+  Reader(const uint8_t* p, size_t n) : detail::ByteReader(p, n, "descriptor bytes") {}
 };
 
 }  // namespace
@@ -389,14 +342,14 @@ std::vector<uint8_t> encodeDescriptor(const Descriptor& d) {
   }
   const std::vector<uint8_t> ground = encodeGroundMap(d.ground_map);
   w.put<uint32_t>(static_cast<uint32_t>(ground.size()));
-  for (uint8_t b : ground) w.put<uint8_t>(b);
+  w.putBytes(ground);
   Writer out;
   out.put<uint32_t>(kMagic);
   out.put<uint16_t>(kVersion);
   out.put<uint16_t>(d.valid ? 1 : 0);
   out.put<uint32_t>(static_cast<uint32_t>(w.bytes.size()));
   out.put<uint32_t>(fnv1a(w.bytes.data(), w.bytes.size()));
-  out.bytes.insert(out.bytes.end(), w.bytes.begin(), w.bytes.end());
+  out.putBytes(w.bytes);
   return out.bytes;
 }
 
@@ -479,9 +432,7 @@ Descriptor decodeDescriptor(const std::vector<uint8_t>& bytes, const DescriptorP
   const uint32_t ground_bytes = r.get<uint32_t>();
   if (ground_bytes > r.remaining())
     throw std::runtime_error("descriptor ground map exceeds the payload");
-  std::vector<uint8_t> ground(ground_bytes);
-  for (uint8_t& b : ground) b = r.get<uint8_t>();
-  d.ground_map = decodeGroundMap(ground.data(), ground.size());
+  d.ground_map = decodeGroundMap(r.take(ground_bytes), ground_bytes);
   if (r.remaining() != 0) throw std::runtime_error("descriptor has trailing bytes");
   d.valid = (flags & 1) != 0;
   // A descriptor valid under the sender's params but too small for ours is not retrievable.

@@ -4,10 +4,11 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstring>
 #include <limits>
 #include <stdexcept>
 #include <string>
+
+#include "byte_io.h"
 
 namespace dtif {
 
@@ -18,21 +19,6 @@ constexpr int8_t kEscapeCode = -127;
 constexpr size_t kHeaderBytes = 4 + 4 + 8 + 4 + 4 + 2 + 2;
 /// Histogram of elevation differences: 5 cm bins over +-kMaxDz.
 constexpr double kBin = 0.05, kMaxDz = 30.0;
-
-template <class T>
-void put(std::vector<uint8_t>* out, T v) {
-  uint8_t b[sizeof(T)];
-  std::memcpy(b, &v, sizeof(T));
-  out->insert(out->end(), b, b + sizeof(T));
-}
-
-template <class T>
-T get(const uint8_t* data, size_t* pos) {
-  T v;
-  std::memcpy(&v, data + *pos, sizeof(T));
-  *pos += sizeof(T);
-  return v;
-}
 
 /// Value the encoder predicts for cell k: the left neighbour, else the one above, else `last`.
 int predict(const GroundMap& m, size_t k, int last) {
@@ -122,55 +108,57 @@ GroundMap makeGroundMap(const float* x, const float* y, const float* z, size_t n
 }
 
 std::vector<uint8_t> encodeGroundMap(const GroundMap& m) {
-  std::vector<uint8_t> out;
-  if (m.empty()) return out;
+  if (m.empty()) return {};
   if (!m.wellFormed()) throw std::runtime_error("ground map is not well formed");
-  std::vector<uint8_t> raw;
-  raw.reserve(m.z.size());
+  detail::ByteWriter raw;
+  raw.bytes.reserve(m.z.size());
   int last = 0;
   for (size_t k = 0; k < m.z.size(); ++k) {
     const int v = m.z[k];
     if (v == GroundMap::kUnknown) {
-      raw.push_back(static_cast<uint8_t>(kEmptyCode));
+      raw.put<int8_t>(kEmptyCode);
       continue;
     }
     const int d = v - predict(m, k, last);
     last = v;
     if (d > kEscapeCode && d <= 127) {
-      raw.push_back(static_cast<uint8_t>(static_cast<int8_t>(d)));
+      raw.put<int8_t>(static_cast<int8_t>(d));
     } else {
-      raw.push_back(static_cast<uint8_t>(kEscapeCode));
-      put<int16_t>(&raw, static_cast<int16_t>(v));
+      raw.put<int8_t>(kEscapeCode);
+      raw.put<int16_t>(static_cast<int16_t>(v));
     }
   }
-  uLongf packed = compressBound(raw.size());
-  std::vector<uint8_t> z(packed);
-  if (compress2(z.data(), &packed, raw.data(), raw.size(), Z_BEST_COMPRESSION) != Z_OK) {
+  detail::ByteWriter out;
+  out.put<float>(static_cast<float>(m.cell_m));
+  out.put<float>(static_cast<float>(m.z_step_m));
+  out.put<double>(m.z0_m);
+  out.put<int32_t>(m.x0);
+  out.put<int32_t>(m.y0);
+  out.put<uint16_t>(static_cast<uint16_t>(m.width));
+  out.put<uint16_t>(static_cast<uint16_t>(m.height));
+  const size_t header = out.bytes.size();
+  uLongf packed = compressBound(raw.bytes.size());
+  out.bytes.resize(header + packed);
+  if (compress2(out.bytes.data() + header, &packed, raw.bytes.data(), raw.bytes.size(),
+                Z_BEST_COMPRESSION) != Z_OK) {
     throw std::runtime_error("ground map compression failed");
   }
-  put<float>(&out, static_cast<float>(m.cell_m));
-  put<float>(&out, static_cast<float>(m.z_step_m));
-  put<double>(&out, m.z0_m);
-  put<int32_t>(&out, m.x0);
-  put<int32_t>(&out, m.y0);
-  put<uint16_t>(&out, static_cast<uint16_t>(m.width));
-  put<uint16_t>(&out, static_cast<uint16_t>(m.height));
-  out.insert(out.end(), z.begin(), z.begin() + packed);
-  return out;
+  out.bytes.resize(header + packed);
+  return out.bytes;
 }
 
 GroundMap decodeGroundMap(const uint8_t* data, size_t size) {
   GroundMap m;
   if (size == 0) return m;
   if (size <= kHeaderBytes) throw std::runtime_error("ground map shorter than its header");
-  size_t pos = 0;
-  m.cell_m = get<float>(data, &pos);
-  m.z_step_m = get<float>(data, &pos);
-  m.z0_m = get<double>(data, &pos);
-  m.x0 = get<int32_t>(data, &pos);
-  m.y0 = get<int32_t>(data, &pos);
-  m.width = get<uint16_t>(data, &pos);
-  m.height = get<uint16_t>(data, &pos);
+  detail::ByteReader head(data, kHeaderBytes, "ground map header");
+  m.cell_m = head.get<float>();
+  m.z_step_m = head.get<float>();
+  m.z0_m = head.get<double>();
+  m.x0 = head.get<int32_t>();
+  m.y0 = head.get<int32_t>();
+  m.width = head.get<uint16_t>();
+  m.height = head.get<uint16_t>();
   const size_t cells = static_cast<size_t>(m.width) * m.height;
   if (!(m.cell_m > 0.0) || !std::isfinite(m.cell_m) || !(m.z_step_m > 0.0) ||
       !std::isfinite(m.z_step_m) || !std::isfinite(m.z0_m) || cells == 0) {
@@ -179,23 +167,21 @@ GroundMap decodeGroundMap(const uint8_t* data, size_t size) {
   // Every cell takes one byte, an escaped one three.
   std::vector<uint8_t> raw(3 * cells + 1);
   uLongf unpacked = raw.size();
-  if (uncompress(raw.data(), &unpacked, data + pos, size - pos) != Z_OK) {
+  if (uncompress(raw.data(), &unpacked, data + kHeaderBytes, size - kHeaderBytes) != Z_OK) {
     throw std::runtime_error("ground map stream is corrupt");
   }
   m.z.resize(cells);
-  size_t r = 0;
+  detail::ByteReader r(raw.data(), unpacked, "ground map stream");
   int last = 0;
   for (size_t k = 0; k < cells; ++k) {
-    if (r >= unpacked) throw std::runtime_error("ground map stream ends early");
-    const int8_t code = static_cast<int8_t>(raw[r++]);
+    const int8_t code = r.get<int8_t>();
     if (code == kEmptyCode) {
       m.z[k] = GroundMap::kUnknown;
       continue;
     }
     int v;
     if (code == kEscapeCode) {
-      if (r + 2 > unpacked) throw std::runtime_error("ground map stream ends early");
-      v = get<int16_t>(raw.data(), &r);
+      v = r.get<int16_t>();
     } else {
       v = predict(m, k, last) + code;
     }
@@ -206,7 +192,7 @@ GroundMap decodeGroundMap(const uint8_t* data, size_t size) {
     m.z[k] = static_cast<int16_t>(v);
     last = v;
   }
-  if (r != unpacked) throw std::runtime_error("ground map stream has trailing bytes");
+  if (r.remaining() != 0) throw std::runtime_error("ground map stream has trailing bytes");
   return m;
 }
 

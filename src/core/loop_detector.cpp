@@ -12,6 +12,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "byte_io.h"
 #include "dtif/core/pair_vote.h"
 
 namespace dtif {
@@ -403,30 +404,7 @@ std::pair<Fit, double> resolveByFit(const Descriptor& q, const Descriptor& c, co
 constexpr char kDbMagic[8] = {'D', 'T', 'I', 'F', 'D', 'B', '\0', '\0'};
 constexpr uint32_t kDbVersion = 1;
 
-uint32_t fnv1a(const uint8_t* p, size_t n) {
-  uint32_t h = 2166136261u;
-  for (size_t i = 0; i < n; ++i) {
-    h ^= p[i];
-    h *= 16777619u;
-  }
-  return h;
-}
-
-template <class T>
-void put(std::vector<uint8_t>& out, T v) {
-  uint8_t b[sizeof(T)];
-  std::memcpy(b, &v, sizeof(T));
-  out.insert(out.end(), b, b + sizeof(T));
-}
-
-template <class T>
-T get(const std::vector<uint8_t>& in, size_t* pos) {
-  if (in.size() - *pos < sizeof(T)) throw std::runtime_error("truncated");
-  T v;
-  std::memcpy(&v, in.data() + *pos, sizeof(T));
-  *pos += sizeof(T);
-  return v;
-}
+using detail::fnv1a;
 
 }  // namespace
 
@@ -807,15 +785,17 @@ std::optional<LoopClosure> LoopDetector::query(const Descriptor& q, QueryStats* 
 // File layout: 8-byte magic, u32 version, u64 entry count, entries (u32 size + encoded
 // descriptor), u32 FNV-1a of everything before it.
 void LoopDetector::save(const std::string& path) const {
-  std::vector<uint8_t> buf(kDbMagic, kDbMagic + 8);
-  put<uint32_t>(buf, kDbVersion);
-  put<uint64_t>(buf, entries_.size());
+  detail::ByteWriter w;
+  w.bytes.assign(kDbMagic, kDbMagic + 8);
+  w.put<uint32_t>(kDbVersion);
+  w.put<uint64_t>(entries_.size());
   for (const auto& d : entries_) {
     const std::vector<uint8_t> e = encodeDescriptor(*d);
-    put<uint32_t>(buf, static_cast<uint32_t>(e.size()));
-    buf.insert(buf.end(), e.begin(), e.end());
+    w.put<uint32_t>(static_cast<uint32_t>(e.size()));
+    w.putBytes(e);
   }
-  put<uint32_t>(buf, fnv1a(buf.data(), buf.size()));
+  w.put<uint32_t>(fnv1a(w.bytes.data(), w.bytes.size()));
+  const std::vector<uint8_t>& buf = w.bytes;
 
   const std::string tmp = path + ".tmp";
   {
@@ -844,33 +824,33 @@ void LoopDetector::load(const std::string& path) {
     throw std::runtime_error(path + ": not a valid dtif database: " + why);
   };
   if (buf.size() < 8 + 4 + 8 + 4 || std::memcmp(buf.data(), kDbMagic, 8) != 0) fail("bad magic");
-  size_t pos = 8;
-  const uint32_t version = get<uint32_t>(buf, &pos);
+  // The body: everything between the magic and the checksum.
+  detail::ByteReader r(buf.data() + 8, buf.size() - 8 - 4, "truncated");
+  const uint32_t version = r.get<uint32_t>();
   if (version != kDbVersion) {
     fail("version " + std::to_string(version) + ", expected " + std::to_string(kDbVersion));
   }
   uint32_t stored_sum;
   std::memcpy(&stored_sum, buf.data() + buf.size() - 4, 4);
   if (fnv1a(buf.data(), buf.size() - 4) != stored_sum) fail("checksum mismatch");
-  const std::vector<uint8_t> body(buf.begin(), buf.end() - 4);
   // Decode everything into a new list first; the database changes only when all of it is good.
   std::vector<std::shared_ptr<const Descriptor>> loaded;
   try {
-    const uint64_t n = get<uint64_t>(body, &pos);
+    const uint64_t n = r.get<uint64_t>();
     // The loosest params: keep each descriptor's saved validity.
     DescriptorParams loose;
     loose.min_trunks = 3;
     loose.min_triangles = 1;
     for (uint64_t i = 0; i < n; ++i) {
-      const uint32_t sz = get<uint32_t>(body, &pos);
-      if (body.size() - pos < sz) throw std::runtime_error("entry truncated");
-      std::vector<uint8_t> e(body.begin() + pos, body.begin() + pos + sz);
-      pos += sz;
+      const uint32_t sz = r.get<uint32_t>();
+      if (r.remaining() < sz) throw std::runtime_error("entry truncated");
+      const uint8_t* at = r.take(sz);
+      const std::vector<uint8_t> e(at, at + sz);
       auto d = std::make_shared<Descriptor>(decodeDescriptor(e, loose));
       if (!d->valid) throw std::runtime_error("entry " + std::to_string(i) + " is not valid");
       loaded.push_back(std::move(d));
     }
-    if (pos != body.size()) throw std::runtime_error("trailing bytes");
+    if (r.remaining() != 0) throw std::runtime_error("trailing bytes");
   } catch (const std::runtime_error& e) {
     fail(e.what());
   }
