@@ -234,6 +234,27 @@ void writeDetectionCsv(const std::string& path, const std::vector<DetectionRow>&
   if (!os) throw DatasetError(path + ": write failed");
 }
 
+void writeMissesCsv(const std::string& path, const std::vector<MissRow>& rows) {
+  std::ofstream os(path);
+  os << "query,candidate,overlap,rank,hypothesis_inliers,outcome,hyp_err_rot_deg,hyp_err_trans_m,"
+        "ambiguity,fit_ambiguity,pairs,covisible_ratio,aligned_overlap,z_pairs,ground_cells\n";
+  os << std::setprecision(4);
+  for (const MissRow& r : rows) {
+    std::string outcome = r.outcome;  // a CSV field: no separators inside
+    std::replace(outcome.begin(), outcome.end(), ',', ';');
+    os << r.query << ',' << r.candidate << ',' << r.overlap << ',' << r.rank << ','
+       << r.hypothesis_inliers << ',' << outcome << ',';
+    if (r.hypothesis_err)
+      os << r.hypothesis_err->rot_deg << ',' << r.hypothesis_err->trans_m;
+    else
+      os << ',';
+    os << ',' << r.ambiguity << ',' << r.fit_ambiguity << ',' << r.pairs << ',' << r.covisible_ratio
+       << ',' << r.aligned_overlap << ',' << r.z_pairs << ',' << r.ground_cells << '\n';
+  }
+  os.flush();
+  if (!os) throw DatasetError(path + ": write failed");
+}
+
 double cellOverlap(const std::unordered_set<int64_t>& a, const std::unordered_set<int64_t>& b) {
   if (a.empty() || b.empty()) return 0.0;
   const auto& small = a.size() < b.size() ? a : b;
@@ -271,6 +292,45 @@ bool hasTrueLoop(const Dataset& ds, const CellSets& cells, size_t i, double excl
     if (cellOverlap(cells[i], cells[j]) >= eval.true_loop_overlap) return true;
   }
   return false;
+}
+
+// Why query i missed its loop: its eligible earlier submap of largest overlap, matched alone.
+MissRow explainMiss(const Dataset& ds, const CellSets& cells,
+                    const std::vector<std::shared_ptr<const Descriptor>>& descs, size_t i,
+                    const QueryStats& qs, const LoopDetectorParams& params) {
+  MissRow m;
+  m.query = ds.submaps[i].id;
+  size_t best = i;
+  for (size_t j = 0; j < i; ++j) {
+    if (!eligiblePair(ds.submaps[i], ds.submaps[j], params.database.exclude_recent_s)) continue;
+    const double o = cellOverlap(cells[i], cells[j]);
+    if (o > m.overlap) m.overlap = o, best = j;
+  }
+  if (best == i) return m;
+  m.candidate = ds.submaps[best].id;
+  const auto it = std::find(qs.candidates.begin(), qs.candidates.end(), m.candidate);
+  if (it != qs.candidates.end()) m.rank = static_cast<int>(it - qs.candidates.begin()) + 1;
+  const Descriptor& q = *descs[i];
+  const Descriptor& c = *descs[best];
+  if (!q.valid || !c.valid) {
+    m.outcome = "invalid descriptor: " + (q.valid ? c.invalid_reason : q.invalid_reason);
+    return m;
+  }
+  PoseEstimate est;
+  Verification ver;
+  const bool ok = matchPair(q, c, params, &est, &ver).has_value();
+  m.outcome = ok ? "accepted" : ver.reason;
+  m.hypothesis_inliers = est.inliers_T.size();
+  const Pose T_gt = ds.T_W_S.at(m.candidate).inverse() * ds.T_W_S.at(m.query);
+  if (est.ok) m.hypothesis_err = poseError(T_gt, est.T_c_q);
+  m.ambiguity = ver.ambiguity;
+  m.fit_ambiguity = ver.fit_ambiguity;
+  m.pairs = static_cast<int>(ver.pairs.size());
+  m.covisible_ratio = ver.covisible_ratio;
+  m.aligned_overlap = ver.overlap;
+  m.z_pairs = ver.z_pairs;
+  m.ground_cells = ver.ground_cells;
+  return m;
 }
 
 // An accepted loop of query i with candidate j (file positions) and its estimate T_c_q, scored.
@@ -374,6 +434,7 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
   LoopDetector detector(params.loop);
   CellSets cells;
   cells.reserve(ds.submaps.size());
+  std::vector<std::shared_ptr<const Descriptor>> descs;  // every submap's, for explainMiss
   double bytes_sum = 0.0;
   const size_t n = ds.submaps.size();
 
@@ -420,6 +481,10 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
                                std::to_string(loop->candidate_id));
       }
       scoreAccepted(ds, cells, i, j, loop->T_c_q, eval, &row);
+    }
+    descs.push_back(desc);
+    if (row.has_loop && !row.true_positive) {
+      result.misses.push_back(explainMiss(ds, cells, descs, i, qs, params.loop));
     }
 
     // 4. Insert q.

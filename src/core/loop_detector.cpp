@@ -9,6 +9,7 @@
 #include <cstring>
 #include <fstream>
 #include <iterator>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 
@@ -308,17 +309,19 @@ Refined guidedRefine(const Descriptor& q, const Descriptor& c, const Pose& T0, d
   return out;
 }
 
-/// Fit of a pose to the whole trunk sets: guided refinement from `T0`, then the Tukey-weighted
-/// count of the mutual pairs, sum of (1 - (d / radius)^2)^2. Trunk centres are fitted to a few
-/// cm, so a pose shifted or turned onto a neighbouring lattice site of a jittered plantation
-/// scores clearly lower than the true one even though it pairs as many trunks.
+/// Fit of a pose to the whole trunk sets: guided refinement from `T0` (pairs within `radius`),
+/// then the Tukey-weighted count of the mutual pairs, sum of (1 - (d / score_radius)^2)^2.
+/// Trunk centres are fitted to a few cm, so a pose shifted or turned onto another lattice site
+/// of a jittered plantation scores clearly lower than the true one even though it pairs as
+/// many trunks.
 struct Fit {
   Pose T = Pose::Identity();
   double score = 0.0;
   double median_xy = 0.0;                  ///< median horizontal residual of the pairs [m]
   std::vector<std::pair<int, int>> pairs;  ///< the refined mutual pairs under T
 };
-Fit fitPose(const Descriptor& q, const Descriptor& c, const Pose& T0, double radius) {
+Fit fitPose(const Descriptor& q, const Descriptor& c, const Pose& T0, double radius,
+            double score_radius) {
   Fit f;
   const Refined r = guidedRefine(q, c, T0, radius);
   f.T = r.T;
@@ -327,7 +330,7 @@ Fit fitPose(const Descriptor& q, const Descriptor& c, const Pose& T0, double rad
   for (const auto& [i, j] : r.pairs) {
     const Eigen::Vector2d d = (r.T * Eigen::Vector3d(q.trunks[i].x, q.trunks[i].y, 0.0)).head<2>() -
                               Eigen::Vector2d(c.trunks[j].x, c.trunks[j].y);
-    const double u = d.squaredNorm() / (radius * radius);
+    const double u = d.squaredNorm() / (score_radius * score_radius);
     if (u < 1.0) f.score += (1.0 - u) * (1.0 - u);
     residual.push_back(d.norm());
   }
@@ -339,50 +342,223 @@ Fit fitPose(const Descriptor& q, const Descriptor& c, const Pose& T0, double rad
   return f;
 }
 
-/// Repetitive stands: the hypothesis and its lattice neighbours (the pose shifted by the
-/// offsets from the candidate trunk at the query's centroid to its nearest trunks, and turned
-/// by 90, 180 and 270 deg about it) are all fitted to the full trunk sets; the best fit wins.
+/// Lattice-consistent translations for the rotation R: every (query, candidate) trunk pair
+/// votes for c_j - R q_i in 0.5 m bins; the bins whose 3 x 3 neighbourhood holds a local
+/// maximum of at least `min_votes` votes (the trunks that pair up under that translation) and
+/// a quarter of the highest,
+/// strongest first, at most `max_peaks`, each as the mean translation of its neighbourhood.
+std::vector<Eigen::Vector2d> translationPeaks(const Descriptor& q, const Descriptor& c,
+                                              const Eigen::Matrix2d& R, int min_votes,
+                                              size_t max_peaks) {
+  constexpr double kBin = 0.5;
+  constexpr size_t kMaxBins = size_t{1} << 22;  // 1 km x 1 km of translations: a bound on memory
+  std::vector<Eigen::Vector2d> rq;
+  for (const Trunk& a : q.trunks) rq.push_back(R * Eigen::Vector2d(a.x, a.y));
+  Eigen::Vector2d lo(std::numeric_limits<double>::infinity(),
+                     std::numeric_limits<double>::infinity());
+  Eigen::Vector2d hi = -lo;
+  for (const Trunk& b : c.trunks) {
+    for (const Eigen::Vector2d& p : rq) {
+      const Eigen::Vector2d t = Eigen::Vector2d(b.x, b.y) - p;
+      lo = lo.cwiseMin(t);
+      hi = hi.cwiseMax(t);
+    }
+  }
+  if (rq.empty() || c.trunks.empty()) return {};
+  // One empty bin of margin on each side keeps the 3 x 3 neighbourhoods inside the array.
+  const double x0 = std::floor(lo.x() / kBin) * kBin - kBin,
+               y0 = std::floor(lo.y() / kBin) * kBin - kBin;
+  const size_t w = static_cast<size_t>((hi.x() - x0) / kBin) + 2;
+  const size_t h = static_cast<size_t>((hi.y() - y0) / kBin) + 2;
+  if (w * h > kMaxBins) return {};
+  std::vector<int> n(w * h, 0);
+  std::vector<Eigen::Vector2d> sum(w * h, Eigen::Vector2d::Zero());
+  for (const Trunk& b : c.trunks) {
+    for (const Eigen::Vector2d& p : rq) {
+      const Eigen::Vector2d t = Eigen::Vector2d(b.x, b.y) - p;
+      const size_t k =
+          static_cast<size_t>((t.y() - y0) / kBin) * w + static_cast<size_t>((t.x() - x0) / kBin);
+      ++n[k];
+      sum[k] += t;
+    }
+  }
+  std::vector<int> around(w * h, 0);  // votes in the 3 x 3 neighbourhood
+  int top = 0;
+  for (size_t y = 1; y + 1 < h; ++y) {
+    for (size_t x = 1; x + 1 < w; ++x) {
+      int a = 0;
+      for (size_t yy = y - 1; yy <= y + 1; ++yy)
+        for (size_t xx = x - 1; xx <= x + 1; ++xx) a += n[yy * w + xx];
+      around[y * w + x] = a;
+      top = std::max(top, a);
+    }
+  }
+  // A site pairing under a quarter of the trunks that the best-paired site pairs cannot beat
+  // it by the margin that verification demands (max_fit_ambiguity) even with every pair exact.
+  const int floor_votes = std::max(min_votes, top / 3);
+  std::vector<std::pair<int, size_t>> peaks;  // (votes, bin), local maxima (ties: first bin)
+  for (size_t y = 1; y + 1 < h; ++y) {
+    for (size_t x = 1; x + 1 < w; ++x) {
+      const size_t k = y * w + x;
+      if (around[k] < floor_votes) continue;
+      bool peak = true;
+      for (size_t yy = y - 1; yy <= y + 1 && peak; ++yy) {
+        for (size_t xx = x - 1; xx <= x + 1 && peak; ++xx) {
+          const size_t m = yy * w + xx;
+          if (m != k && (around[m] > around[k] || (around[m] == around[k] && m < k))) peak = false;
+        }
+      }
+      if (peak) peaks.emplace_back(around[k], k);
+    }
+  }
+  std::stable_sort(peaks.begin(), peaks.end(),
+                   [](const auto& u, const auto& v) { return u.first > v.first; });
+  if (peaks.size() > max_peaks) peaks.resize(max_peaks);
+  std::vector<Eigen::Vector2d> out;
+  for (const auto& [votes, k] : peaks) {
+    Eigen::Vector2d t = Eigen::Vector2d::Zero();
+    for (size_t yy = k / w - 1; yy <= k / w + 1; ++yy)
+      for (size_t xx = k % w - 1; xx <= k % w + 1; ++xx) t += sum[yy * w + xx];
+    out.push_back(t / static_cast<double>(votes));
+  }
+  return out;
+}
+
+/// Candidate trunk centres in a dense grid of square cells, for nearest-trunk lookups within a
+/// cell side.
+class TrunkGrid {
+ public:
+  TrunkGrid(const Descriptor& c, double cell) : cell_(cell) {
+    Eigen::Vector2d lo(std::numeric_limits<double>::infinity(),
+                       std::numeric_limits<double>::infinity());
+    for (const Trunk& t : c.trunks) {
+      xy_.emplace_back(t.x, t.y);
+      lo = lo.cwiseMin(xy_.back());
+    }
+    if (xy_.empty()) return;
+    origin_ = lo - Eigen::Vector2d(cell, cell);  // a margin cell below
+    int64_t w = 0, h = 0;
+    for (const Eigen::Vector2d& p : xy_) {
+      w = std::max(w, cellOf(p.x() - origin_.x()) + 2);
+      h = std::max(h, cellOf(p.y() - origin_.y()) + 2);
+    }
+    w_ = w, h_ = h;
+    head_.assign(static_cast<size_t>(w_ * h_), -1);
+    next_.assign(xy_.size(), -1);
+    for (size_t j = 0; j < xy_.size(); ++j) {
+      const int64_t k = cellOf(xy_[j].y() - origin_.y()) * w_ + cellOf(xy_[j].x() - origin_.x());
+      next_[j] = head_[k];
+      head_[k] = static_cast<int>(j);
+    }
+  }
+  /// Squared distance from p to the nearest trunk within radius (<= the cell side); -1: none.
+  double nearest2(const Eigen::Vector2d& p, double radius, int* index) const {
+    *index = -1;
+    if (xy_.empty()) return -1.0;
+    const int64_t ix = cellOf(p.x() - origin_.x()), iy = cellOf(p.y() - origin_.y());
+    double best = radius * radius;
+    for (int64_t y = std::max<int64_t>(iy - 1, 0); y <= std::min(iy + 1, h_ - 1); ++y) {
+      for (int64_t x = std::max<int64_t>(ix - 1, 0); x <= std::min(ix + 1, w_ - 1); ++x) {
+        for (int j = head_[y * w_ + x]; j >= 0; j = next_[j]) {
+          const double d = (xy_[j] - p).squaredNorm();
+          if (d <= best) best = d, *index = j;
+        }
+      }
+    }
+    return *index >= 0 ? best : -1.0;
+  }
+  const Eigen::Vector2d& at(int j) const { return xy_[j]; }
+
+ private:
+  int64_t cellOf(double v) const { return static_cast<int64_t>(std::floor(v / cell_)); }
+  double cell_;
+  Eigen::Vector2d origin_ = Eigen::Vector2d::Zero();
+  int64_t w_ = 0, h_ = 0;
+  std::vector<Eigen::Vector2d> xy_;
+  std::vector<int> head_, next_;  // per cell its first trunk, per trunk the next in its cell
+};
+
+/// A cheap fitPose for ranking many lattice poses: two rounds of 2-D Procrustes on each query
+/// trunk's nearest candidate trunk within `radius` (not mutual), then the same Tukey score; on
+/// `sample`, an even subset of the query trunks.
+std::pair<double, Pose> quickFit(const std::vector<Eigen::Vector2d>& sample, const TrunkGrid& grid,
+                                 Pose T, double radius, double score_radius) {
+  double score = 0.0;
+  std::vector<std::pair<Eigen::Vector2d, Eigen::Vector2d>> pairs;
+  for (int it = 0; it <= 2; ++it) {
+    Eigen::Vector2d mq = Eigen::Vector2d::Zero(), mc = Eigen::Vector2d::Zero();
+    pairs.clear();
+    score = 0.0;
+    for (const Eigen::Vector2d& t : sample) {
+      const Eigen::Vector2d p = (T * Eigen::Vector3d(t.x(), t.y(), 0.0)).head<2>();
+      int j = -1;
+      const double d2 = grid.nearest2(p, radius, &j);
+      if (j < 0) continue;
+      const double u = d2 / (score_radius * score_radius);
+      if (u < 1.0) score += (1.0 - u) * (1.0 - u);
+      pairs.emplace_back(t, grid.at(j));
+      mq += pairs.back().first;
+      mc += pairs.back().second;
+    }
+    if (it == 2 || pairs.size() < 2) break;
+    mq /= static_cast<double>(pairs.size());
+    mc /= static_cast<double>(pairs.size());
+    double sc = 0.0, ss = 0.0;
+    for (const auto& [a0, b0] : pairs) {
+      const Eigen::Vector2d a = a0 - mq, b = b0 - mc;
+      sc += a.dot(b);
+      ss += a.x() * b.y() - a.y() * b.x();
+    }
+    const double yaw = std::atan2(ss, sc);
+    const Eigen::Vector2d t = mc - Eigen::Rotation2Dd(yaw).toRotationMatrix() * mq;
+    T.linear() = rotZ(yaw);
+    T.translation() = Eigen::Vector3d(t.x(), t.y(), T.translation().z());
+  }
+  return {score, T};
+}
+
+/// Repetitive stands: the hypothesis may sit on any site of the lattice, several spacings
+/// from the true one. Every lattice-consistent pose is tried: T0's yaw turned by 0, 90, 180
+/// and 270 deg, each with the translations where many trunks pair up (translationPeaks); all
+/// are fitted to the full trunk sets and the best fit wins.
 /// Returns the winner and the runner-up's share of its score.
 std::pair<Fit, double> resolveByFit(const Descriptor& q, const Descriptor& c, const Pose& T0,
-                                    double radius) {
-  constexpr int kNeighbours = 8;
+                                    const VerifierParams& params) {
+  constexpr size_t kPeaksPerTurn = 2000;  // a bound on the work, far above a submap's sites
+  constexpr size_t kFullFits = 8;
+  constexpr size_t kSample = 80;
+  const double radius = params.match_radius_m;
+  const double score_radius = params.fit_score_radius_m;
   Eigen::Vector2d centroid = Eigen::Vector2d::Zero();
   for (const Trunk& t : q.trunks) centroid += Eigen::Vector2d(t.x, t.y);
   centroid /= static_cast<double>(q.trunks.size());
-  const Eigen::Vector2d anchor_q =
-      (T0 * Eigen::Vector3d(centroid.x(), centroid.y(), 0.0)).head<2>();
-  int anchor = 0;
-  double best_d = std::numeric_limits<double>::infinity();
-  for (size_t j = 0; j < c.trunks.size(); ++j) {
-    const double d = (Eigen::Vector2d(c.trunks[j].x, c.trunks[j].y) - anchor_q).squaredNorm();
-    if (d < best_d) best_d = d, anchor = static_cast<int>(j);
-  }
-  const Eigen::Vector2d a(c.trunks[anchor].x, c.trunks[anchor].y);
-  std::vector<std::pair<double, Eigen::Vector2d>> near;
-  for (size_t j = 0; j < c.trunks.size(); ++j) {
-    const Eigen::Vector2d o = Eigen::Vector2d(c.trunks[j].x, c.trunks[j].y) - a;
-    if (static_cast<int>(j) != anchor) near.emplace_back(o.squaredNorm(), o);
-  }
-  const size_t k = std::min<size_t>(kNeighbours, near.size());
-  std::partial_sort(near.begin(), near.begin() + k, near.end(),
-                    [](const auto& x, const auto& y) { return x.first < y.first; });
-  std::vector<Eigen::Vector2d> shifts{Eigen::Vector2d::Zero()};
-  for (size_t i = 0; i < k; ++i) shifts.push_back(near[i].second);
+  const double yaw0 = std::atan2(T0.linear()(1, 0), T0.linear()(0, 0));
 
-  std::vector<Fit> fits{fitPose(q, c, T0, radius)};
+  // Every lattice pose ranked by quickFit; the best kFullFits are fitted exactly.
+  const TrunkGrid grid(c, radius);
+  std::vector<Eigen::Vector2d> sample;  // at most kSample query trunks, evenly over the list
+  const size_t stride = (q.trunks.size() + kSample - 1) / kSample;
+  for (size_t i = 0; i < q.trunks.size(); i += stride)
+    sample.emplace_back(q.trunks[i].x, q.trunks[i].y);
+  std::vector<std::pair<double, Pose>> ranked;
   for (int turn = 0; turn < 4; ++turn) {
-    Pose R = Pose::Identity();  // turn about the anchor trunk
-    R.linear() = rotZ(turn * M_PI / 2.0);
-    R.translation() =
-        Eigen::Vector3d(a.x(), a.y(), 0.0) - R.linear() * Eigen::Vector3d(a.x(), a.y(), 0.0);
-    for (const Eigen::Vector2d& s : shifts) {
-      if (turn == 0 && s.isZero()) continue;
-      Pose S = Pose::Identity();
-      S.translation() = Eigen::Vector3d(s.x(), s.y(), 0.0);
-      fits.push_back(fitPose(q, c, S * R * T0, radius));
+    const double yaw = yaw0 + turn * M_PI / 2.0;
+    const Eigen::Matrix2d R = Eigen::Rotation2Dd(yaw).toRotationMatrix();
+    for (const Eigen::Vector2d& t : translationPeaks(q, c, R, params.min_inliers, kPeaksPerTurn)) {
+      Pose T = Pose::Identity();
+      T.linear() = rotZ(yaw);
+      T.translation() = Eigen::Vector3d(t.x(), t.y(), T0.translation().z());
+      ranked.push_back(quickFit(sample, grid, T, radius, score_radius));
     }
   }
-  std::sort(fits.begin(), fits.end(), [](const Fit& x, const Fit& y) { return x.score > y.score; });
+  const size_t full = std::min(kFullFits, ranked.size());
+  std::partial_sort(ranked.begin(), ranked.begin() + full, ranked.end(),
+                    [](const auto& x, const auto& y) { return x.first > y.first; });
+  std::vector<Fit> fits{fitPose(q, c, T0, radius, score_radius)};
+  for (size_t k = 0; k < full; ++k)
+    fits.push_back(fitPose(q, c, ranked[k].second, radius, score_radius));
+  std::stable_sort(fits.begin(), fits.end(),
+                   [](const Fit& x, const Fit& y) { return x.score > y.score; });
   const Fit& best = fits.front();
   // The runner-up must be another pose, not the winner reached from a second start.
   double runner = 0.0;
@@ -431,6 +607,9 @@ std::string VerifierParams::validate() const {
   if (!(base_sigma_m > 0.0)) err << "base_sigma_m must be > 0; ";
   if (!(min_overlap >= 0.0 && min_overlap <= 1.0)) err << "min_overlap must be in [0, 1]; ";
   if (!(max_fit_median_m > 0.0)) err << "max_fit_median_m must be > 0; ";
+  if (!(fit_score_radius_m > 0.0 && std::isfinite(fit_score_radius_m))) {
+    err << "fit_score_radius_m must be > 0; ";
+  }
   if (min_z_pairs < 0) err << "min_z_pairs must be >= 0; ";
   if (!(max_z_ambiguity >= 0.0)) err << "max_z_ambiguity must be >= 0; ";
   if (min_ground_cells < 0) err << "min_ground_cells must be >= 0; ";
@@ -490,7 +669,7 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
     // The correspondences alone cannot tell the lattice sites apart; the fit of all trunks can
     // when the stand's irregularity exceeds the trunk-centre noise.
     if (params.max_fit_ambiguity <= 0.0) return reject("ambiguous");
-    const auto [fit, ratio] = resolveByFit(q, c, est.T_c_q, params.match_radius_m);
+    const auto [fit, ratio] = resolveByFit(q, c, est.T_c_q, params);
     v.fit_ambiguity = ratio;
     if (ratio > params.max_fit_ambiguity) return reject("ambiguous");
     // A wrong site of a jittered lattice pairs every trunk too, but only to the jitter. The
@@ -585,7 +764,7 @@ std::vector<Correspondence> voteCorrespondences(const Descriptor& q, const Descr
     Pose T = Pose::Identity();
     T.linear() = rotZ(pk.yaw);
     T.translation() = Eigen::Vector3d(pk.t.x(), pk.t.y(), 0.0);
-    fits.push_back(fitPose(q, c, T, radius));
+    fits.push_back(fitPose(q, c, T, radius, radius));
   }
   size_t best = 0;
   for (size_t k = 1; k < fits.size(); ++k)
@@ -759,6 +938,7 @@ std::optional<LoopClosure> LoopDetector::query(const Descriptor& q, QueryStats* 
                       return a.sim > b.sim || (a.sim == b.sim && a.index < b.index);
                     });
   cands.resize(keep);
+  for (const Cand& cd : cands) st.candidates.push_back(entries_[cd.index]->submap_id);
   st.screen_ms = msSince(t0);
 
   std::optional<LoopClosure> best;

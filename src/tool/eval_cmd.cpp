@@ -1,6 +1,7 @@
 // dtif eval <dataset_dir> --out <dir> [--config params.yaml] [--unit-weights]
 // The evaluation protocol of DATASET.md; writes results.csv, summary.json, table.md and the
-// effective parameters (params.yaml) into the output folder.
+// effective parameters (params.yaml) into the output folder; misses.csv says why each query
+// with a true loop missed it (its best ground-truth candidate matched alone).
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
@@ -52,6 +53,7 @@ int runEval(const Args& args) {
   const std::string table = formatTable(res.summary, method);
   writeEvalFiles(*out, res, table, params);
   const std::filesystem::path dir(*out);
+  writeMissesCsv((dir / "misses.csv").string(), res.misses);
   std::cout << "dataset " << ds.root << ": " << res.summary.submaps << " submaps\n" << table;
   if (!res.detection.empty()) {
     writeDetectionCsv((dir / "detection.csv").string(), res.detection);

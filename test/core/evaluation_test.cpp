@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <filesystem>
@@ -246,6 +247,54 @@ TEST(LoopLog, RowsRoundTripAndScoreAgainstGroundTruth) {
   ASSERT_EQ(unmatched.size(), 1u);
   EXPECT_NE(unmatched[0].find("alpha/2"), std::string::npos) << unmatched[0];
   EXPECT_NE(formatTable(res.summary).find("| - |"), std::string::npos);  // no descriptor times
+  std::filesystem::remove_all(dir);
+}
+
+TEST(Misses, NameTheBestTrueCandidateAndWhyItWasMissed) {
+  // alpha at 100 s and 200 s, 2 m apart (overlap 0.8), bravo at 150 s 1 m from the first
+  // (overlap 0.9): flat patches without a trunk, so every descriptor is invalid and the one
+  // query with true loops misses them.
+  const auto dir = test::freshTempDir("dtif_misses_test");
+  Dataset ds;
+  ds.root = dir.string();
+  const std::array<std::tuple<std::string, double, double>, 3> rows = {
+      {{"alpha", 100.0, 0.0}, {"bravo", 150.0, 1.0}, {"alpha", 200.0, 2.0}}};
+  for (int64_t id = 0; id < 3; ++id) {
+    SubmapRecord r;
+    r.id = id;
+    std::tie(r.robot, r.stamp, std::ignore) = rows[id];
+    r.file = "submaps/" + std::to_string(id) + ".pcd";
+    ds.submaps.push_back(r);
+    ds.T_W_S[id] = makePose(std::get<2>(rows[id]), 0, 0, 0, 0, 0);
+    writeSubmapCloud(ds, r, patchCloud());
+  }
+  writeDatasetTables(ds);
+  const EvalResult res = runEvaluation(readDataset(ds.root), DtifParams{}, EvalParams{});
+  // bravo/1 overlaps alpha/0 too (other robot: eligible at once); alpha/2 has both.
+  ASSERT_EQ(res.misses.size(), 2u);
+  EXPECT_EQ(res.misses[0].query, 1);
+  EXPECT_EQ(res.misses[0].candidate, 0);
+  EXPECT_EQ(res.misses[1].query, 2);
+  EXPECT_EQ(res.misses[1].candidate, 1);  // 0.9 overlap beats alpha/0's 0.8
+  EXPECT_NEAR(res.misses[1].overlap, 0.9, 1e-9);
+  EXPECT_EQ(res.misses[1].rank, 0);  // an invalid query screens nothing
+  EXPECT_EQ(res.misses[1].outcome.rfind("invalid descriptor: ", 0), 0u) << res.misses[1].outcome;
+  EXPECT_FALSE(res.misses[1].hypothesis_err.has_value());
+
+  const auto path = dir / "misses.csv";
+  writeMissesCsv(path.string(), res.misses);
+  std::ifstream is(path);
+  std::string header, line;
+  std::getline(is, header);
+  EXPECT_EQ(header.rfind("query,candidate,overlap,rank,hypothesis_inliers,outcome,", 0), 0u);
+  int lines = 0;
+  while (std::getline(is, line)) {
+    ++lines;
+    EXPECT_EQ(std::count(line.begin(), line.end(), ','),
+              std::count(header.begin(), header.end(), ','))
+        << line;
+  }
+  EXPECT_EQ(lines, 2);
   std::filesystem::remove_all(dir);
 }
 

@@ -506,6 +506,55 @@ TEST(LoopDetector, LatticeFitJudgesTheMedianResidual) {
   EXPECT_GE(t.accepted, n / 2);
 }
 
+/// A hypothesis on a wrong lattice site far from the true one (3 and 2 spacings off, turned
+/// by 90 deg), as the triangles of a plantation give when the submaps overlap only in part:
+/// the lattice search must reach the true site, not only the hypothesis' neighbours.
+TEST(LoopDetector, LatticeFitReachesSitesFarFromTheHypothesis) {
+  std::mt19937 rng(2024);
+  const Trunks world = test::plantation(rng, 180, 180, 3.0, 0.15);
+  int resolved = 0;
+  const int n = 6;
+  for (int i = 0; i < n; ++i) {
+    // The candidate frame is axis-aligned on a lattice node, so lattice vectors and 90 deg
+    // turns about its origin map lattice nodes onto lattice nodes.
+    const Pose T_w_c = poseXyYaw(90.0, 90.0, 0.0, 0.0);
+    const double a = 0.7 * i;
+    const Eigen::Vector2d qc(90.0 + 12.0 * std::cos(a), 90.0 + 12.0 * std::sin(a));
+    const Pose T_w_q = poseXyYaw(qc.x(), qc.y(), 0.0, 0.4 + a);
+    const Descriptor c = describe(observe(rng, world, Eigen::Vector2d(90.0, 90.0), T_w_c), "b", 1);
+    const Descriptor q = describe(observe(rng, world, qc, T_w_q), "a", 0);
+    const Pose T_true = T_w_c.inverse() * T_w_q;
+    const Pose T_wrong = poseXyYaw(9.0, -6.0, 0.0, M_PI / 2.0) * T_true;
+
+    std::vector<Correspondence> corrs(6);
+    PoseEstimate est;  // what an ambiguous triangle hypothesis looks like
+    est.ok = true;
+    est.T_c_q = T_wrong;
+    for (int k = 0; k < 6; ++k) {
+      corrs[k].iq = k, corrs[k].ic = k, corrs[k].w = 2.0;
+      est.inliers_R.push_back(k);
+      est.inliers_T.push_back(k);
+    }
+    est.inlier_weight = 12.0;
+    est.yaw_consensus = est.yaw_runner_up = 1.0;
+    est.translation_consensus = est.translation_runner_up = 1.0;
+
+    const Verification v = verifyLoop(q, c, corrs, est, VerifierParams{});
+    ASSERT_GT(v.ambiguity, VerifierParams{}.max_ambiguity);
+    if (!v.accepted) {
+      std::printf("[ info ] pair %d rejected: %s (fit ambiguity %.2f)\n", i, v.reason.c_str(),
+                  v.fit_ambiguity);
+      continue;
+    }
+    ++resolved;
+    EXPECT_LT(test::yawError(v.T_c_q, T_true), 0.3 * M_PI / 180.0) << "pair " << i;
+    EXPECT_LT((v.T_c_q.translation() - T_true.translation()).head<2>().norm(), 0.15)
+        << "pair " << i;
+  }
+  std::printf("[ info ] hypothesis 3 x 2 sites and 90 deg off: %d/%d resolved\n", resolved, n);
+  EXPECT_GE(resolved, n - 1);
+}
+
 TEST(LoopDetector, RejectsDifferentPlacesOfAPlantationGrid) {
   // 3 m x 3 m grid, 0.15 m planting jitter, radii 15 +- 1 cm: every window looks alike up to
   // the jitter. Pairs of windows >= 33 m apart share no tree; each must be rejected.

@@ -93,11 +93,34 @@ struct DetectionRow {
 DetectionRow trunkDetection(const Cloud& cloud_S, const Pose& T_W_S, const Trunks& trunks,
                             const std::vector<StemRecord>& stems);
 
+/// A query with a true loop that was not found (or not within the TP tolerances): why, for
+/// its best ground-truth candidate. An extra output of eval (misses.csv) for tuning.
+struct MissRow {
+  int64_t query = -1;
+  int64_t candidate = -1;  ///< the eligible earlier submap of largest overlap
+  double overlap = 0.0;    ///< their ground-truth overlap
+  int rank = 0;            ///< its place in the query's screened candidates (1: best); 0: not kept
+  size_t hypothesis_inliers = 0;  ///< |I_T| of the solver's hypothesis
+  std::string outcome;  ///< matchPair on the pair alone: "accepted" or the rejection reason
+  std::optional<PoseError> hypothesis_err;  ///< the solver's hypothesis against ground truth
+  double ambiguity = 0.0;                   ///< Verification::ambiguity
+  double fit_ambiguity = -1.0;              ///< Verification::fit_ambiguity
+  int pairs = 0;                            ///< refined trunk pairs
+  double covisible_ratio = 0.0;
+  double aligned_overlap = -1.0;  ///< Verification::overlap
+  int z_pairs = 0;
+  int ground_cells = 0;
+};
+
 struct EvalResult {
   std::vector<EvalRow> rows;
   EvalSummary summary;
   std::vector<DetectionRow> detection;  ///< per submap; empty without stems.csv
+  std::vector<MissRow> misses;          ///< queries with a true loop and no true positive
 };
+
+/// misses.csv: one row per MissRow. Throws DatasetError.
+void writeMissesCsv(const std::string& path, const std::vector<MissRow>& rows);
 
 /// detection.csv: one row per submap, the fields of DetectionRow. Throws DatasetError.
 void writeDetectionCsv(const std::string& path, const std::vector<DetectionRow>& rows);

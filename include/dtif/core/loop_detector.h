@@ -45,14 +45,18 @@ struct VerifierParams {
   /// Overlap of the aligned footprints (occupied cells at trunk height, DATASET.md's measure)
   /// at least; pairs without footprints (trunk maps) skip the check [0..1].
   double min_overlap = 0.3;
-  /// An ambiguous hypothesis (max_ambiguity) is refitted to all trunks together with its lattice
-  /// neighbours (shifted to the nearest trunks, turned by 90/180/270 deg); it is kept when the
-  /// runner-up fit scores at most this share of the best. 0: ambiguous is always rejected [0..1).
+  /// An ambiguous hypothesis (max_ambiguity) is replaced by the best fit to all trunks of every
+  /// lattice-consistent pose (its yaw turned by 0/90/180/270 deg, each with the translations
+  /// where at least min_inliers trunks pair up); that fit is kept when the runner-up pose scores
+  /// at most this share of it. 0: ambiguous is always rejected [0..1).
   double max_fit_ambiguity = 0.7;
+  /// A fit scores each refined pair (1 - (d / r)^2)^2 for residuals d below this r: tight, so
+  /// a wrong lattice site, paired only to the planting jitter, scores little [m].
+  double fit_score_radius_m = 0.2;
   /// The fitted winner's median horizontal pair residual at most: a wrong site of a jittered
-  /// lattice pairs the trunks only to the planting jitter (0.15 m: median ~0.2 m), the right
-  /// one to the centre noise (~0.04 m) [m].
-  double max_fit_median_m = 0.08;
+  /// lattice pairs the trunks only to the planting jitter (0.15 m: median 0.18-0.21 m), the
+  /// right one to the centre noise (0.04-0.09 m in the plantation scene) [m].
+  double max_fit_median_m = 0.1;
   /// Refined pairs whose stem bases were both seen and agree on t_z at least; with none t_z is
   /// a guess and the loop is rejected rather than reported with a wrong elevation. One pair is
   /// enough once bases on vegetation are flagged (TrunkExtractorParams::max_base_below_points)
@@ -91,6 +95,7 @@ struct VerifierParams {
     v("min_overlap", min_overlap);
     v("max_fit_ambiguity", max_fit_ambiguity);
     v("max_fit_median_m", max_fit_median_m);
+    v("fit_score_radius_m", fit_score_radius_m);
     v("min_z_pairs", min_z_pairs);
     v("max_z_ambiguity", max_z_ambiguity);
     v("min_ground_cells", min_ground_cells);
@@ -150,14 +155,15 @@ using PoseSolver = std::function<PoseEstimate(const std::vector<Correspondence>&
 
 /// Per-query timings and counts.
 struct QueryStats {
-  double screen_ms = 0.0;  ///< histogram screening
-  double match_ms = 0.0;   ///< correspondence construction
-  double solver_ms = 0.0;  ///< pose estimation only
-  double verify_ms = 0.0;  ///< verification
-  size_t eligible = 0;     ///< database entries after recent-submap exclusion
-  size_t screened_in = 0;  ///< entries passing histogram screening
-  size_t matched = 0;      ///< candidates that reached pose estimation
-  size_t verified = 0;     ///< candidates that passed verification
+  double screen_ms = 0.0;           ///< histogram screening
+  double match_ms = 0.0;            ///< correspondence construction
+  double solver_ms = 0.0;           ///< pose estimation only
+  double verify_ms = 0.0;           ///< verification
+  size_t eligible = 0;              ///< database entries after recent-submap exclusion
+  size_t screened_in = 0;           ///< entries passing histogram screening
+  size_t matched = 0;               ///< candidates that reached pose estimation
+  size_t verified = 0;              ///< candidates that passed verification
+  std::vector<int64_t> candidates;  ///< submap ids of the screened candidates, best first
 };
 
 /// Outcome of verifying one pose hypothesis (exposed for tests and diagnostics).
