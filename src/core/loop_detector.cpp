@@ -684,13 +684,21 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
   v.T_c_q = ref.T;
   v.pairs = ref.pairs;
   v.rms_xy_m = ref.rms_xy;
-  // The refinement must stay near the hypothesis: a jump means it locked onto other trunks.
-  // Measured on the query's own trunks (the raw translation swings with the yaw when the
-  // coordinates are far from the origin, e.g. UTM).
-  double shift = 0.0;
-  for (const Trunk& t : q.trunks) {
-    const Eigen::Vector3d p(t.x, t.y, t.z);
-    shift = std::max(shift, ((ref.T * p) - (T_hyp * p)).head<2>().norm());
+  // The refinement must stay near the hypothesis: a jump means it locked onto other trunks,
+  // which moves the paired trunks' centroid by about a tree spacing or turns them by degrees.
+  // Measured at that centroid, where the submaps overlap and the correspondences lie (the raw
+  // translation swings with the yaw when the coordinates are far from the origin, e.g. UTM,
+  // and a rough hypothesis' yaw, corrected, moves trunks 30 m out by decimetres: 0.7 deg,
+  // 0.37 m).
+  constexpr double kMaxRefineYawRad = 3.0 * M_PI / 180.0;
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  for (const auto& [i, j] : ref.pairs)
+    centroid += Eigen::Vector3d(q.trunks[i].x, q.trunks[i].y, 0.0);
+  if (!ref.pairs.empty()) centroid /= static_cast<double>(ref.pairs.size());
+  const double shift = ((ref.T * centroid) - (T_hyp * centroid)).head<2>().norm();
+  const Eigen::Matrix3d dR = T_hyp.linear().transpose() * ref.T.linear();
+  if (std::abs(std::atan2(dR(1, 0), dR(0, 0))) > kMaxRefineYawRad) {
+    return reject("refinement diverged");
   }
   if (shift > params.match_radius_m) return reject("refinement diverged");
   if (static_cast<int>(ref.pairs.size()) < params.min_inliers) return reject("few inliers");

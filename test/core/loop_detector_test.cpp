@@ -431,6 +431,48 @@ TEST(LoopDetector, RejectsDisjointPlacesOfRandomStands) {
   EXPECT_EQ(false_accepts, 0) << "of " << tried;
 }
 
+/// A rough hypothesis (1 deg of yaw off about the overlap) of wide submaps: its correction moves
+/// query trunks 25 m out by 0.44 m, more than match_radius_m, but the paired trunks near the
+/// overlap by a few cm; that is no jump onto other trunks, and the loop is kept.
+TEST(LoopDetector, RefinementMayCorrectTheYawOfAWideSubmap) {
+  std::mt19937 rng(77);
+  test::ObservationNoise wide;
+  wide.radius_m = 25.0;
+  int accepted = 0;
+  const int n = 5;
+  for (int i = 0; i < n; ++i) {
+    const Trunks world = test::randomStand(rng, 120, 120, 500);
+    const Pose T_w_c = poseXyYaw(60.0, 60.0, 0.0, 0.3 * i);
+    const Pose T_w_q = poseXyYaw(66.0, 58.0, 0.0, 1.0 + 0.3 * i);
+    const Descriptor c = describe(observe(rng, world, {60.0, 60.0}, T_w_c, wide), "b", 1);
+    const Descriptor q = describe(observe(rng, world, {66.0, 58.0}, T_w_q, wide), "a", 0);
+    const Pose T_true = T_w_c.inverse() * T_w_q;
+    // 1.5 deg about the query's origin, inside the overlap.
+    const Pose T_rough = T_true * poseXyYaw(0.0, 0.0, 0.0, 1.5 * M_PI / 180.0);
+    std::vector<Correspondence> corrs(6);
+    PoseEstimate est;
+    est.ok = true;
+    est.T_c_q = T_rough;
+    for (int k = 0; k < 6; ++k) {
+      corrs[k].iq = k, corrs[k].ic = k, corrs[k].w = 2.0;
+      est.inliers_R.push_back(k);
+      est.inliers_T.push_back(k);
+    }
+    est.inlier_weight = 12.0;
+    est.yaw_consensus = est.translation_consensus = 1.0;  // unambiguous: no lattice refit
+    const Verification v = verifyLoop(q, c, corrs, est, VerifierParams{});
+    EXPECT_EQ(v.fit_ambiguity, -1.0);
+    if (!v.accepted) {
+      std::printf("[ info ] wide pair %d rejected: %s\n", i, v.reason.c_str());
+      continue;
+    }
+    ++accepted;
+    EXPECT_LT(test::yawError(v.T_c_q, T_true), 0.2 * M_PI / 180.0) << "pair " << i;
+    EXPECT_LT((v.T_c_q.translation() - T_true.translation()).head<2>().norm(), 0.1) << "pair " << i;
+  }
+  EXPECT_EQ(accepted, n);
+}
+
 /// Overlapping places (3-8 m apart, any headings) of a jittered 3 m plantation, n pairs; every
 /// `bad_every`-th query trunk centre is moved 0.3 m (0: none). Counts the accepted loops, the
 /// wrong ones (> 0.3 deg or 0.15 m) and those resolved by the lattice fit.
