@@ -108,9 +108,10 @@ struct DatabaseParams {
   double exclude_recent_s = 30.0;  ///< same-robot submaps closer in time are not loops [s]
   int max_candidates = 25;         ///< screened candidates passed to matching, best first
   /// Of those, the best this many may fall back to pose voting (MatcherParams::vote_fallback)
-  /// when their triangles give no hypothesis: voting costs ~1 ms per candidate, the histogram
-  /// screening ranks the overlapping submaps first. 0: none.
-  int max_vote_candidates = 8;
+  /// when their triangles give no hypothesis. Voting costs ~1 ms per candidate; in dense
+  /// understory the histogram screening ranks true candidates down to 9th-19th (seeds 2 and 3
+  /// of dense_slope: 2 loops each beyond the best 8). 0: none.
+  int max_vote_candidates = 25;
 
   std::string validate() const;
 
