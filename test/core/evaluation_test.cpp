@@ -9,6 +9,9 @@
 #include <fstream>
 #include <random>
 #include <sstream>
+#include <string>
+#include <tuple>
+#include <vector>
 
 #include "dtif/core/dataset.h"
 #include "test_utils.h"
@@ -182,14 +185,13 @@ Cloud patchCloud() {
   return c;
 }
 
-TEST(LoopLog, RowsRoundTripAndScoreAgainstGroundTruth) {
-  // alpha at 100 s and 200 s, 2 m apart (overlap 0.8); bravo at 150 s, 50 m away.
-  const auto dir = test::freshTempDir("dtif_loop_log_test");
+/// A dataset of trunk-less patches (patchCloud) in `dir`: one submap per (robot, stamp, x of
+/// its frame in W), ids in order.
+Dataset patchDataset(const std::filesystem::path& dir,
+                     const std::vector<std::tuple<std::string, double, double>>& rows) {
   Dataset ds;
   ds.root = dir.string();
-  const std::array<std::tuple<std::string, double, double>, 3> rows = {
-      {{"alpha", 100.0, 0.0}, {"bravo", 150.0, 50.0}, {"alpha", 200.0, 2.0}}};
-  for (int64_t id = 0; id < 3; ++id) {
+  for (int64_t id = 0; id < static_cast<int64_t>(rows.size()); ++id) {
     SubmapRecord r;
     r.id = id;
     std::tie(r.robot, r.stamp, std::ignore) = rows[id];
@@ -199,7 +201,14 @@ TEST(LoopLog, RowsRoundTripAndScoreAgainstGroundTruth) {
     writeSubmapCloud(ds, r, patchCloud());
   }
   writeDatasetTables(ds);
-  const Dataset read = readDataset(ds.root);
+  return readDataset(ds.root);
+}
+
+TEST(LoopLog, RowsRoundTripAndScoreAgainstGroundTruth) {
+  // alpha at 100 s and 200 s, 2 m apart (overlap 0.8); bravo at 150 s, 50 m away.
+  const auto dir = test::freshTempDir("dtif_loop_log_test");
+  const Dataset read =
+      patchDataset(dir, {{"alpha", 100.0, 0.0}, {"bravo", 150.0, 50.0}, {"alpha", 200.0, 2.0}});
 
   std::vector<LoopLogRow> log(4);
   log[0].query_robot = "alpha", log[0].query_id = 0, log[0].query_stamp = 100.0;
@@ -255,21 +264,9 @@ TEST(Misses, NameTheBestTrueCandidateAndWhyItWasMissed) {
   // (overlap 0.9): flat patches without a trunk, so every descriptor is invalid and the one
   // query with true loops misses them.
   const auto dir = test::freshTempDir("dtif_misses_test");
-  Dataset ds;
-  ds.root = dir.string();
-  const std::array<std::tuple<std::string, double, double>, 3> rows = {
-      {{"alpha", 100.0, 0.0}, {"bravo", 150.0, 1.0}, {"alpha", 200.0, 2.0}}};
-  for (int64_t id = 0; id < 3; ++id) {
-    SubmapRecord r;
-    r.id = id;
-    std::tie(r.robot, r.stamp, std::ignore) = rows[id];
-    r.file = "submaps/" + std::to_string(id) + ".pcd";
-    ds.submaps.push_back(r);
-    ds.T_W_S[id] = makePose(std::get<2>(rows[id]), 0, 0, 0, 0, 0);
-    writeSubmapCloud(ds, r, patchCloud());
-  }
-  writeDatasetTables(ds);
-  const EvalResult res = runEvaluation(readDataset(ds.root), DtifParams{}, EvalParams{});
+  const Dataset ds =
+      patchDataset(dir, {{"alpha", 100.0, 0.0}, {"bravo", 150.0, 1.0}, {"alpha", 200.0, 2.0}});
+  const EvalResult res = runEvaluation(ds, DtifParams{}, EvalParams{});
   // bravo/1 overlaps alpha/0 too (other robot: eligible at once); alpha/2 has both.
   ASSERT_EQ(res.misses.size(), 2u);
   EXPECT_EQ(res.misses[0].query, 1);

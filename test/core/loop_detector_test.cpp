@@ -431,8 +431,27 @@ TEST(LoopDetector, RejectsDisjointPlacesOfRandomStands) {
   EXPECT_EQ(false_accepts, 0) << "of " << tried;
 }
 
-/// A rough hypothesis (1 deg of yaw off about the overlap) of wide submaps: its correction moves
-/// query trunks 25 m out by 0.44 m, more than match_radius_m, but the paired trunks near the
+/// A pose estimate `T` as the solver would give it from 6 correspondences of weight 2 (filled
+/// into *corrs, which verifyLoop reads for the score), unambiguous or with an equal runner-up
+/// in yaw and translation (a lattice).
+PoseEstimate hypothesis(const Pose& T, bool ambiguous, std::vector<Correspondence>* corrs) {
+  corrs->assign(6, Correspondence{});
+  PoseEstimate est;
+  est.ok = true;
+  est.T_c_q = T;
+  for (int k = 0; k < 6; ++k) {
+    (*corrs)[k].iq = k, (*corrs)[k].ic = k, (*corrs)[k].w = 2.0;
+    est.inliers_R.push_back(k);
+    est.inliers_T.push_back(k);
+  }
+  est.inlier_weight = 12.0;
+  est.yaw_consensus = est.translation_consensus = 1.0;
+  if (ambiguous) est.yaw_runner_up = est.translation_runner_up = 1.0;
+  return est;
+}
+
+/// A rough hypothesis (1.5 deg of yaw off about the overlap) of wide submaps: its correction
+/// moves query trunks 25 m out by 0.65 m, more than match_radius_m, but the paired trunks near the
 /// overlap by a few cm; that is no jump onto other trunks, and the loop is kept.
 TEST(LoopDetector, RefinementMayCorrectTheYawOfAWideSubmap) {
   std::mt19937 rng(77);
@@ -449,17 +468,8 @@ TEST(LoopDetector, RefinementMayCorrectTheYawOfAWideSubmap) {
     const Pose T_true = T_w_c.inverse() * T_w_q;
     // 1.5 deg about the query's origin, inside the overlap.
     const Pose T_rough = T_true * poseXyYaw(0.0, 0.0, 0.0, 1.5 * M_PI / 180.0);
-    std::vector<Correspondence> corrs(6);
-    PoseEstimate est;
-    est.ok = true;
-    est.T_c_q = T_rough;
-    for (int k = 0; k < 6; ++k) {
-      corrs[k].iq = k, corrs[k].ic = k, corrs[k].w = 2.0;
-      est.inliers_R.push_back(k);
-      est.inliers_T.push_back(k);
-    }
-    est.inlier_weight = 12.0;
-    est.yaw_consensus = est.translation_consensus = 1.0;  // unambiguous: no lattice refit
+    std::vector<Correspondence> corrs;
+    const PoseEstimate est = hypothesis(T_rough, false, &corrs);  // no lattice refit
     const Verification v = verifyLoop(q, c, corrs, est, VerifierParams{});
     EXPECT_EQ(v.fit_ambiguity, -1.0);
     if (!v.accepted) {
@@ -568,19 +578,8 @@ TEST(LoopDetector, LatticeFitReachesSitesFarFromTheHypothesis) {
     const Pose T_true = T_w_c.inverse() * T_w_q;
     const Pose T_wrong = poseXyYaw(9.0, -6.0, 0.0, M_PI / 2.0) * T_true;
 
-    std::vector<Correspondence> corrs(6);
-    PoseEstimate est;  // what an ambiguous triangle hypothesis looks like
-    est.ok = true;
-    est.T_c_q = T_wrong;
-    for (int k = 0; k < 6; ++k) {
-      corrs[k].iq = k, corrs[k].ic = k, corrs[k].w = 2.0;
-      est.inliers_R.push_back(k);
-      est.inliers_T.push_back(k);
-    }
-    est.inlier_weight = 12.0;
-    est.yaw_consensus = est.yaw_runner_up = 1.0;
-    est.translation_consensus = est.translation_runner_up = 1.0;
-
+    std::vector<Correspondence> corrs;  // what an ambiguous triangle hypothesis looks like
+    const PoseEstimate est = hypothesis(T_wrong, true, &corrs);
     const Verification v = verifyLoop(q, c, corrs, est, VerifierParams{});
     ASSERT_GT(v.ambiguity, VerifierParams{}.max_ambiguity);
     if (!v.accepted) {
