@@ -702,22 +702,25 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
   }
   if (shift > params.match_radius_m) return reject("refinement diverged");
   if (static_cast<int>(ref.pairs.size()) < params.min_inliers) return reject("few inliers");
-  if (v.z_pairs < params.min_z_pairs) {
-    // No pair of seen bases: where both submaps saw the same lowest surface (ground, a log),
-    // their ground maps differ by t_z.
-    if (params.min_ground_cells <= 0 || q.ground_map.empty() || c.ground_map.empty())
-      return reject("elevation unobserved");
+  const bool z_unobserved = v.z_pairs < params.min_z_pairs;
+  if (z_unobserved || v.z_ambiguity > params.max_z_ambiguity) {
+    // No pair of seen bases, or groups of them agreeing on different t_z (stems on shrubs):
+    // where both submaps saw the same lowest surface (ground, a log), their ground maps differ
+    // by t_z. A tilt fitted to disagreeing bases is not trusted.
+    const std::string why = z_unobserved ? "elevation unobserved" : "elevation ambiguous";
+    if (params.min_ground_cells <= 0 || q.ground_map.empty() || c.ground_map.empty() ||
+        v.tilt_fitted) {
+      return reject(why);
+    }
     const GroundElevation g =
         groundElevation(q.ground_map, c.ground_map, ref.T, params.ground_window_m);
     v.ground_ambiguity = g.ok ? g.ambiguity : -1.0;
-    if (!g.ok || g.support < params.min_ground_cells) return reject("elevation unobserved");
+    if (!g.ok || g.support < params.min_ground_cells) return reject(why);
     if (g.ambiguity > params.max_ground_ambiguity) return reject("elevation ambiguous");
     ref.T.translation().z() += g.dz_m;
     v.T_c_q = ref.T;
     v.ground_cells = g.support;
     v.ground_sigma_m = g.spread_m;
-  } else if (v.z_ambiguity > params.max_z_ambiguity) {
-    return reject("elevation ambiguous");
   }
   if (ref.rms_xy > params.max_rms_xy_m) return reject("large residual");
 
@@ -887,11 +890,12 @@ std::optional<LoopClosure> matchPair(const Descriptor& q, const Descriptor& c,
   }
   lc.covariance.setZero();
   lc.covariance(0, 0) = lc.covariance(1, 1) = std::max(s2 / n, kMinXyVar);
-  // No pair with both stem bases seen: t_z is extrapolated terrain, not a measurement.
+  // t_z from the ground maps (no seen-base pair, or disagreeing ones), from seen-base pairs,
+  // or, with none, extrapolated terrain, not a measurement.
   lc.covariance(2, 2) =
-      ver.z_pairs > 1 ? std::max(ver.rms_z_m * ver.rms_z_m / ver.z_pairs, kMinZVar)
-      : ver.ground_cells > 0
+      ver.ground_cells > 0
           ? std::max(ver.ground_sigma_m * ver.ground_sigma_m / ver.ground_cells, kGroundZVar)
+      : ver.z_pairs > 1  ? std::max(ver.rms_z_m * ver.rms_z_m / ver.z_pairs, kMinZVar)
       : ver.z_pairs == 1 ? kSinglePairZVar
                          : kUnobservedZVar;
   lc.covariance(3, 3) = ver.tilt_fitted ? ver.roll_var : kRollPitchVar;

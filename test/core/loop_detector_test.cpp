@@ -258,10 +258,6 @@ TEST(LoopDetector, ElevationIsTheModeOfSeenBasePairs) {
       pc.q.trunks[i].base_seen = pc.c.trunks[j].base_seen = true;
       pc.c.trunks[j].z += lift[k];
     }
-    const GroundElevation gdbg = groundElevation(pc.q.ground_map, pc.c.ground_map, pc.T_c_q, 0.15);
-    std::printf("DBG q %zu c %zu support %d compared %d amb %.2f dz %.3f\n",
-                pc.q.ground_map.count(), pc.c.ground_map.count(), gdbg.support, gdbg.compared,
-                gdbg.ambiguity, gdbg.dz_m);
     Verification v2;
     const auto lc = matchPair(pc.q, pc.c, params, nullptr, &v2);
     ASSERT_TRUE(lc.has_value()) << v2.reason;
@@ -310,6 +306,42 @@ TEST(LoopDetector, AgreeingWrongBasesMakeTheElevationAmbiguous) {
         EXPECT_NEAR(lc->covariance(2, 2), 0.09, 1e-9);
       }
     }
+    ++checked;
+  }
+  EXPECT_GE(checked, 10);
+}
+
+/// One good seen-base pair against one on a shrub leaves t_z ambiguous; when both submaps carry
+/// ground maps, their difference settles it (and the loop's z variance is the maps').
+TEST(LoopDetector, GroundMapsSettleAnAmbiguousElevation) {
+  const LoopDetectorParams params;
+  std::mt19937 rng(37);
+  int checked = 0;
+  for (PairCase& pc : overlappingPairs(20, 4444)) {
+    Verification ver;
+    if (!matchPair(pc.q, pc.c, params, nullptr, &ver) || ver.pairs.size() < 8) continue;
+    for (Trunk& t : pc.q.trunks) t.base_seen = false;
+    for (Trunk& t : pc.c.trunks) t.base_seen = false;
+    for (int k = 0; k < 2; ++k) {
+      const auto [i, j] = ver.pairs[k];
+      pc.q.trunks[i].base_seen = pc.c.trunks[j].base_seen = true;
+      if (k == 1) pc.q.trunks[i].z += 1.6;  // on a shrub
+    }
+    Verification v1;
+    EXPECT_FALSE(matchPair(pc.q, pc.c, params, nullptr, &v1).has_value());
+    EXPECT_EQ(v1.reason, "elevation ambiguous");
+
+    const Pose T_W_c = Pose::Identity(), T_W_q = pc.T_c_q;  // world = candidate frame
+    pc.c.ground_map =
+        test::mapOf(test::hillyGround(rng, Eigen::Vector2d::Zero(), 14.0, true), T_W_c, 0.5, 0.05);
+    pc.q.ground_map = test::mapOf(
+        test::hillyGround(rng, T_W_q.translation().head<2>(), 14.0, false, 6.0), T_W_q, 0.5, 0.05);
+    Verification v2;
+    const auto lc = matchPair(pc.q, pc.c, params, nullptr, &v2);
+    ASSERT_TRUE(lc.has_value()) << v2.reason;
+    EXPECT_GE(v2.ground_cells, params.verification.min_ground_cells);
+    EXPECT_NEAR(lc->T_c_q.translation().z(), pc.T_c_q.translation().z(), 0.05);
+    EXPECT_LE(lc->covariance(2, 2), 0.01);
     ++checked;
   }
   EXPECT_GE(checked, 10);
