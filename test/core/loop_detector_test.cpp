@@ -204,6 +204,16 @@ TEST(LoopDetector, ElevationComesFromSeenBasesOnly) {
 
 /// No stem base seen in either submap (a steep slope seen from a helmet): t_z comes from the
 /// ground maps when both carry one, else the loop is rejected rather than given a guessed t_z.
+/// Ground maps for both sides of the pair: one hilly slope (world = the candidate frame); the
+/// query sees no ground 6 m downhill of its centre.
+void addGroundMaps(std::mt19937& rng, PairCase* pc) {
+  const Pose T_W_c = Pose::Identity(), T_W_q = pc->T_c_q;
+  pc->c.ground_map =
+      test::mapOf(test::hillyGround(rng, Eigen::Vector2d::Zero(), 14.0, true), T_W_c, 0.5, 0.05);
+  pc->q.ground_map = test::mapOf(
+      test::hillyGround(rng, T_W_q.translation().head<2>(), 14.0, false, 6.0), T_W_q, 0.5, 0.05);
+}
+
 TEST(LoopDetector, ElevationFromGroundMapsWhenNoBaseIsSeen) {
   const LoopDetectorParams params;
   std::mt19937 rng(31);
@@ -216,12 +226,7 @@ TEST(LoopDetector, ElevationFromGroundMapsWhenNoBaseIsSeen) {
     EXPECT_FALSE(none.has_value());
     if (ver.reason != "elevation unobserved") continue;  // rejected before the elevation
     ++checked;
-    // Both maps of one hilly slope; the query sees no ground 6 m downhill of its centre.
-    const Pose T_W_c = Pose::Identity(), T_W_q = pc.T_c_q;  // world = candidate frame
-    pc.c.ground_map =
-        test::mapOf(test::hillyGround(rng, Eigen::Vector2d::Zero(), 14.0, true), T_W_c, 0.5, 0.05);
-    pc.q.ground_map = test::mapOf(
-        test::hillyGround(rng, T_W_q.translation().head<2>(), 14.0, false, 6.0), T_W_q, 0.5, 0.05);
+    addGroundMaps(rng, &pc);
     Verification v2;
     const auto lc = matchPair(pc.q, pc.c, params, nullptr, &v2);
     ASSERT_TRUE(lc.has_value()) << v2.reason;
@@ -331,11 +336,7 @@ TEST(LoopDetector, GroundMapsSettleAnAmbiguousElevation) {
     EXPECT_FALSE(matchPair(pc.q, pc.c, params, nullptr, &v1).has_value());
     EXPECT_EQ(v1.reason, "elevation ambiguous");
 
-    const Pose T_W_c = Pose::Identity(), T_W_q = pc.T_c_q;  // world = candidate frame
-    pc.c.ground_map =
-        test::mapOf(test::hillyGround(rng, Eigen::Vector2d::Zero(), 14.0, true), T_W_c, 0.5, 0.05);
-    pc.q.ground_map = test::mapOf(
-        test::hillyGround(rng, T_W_q.translation().head<2>(), 14.0, false, 6.0), T_W_q, 0.5, 0.05);
+    addGroundMaps(rng, &pc);
     Verification v2;
     const auto lc = matchPair(pc.q, pc.c, params, nullptr, &v2);
     ASSERT_TRUE(lc.has_value()) << v2.reason;
