@@ -12,6 +12,7 @@
 #include <limits>
 #include <nlohmann/json.hpp>
 #include <sstream>
+#include <tuple>
 #include <unordered_map>
 
 #include "dtif/core/descriptor.h"
@@ -283,15 +284,31 @@ namespace {
 
 using CellSets = std::vector<std::unordered_set<int64_t>>;
 
+// The earlier submap (file position) of largest overlap with submap i among those i may be
+// matched with (not the same robot's within exclude_recent_s), and that overlap; (i, -1) when
+// there is none.
+std::pair<size_t, double> bestEligibleOverlap(const Dataset& ds, const CellSets& cells, size_t i,
+                                              double exclude_recent_s) {
+  std::pair<size_t, double> best{i, -1.0};
+  for (size_t j = 0; j < i; ++j) {
+    if (!eligiblePair(ds.submaps[i], ds.submaps[j], exclude_recent_s)) continue;
+    const double o = cellOverlap(cells[i], cells[j]);
+    if (o > best.second) best = {j, o};
+  }
+  return best;
+}
+
 // DATASET.md's ground truth: does some submap before i (file order) that i may be matched
 // with (not the same robot's within exclude_recent_s) form a true loop with it?
 bool hasTrueLoop(const Dataset& ds, const CellSets& cells, size_t i, double exclude_recent_s,
                  const EvalParams& eval) {
-  for (size_t j = 0; j < i; ++j) {
-    if (!eligiblePair(ds.submaps[i], ds.submaps[j], exclude_recent_s)) continue;
-    if (cellOverlap(cells[i], cells[j]) >= eval.true_loop_overlap) return true;
-  }
-  return false;
+  const auto [j, overlap] = bestEligibleOverlap(ds, cells, i, exclude_recent_s);
+  return j != i && overlap >= eval.true_loop_overlap;
+}
+
+// Ground-truth T_c_q of query i and candidate j (file positions), Eq. (4.2).
+Pose trueTcq(const Dataset& ds, size_t i, size_t j) {
+  return ds.T_W_S.at(ds.submaps[j].id).inverse() * ds.T_W_S.at(ds.submaps[i].id);
 }
 
 // Why query i missed its loop: its eligible earlier submap of largest overlap, matched alone.
@@ -301,11 +318,7 @@ MissRow explainMiss(const Dataset& ds, const CellSets& cells,
   MissRow m;
   m.query = ds.submaps[i].id;
   size_t best = i;
-  for (size_t j = 0; j < i; ++j) {
-    if (!eligiblePair(ds.submaps[i], ds.submaps[j], params.database.exclude_recent_s)) continue;
-    const double o = cellOverlap(cells[i], cells[j]);
-    if (o > m.overlap) m.overlap = o, best = j;
-  }
+  std::tie(best, m.overlap) = bestEligibleOverlap(ds, cells, i, params.database.exclude_recent_s);
   if (best == i) return m;
   m.candidate = ds.submaps[best].id;
   const auto it = std::find(qs.candidates.begin(), qs.candidates.end(), m.candidate);
@@ -321,8 +334,7 @@ MissRow explainMiss(const Dataset& ds, const CellSets& cells,
   const bool ok = matchPair(q, c, params, &est, &ver).has_value();
   m.outcome = ok ? "accepted" : ver.reason;
   m.hypothesis_inliers = est.inliers_T.size();
-  const Pose T_gt = ds.T_W_S.at(m.candidate).inverse() * ds.T_W_S.at(m.query);
-  if (est.ok) m.hypothesis_err = poseError(T_gt, est.T_c_q);
+  if (est.ok) m.hypothesis_err = poseError(trueTcq(ds, i, best), est.T_c_q);
   m.ambiguity = ver.ambiguity;
   m.fit_ambiguity = ver.fit_ambiguity;
   m.pairs = static_cast<int>(ver.pairs.size());
@@ -337,9 +349,7 @@ MissRow explainMiss(const Dataset& ds, const CellSets& cells,
 void scoreAccepted(const Dataset& ds, const CellSets& cells, size_t i, size_t j, const Pose& T_c_q,
                    const EvalParams& eval, EvalRow* row) {
   row->candidate = ds.submaps[j].id;
-  const Pose T_c_q_gt =
-      ds.T_W_S.at(ds.submaps[j].id).inverse() * ds.T_W_S.at(ds.submaps[i].id);  // Eq. (4.2)
-  scoreAcceptedLoop(T_c_q_gt, T_c_q, cellOverlap(cells[i], cells[j]), eval, row);
+  scoreAcceptedLoop(trueTcq(ds, i, j), T_c_q, cellOverlap(cells[i], cells[j]), eval, row);
 }
 
 void checkGroundTruth(const Dataset& ds) {
