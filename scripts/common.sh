@@ -23,6 +23,7 @@ dtif_build() {
 
 # dtif_build with its output in .ws/build.log, printed only when the build fails (then exits).
 dtif_build_logged() {
+  mkdir -p "${DTIF_WS}"
   dtif_build "$@" > "${DTIF_WS}/build.log" 2>&1 || { cat "${DTIF_WS}/build.log"; exit 1; }
 }
 

@@ -12,9 +12,9 @@
 #include <unordered_set>
 
 #include "dtif/baselines/solvers.h"
-#include "dtif/core/descriptor.h"
-#include "dtif/core/loop_detector.h"
-#include "dtif/core/trunk_extractor.h"
+#include "dtif/core/database/loop_detector.h"
+#include "dtif/core/descriptor/descriptor.h"
+#include "dtif/core/extraction/trunk_extractor.h"
 
 namespace dtif::baselines {
 namespace {
@@ -169,7 +169,7 @@ SceneBench runSceneBench(const Dataset& ds, const std::string& scene, const Dtif
     for (size_t i = 0; i < n; ++i) {
       QueryStats qs;
       const auto t0 = Clock::now();
-      const std::optional<LoopClosure> lc = det.query(*descs[i], &qs);
+      const std::optional<Loop> lc = det.query(*descs[i], &qs);
       const double t_loop = msSince(t0);
       for (EvalRow* r : {&raw[i], &refined[i]}) {
         r->t_loop_ms = t_loop;
@@ -205,7 +205,7 @@ SceneBench runSceneBench(const Dataset& ds, const std::string& scene, const Dtif
     LoopDetector det(lp);
     std::vector<EvalRow> rows = base;
     for (size_t i = 0; i < n; ++i) {
-      const std::optional<LoopClosure> lc = det.query(*descs[i]);
+      const std::optional<Loop> lc = det.query(*descs[i]);
       if (lc) {
         const size_t j = indexOf(lc->candidate_id, i);
         rows[i].inliers = lc->inliers;
@@ -419,10 +419,10 @@ Descriptor perturbedCopy(const Descriptor& d, uint32_t seed, const DescriptorPar
   T.linear() = rotZ(yaw(rng));
   T.translation() = Eigen::Vector3d(shift(rng), shift(rng), 0.0);
   Trunks trunks;
-  for (const Trunk& t : d.trunks) {
+  for (const TrunkLandmark& t : d.trunks) {
     if (u01(rng) < 0.1) continue;
     const Eigen::Vector3d p = T * Eigen::Vector3d(t.x, t.y, t.z);
-    Trunk c = t;
+    TrunkLandmark c = t;
     c.x = p.x() + jitter(rng);
     c.y = p.y() + jitter(rng);
     c.z = p.z();

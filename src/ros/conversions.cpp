@@ -59,17 +59,16 @@ bool fromMsg(const geometry_msgs::Pose& msg, Pose* T, std::string* error) {
   return true;
 }
 
-dtif_msgs::TrunkDescriptor toMsg(const Descriptor& d, const Pose& T_O_S,
-                                 const std::string& odom_frame) {
-  dtif_msgs::TrunkDescriptor m;
+dtif::TrunkDescriptor toMsg(const Descriptor& d, const Pose& T_O_S, const std::string& odom_frame) {
+  dtif::TrunkDescriptor m;
   m.header.frame_id = odom_frame;
   if (d.stamp > 0.0 && std::isfinite(d.stamp)) m.header.stamp.fromSec(d.stamp);
   m.robot = d.robot;
   m.submap_id = d.submap_id;
   m.odom_pose = toMsg(T_O_S);
   m.trunks.reserve(d.trunks.size());
-  for (const Trunk& t : d.trunks) {
-    dtif_msgs::Trunk mt;
+  for (const TrunkLandmark& t : d.trunks) {
+    dtif::Trunk mt;
     mt.x = static_cast<float>(t.x);
     mt.y = static_cast<float>(t.y);
     mt.z = static_cast<float>(t.z);
@@ -98,8 +97,7 @@ dtif_msgs::TrunkDescriptor toMsg(const Descriptor& d, const Pose& T_O_S,
   return m;
 }
 
-bool fromMsg(const dtif_msgs::TrunkDescriptor& msg, Descriptor* d, Pose* T_O_S,
-             std::string* error) {
+bool fromMsg(const dtif::TrunkDescriptor& msg, Descriptor* d, Pose* T_O_S, std::string* error) {
   Descriptor out;
   out.robot = msg.robot;
   out.submap_id = msg.submap_id;
@@ -109,11 +107,11 @@ bool fromMsg(const dtif_msgs::TrunkDescriptor& msg, Descriptor* d, Pose* T_O_S,
   }
   out.trunks.reserve(msg.trunks.size());
   for (size_t i = 0; i < msg.trunks.size(); ++i) {
-    const dtif_msgs::Trunk& t = msg.trunks[i];
+    const dtif::Trunk& t = msg.trunks[i];
     if (!finite(t.x) || !finite(t.y) || !finite(t.z) || !finite(t.r) || t.r < 0.0f) {
       return fail(error, "trunk " + std::to_string(i) + " is not finite or has a negative radius");
     }
-    out.trunks.push_back(Trunk{t.x, t.y, t.z, t.r, t.base_seen != 0});
+    out.trunks.push_back(TrunkLandmark{t.x, t.y, t.z, t.r, t.base_seen != 0});
   }
   if (msg.faces.size() % 3 != 0) return fail(error, "faces is not a list of triples");
   const size_t n = out.trunks.size();
@@ -168,8 +166,8 @@ bool fromMsg(const dtif_msgs::TrunkDescriptor& msg, Descriptor* d, Pose* T_O_S,
   return true;
 }
 
-dtif_msgs::LoopClosure toMsg(const LoopClosure& lc) {
-  dtif_msgs::LoopClosure m;
+dtif::LoopClosure toMsg(const Loop& lc) {
+  dtif::LoopClosure m;
   m.query_robot = lc.query_robot;
   m.query_id = lc.query_id;
   m.candidate_robot = lc.candidate_robot;
@@ -189,8 +187,8 @@ dtif_msgs::LoopClosure toMsg(const LoopClosure& lc) {
   return m;
 }
 
-bool fromMsg(const dtif_msgs::LoopClosure& msg, LoopClosure* lc, std::string* error) {
-  LoopClosure out;
+bool fromMsg(const dtif::LoopClosure& msg, Loop* lc, std::string* error) {
+  Loop out;
   out.query_robot = msg.query_robot;
   out.query_id = msg.query_id;
   out.candidate_robot = msg.candidate_robot;

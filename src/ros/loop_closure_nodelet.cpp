@@ -21,8 +21,8 @@
 #include <set>
 #include <thread>
 
-#include "dtif/core/dataset.h"
-#include "dtif/core/loop_detector.h"
+#include "dtif/core/database/loop_detector.h"
+#include "dtif/io/dataset.h"
 #include "dtif/ros/conversions.h"
 #include "dtif/ros/markers.h"
 #include "dtif/ros/msgs.h"
@@ -93,11 +93,11 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       }
     }
 
-    loop_pub_ = nh.advertise<dtif_msgs::LoopClosure>("loop_closures", 50);
+    loop_pub_ = nh.advertise<dtif::LoopClosure>("loop_closures", 50);
     marker_pub_ = nh.advertise<visualization_msgs::MarkerArray>("markers", 2);
     for (const std::string& robot : node_.robots) {
       const std::string topic = robot + "/" + node_.descriptor_topic;
-      subs_.push_back(nh.subscribe<dtif_msgs::TrunkDescriptor>(
+      subs_.push_back(nh.subscribe<dtif::TrunkDescriptor>(
           topic, 50,
           boost::bind(&LoopClosureNodelet::onDescriptor, this, boost::placeholders::_1, robot)));
       NODELET_INFO("subscribed to %s", nh.resolveName(topic).c_str());
@@ -124,7 +124,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     if (auto markers = latest_loop_markers_.all()) marker_pub_.publish(markers);
   }
 
-  void onDescriptor(const dtif_msgs::TrunkDescriptor::ConstPtr& msg, const std::string& robot) {
+  void onDescriptor(const dtif::TrunkDescriptor::ConstPtr& msg, const std::string& robot) {
     if (msg->robot != robot) {
       NODELET_WARN_THROTTLE(5.0, "descriptor of robot '%s' on the topic of '%s': dropped",
                             msg->robot.c_str(), robot.c_str());
@@ -144,7 +144,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
 
   void work() {
     while (true) {
-      dtif_msgs::TrunkDescriptor::ConstPtr msg;
+      dtif::TrunkDescriptor::ConstPtr msg;
       {
         std::unique_lock<std::mutex> lock(queue_mutex_);
         cv_.wait(lock, [this] { return stop_ || !queue_.empty(); });
@@ -156,7 +156,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     }
   }
 
-  void process(const dtif_msgs::TrunkDescriptor& msg) {
+  void process(const dtif::TrunkDescriptor& msg) {
     auto d = std::make_shared<Descriptor>();
     Meta meta;
     std::string error;
@@ -177,7 +177,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
                             d->triangles.size());
       return;
     }
-    std::optional<LoopClosure> lc;
+    std::optional<Loop> lc;
     double t_loop_ms = 0.0;
     std::shared_ptr<const Descriptor> candidate;
     std::optional<Meta> candidate_meta;
@@ -223,10 +223,10 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       logQuery(msg, *d, std::nullopt, nullptr, t_loop_ms);
       return;
     }
-    boost::shared_ptr<dtif_msgs::LoopClosure> out(new dtif_msgs::LoopClosure(ros_glue::toMsg(*lc)));
+    boost::shared_ptr<dtif::LoopClosure> out(new dtif::LoopClosure(ros_glue::toMsg(*lc)));
     out->header.stamp = msg.header.stamp;
     out->header.frame_id = candidate_meta ? candidate_meta->odom_frame : std::string();
-    loop_pub_.publish(boost::shared_ptr<const dtif_msgs::LoopClosure>(out));
+    loop_pub_.publish(boost::shared_ptr<const dtif::LoopClosure>(out));
     logQuery(msg, *d, lc, candidate.get(), t_loop_ms);
     NODELET_INFO("loop %s/%ld -> %s/%ld: %d inliers, score %.2f", lc->query_robot.c_str(),
                  static_cast<long>(lc->query_id), lc->candidate_robot.c_str(),
@@ -245,9 +245,8 @@ class LoopClosureNodelet : public nodelet::Nodelet {
   }
 
   // One row of ~loop_log (worker thread only).
-  void logQuery(const dtif_msgs::TrunkDescriptor& msg, const Descriptor& d,
-                const std::optional<LoopClosure>& lc, const Descriptor* candidate,
-                double t_loop_ms) {
+  void logQuery(const dtif::TrunkDescriptor& msg, const Descriptor& d,
+                const std::optional<Loop>& lc, const Descriptor* candidate, double t_loop_ms) {
     if (!loop_log_.is_open()) return;
     LoopLogRow r;
     r.query_robot = d.robot;
@@ -328,7 +327,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     return true;
   }
 
-  bool onSave(dtif_msgs::SaveDatabase::Request& req, dtif_msgs::SaveDatabase::Response& res) {
+  bool onSave(dtif::SaveDatabase::Request& req, dtif::SaveDatabase::Response& res) {
     std::lock_guard<std::mutex> lock(db_mutex_);
     res.size = detector_->size();
     if (req.path.empty()) {
@@ -348,7 +347,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     return true;
   }
 
-  bool onLoad(dtif_msgs::LoadDatabase::Request& req, dtif_msgs::LoadDatabase::Response& res) {
+  bool onLoad(dtif::LoadDatabase::Request& req, dtif::LoadDatabase::Response& res) {
     res.success = loadDatabase(req.path, &res.message);
     if (!res.success) NODELET_ERROR("%s", res.message.c_str());
     std::lock_guard<std::mutex> lock(db_mutex_);
@@ -356,7 +355,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     return true;
   }
 
-  bool onSize(dtif_msgs::GetDatabaseSize::Request&, dtif_msgs::GetDatabaseSize::Response& res) {
+  bool onSize(dtif::GetDatabaseSize::Request&, dtif::GetDatabaseSize::Response& res) {
     std::lock_guard<std::mutex> lock(db_mutex_);
     res.size = detector_->size();
     std::map<std::string, uint64_t> per_robot;
@@ -379,7 +378,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
 
   std::mutex queue_mutex_;  // queue_, stop_
   std::condition_variable cv_;
-  std::deque<dtif_msgs::TrunkDescriptor::ConstPtr> queue_;
+  std::deque<dtif::TrunkDescriptor::ConstPtr> queue_;
   bool stop_ = false;
   std::thread worker_;
 

@@ -27,7 +27,7 @@ geometry_msgs::Point point(const Eigen::Vector3d& p) {
   return m;
 }
 
-Eigen::Vector3d trunkPoint(const Trunk& t, double dz = 0.0) { return {t.x, t.y, t.z + dz}; }
+Eigen::Vector3d trunkPoint(const TrunkLandmark& t, double dz = 0.0) { return {t.x, t.y, t.z + dz}; }
 
 visualization_msgs::Marker base(const std::string& frame, const std::string& ns, int id, int type,
                                 const ros::Time& stamp) {
@@ -100,7 +100,7 @@ visualization_msgs::MarkerArray trunkMarkers(const Descriptor& d, const Pose& T_
 }
 
 visualization_msgs::MarkerArray loopMarkers(const Descriptor& q, const Descriptor& c,
-                                            const LoopClosure& lc, const Pose& T_F_Sq,
+                                            const Loop& lc, const Pose& T_F_Sq,
                                             const std::string& frame, const ros::Time& stamp) {
   visualization_msgs::MarkerArray out;
   {

@@ -20,8 +20,8 @@
 #include <regex>
 #include <thread>
 
-#include "dtif/core/descriptor.h"
-#include "dtif/core/trunk_extractor.h"
+#include "dtif/core/descriptor/descriptor.h"
+#include "dtif/core/extraction/trunk_extractor.h"
 #include "dtif/ros/conversions.h"
 #include "dtif/ros/markers.h"
 #include "dtif/ros/msgs.h"
@@ -87,7 +87,7 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
     }
     recent_markers_ =
         std::make_unique<ros_glue::RecentMarkers>(static_cast<size_t>(node_.marker_history));
-    descriptor_pub_ = nh.advertise<dtif_msgs::TrunkDescriptor>("descriptor", 10);
+    descriptor_pub_ = nh.advertise<dtif::TrunkDescriptor>("descriptor", 10);
     trunks_pub_ = nh.advertise<visualization_msgs::MarkerArray>("trunks", 2);
     if (node_.publish_submap_cloud) {
       cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("submap_cloud", 2);
@@ -260,10 +260,10 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
     NODELET_DEBUG("submap %ld: %zu points, %zu trunks, %zu faces, %.1f ms%s%s",
                   static_cast<long>(s.id), s.cloud->size(), d.trunks.size(), d.triangles.size(), ms,
                   d.valid ? "" : ", invalid: ", d.invalid_reason.c_str());
-    boost::shared_ptr<dtif_msgs::TrunkDescriptor> msg(
-        new dtif_msgs::TrunkDescriptor(ros_glue::toMsg(d, s.T_O_S, frame)));
+    boost::shared_ptr<dtif::TrunkDescriptor> msg(
+        new dtif::TrunkDescriptor(ros_glue::toMsg(d, s.T_O_S, frame)));
     msg->data_end.fromSec(s.end_stamp);
-    descriptor_pub_.publish(boost::shared_ptr<const dtif_msgs::TrunkDescriptor>(msg));
+    descriptor_pub_.publish(boost::shared_ptr<const dtif::TrunkDescriptor>(msg));
     // Markers and the cloud are in the odometry frame, where they do not move: stamp 0 lets
     // rviz use the latest transform to another robot's frame, which exists only after the first
     // loop between the two, i.e. after most submaps' stamps.

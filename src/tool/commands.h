@@ -5,8 +5,8 @@
 #include <string>
 #include <vector>
 
-#include "dtif/core/config.h"
-#include "dtif/core/evaluation.h"
+#include "dtif/eval/evaluation.h"
+#include "dtif/io/config.h"
 
 namespace dtif::tool {
 

@@ -8,7 +8,7 @@
 #include <iostream>
 
 #include "commands.h"
-#include "dtif/core/evaluation.h"
+#include "dtif/eval/evaluation.h"
 #include "options.h"
 
 namespace dtif::tool {

@@ -3,8 +3,9 @@
 #include <iostream>
 
 #include "commands.h"
-#include "dtif/core/dataset.h"
-#include "dtif/core/descriptor.h"
+#include "dtif/core/descriptor/descriptor.h"
+#include "dtif/core/extraction/trunk_extractor.h"
+#include "dtif/io/dataset.h"
 #include "options.h"
 
 namespace dtif::tool {

@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "commands.h"
-#include "dtif/core/config.h"
+#include "dtif/io/config.h"
 
 namespace dtif::tool {
 

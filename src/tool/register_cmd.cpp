@@ -6,9 +6,10 @@
 #include <memory>
 
 #include "commands.h"
-#include "dtif/core/dataset.h"
-#include "dtif/core/descriptor.h"
-#include "dtif/core/loop_detector.h"
+#include "dtif/core/database/loop_detector.h"
+#include "dtif/core/descriptor/descriptor.h"
+#include "dtif/core/extraction/trunk_extractor.h"
+#include "dtif/io/dataset.h"
 #include "options.h"
 
 namespace dtif::tool {

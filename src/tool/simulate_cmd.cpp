@@ -9,8 +9,8 @@
 #include <stdexcept>
 
 #include "commands.h"
-#include "dtif/core/sim_bag.h"
-#include "dtif/core/simulator.h"
+#include "dtif/bag/sim_bag.h"
+#include "dtif/sim/simulator.h"
 #include "options.h"
 
 namespace dtif::tool {

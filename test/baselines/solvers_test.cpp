@@ -8,7 +8,7 @@
 
 #include "core/match_test_utils.h"
 #include "dtif/baselines/bench.h"
-#include "dtif/core/loop_detector.h"
+#include "dtif/core/database/loop_detector.h"
 #include "test_utils.h"
 
 namespace dtif::baselines {

@@ -1,4 +1,4 @@
-#include "dtif/core/descriptor.h"
+#include "dtif/core/descriptor/descriptor.h"
 
 #include <gtest/gtest.h>
 
@@ -31,8 +31,8 @@ TEST(Descriptor, CanonicalTriangleOrderMatchesEq32) {
     EXPECT_FLOAT_EQ(tri.r[2], 0.1f);
     // kEdgeEnds: e1 joins v[0], v[2] (B, A); e2 joins v[0], v[1] (B, C); e3 v[1], v[2] (C, A).
     for (int a = 0; a < 3; ++a) {
-      const Trunk& p = t[tri.v[kEdgeEnds[a][0]]];
-      const Trunk& q = t[tri.v[kEdgeEnds[a][1]]];
+      const TrunkLandmark& p = t[tri.v[kEdgeEnds[a][0]]];
+      const TrunkLandmark& q = t[tri.v[kEdgeEnds[a][1]]];
       EXPECT_FLOAT_EQ(static_cast<float>(std::hypot(p.x - q.x, p.y - q.y)), tri.len[a]);
     }
   }
@@ -80,7 +80,7 @@ TEST(Descriptor, DuplicateAndNanTrunksAreRemoved) {
   for (size_t i = 0; i < a.triangles.size(); ++i) {
     EXPECT_EQ(a.triangles[i].v, b.triangles[i].v);
   }
-  for (const Trunk& x : b.trunks) EXPECT_TRUE(std::isfinite(x.x) && std::isfinite(x.r));
+  for (const TrunkLandmark& x : b.trunks) EXPECT_TRUE(std::isfinite(x.x) && std::isfinite(x.r));
 }
 
 TEST(Descriptor, TrianglesSortedAndHistogramsNormalised) {
@@ -129,7 +129,7 @@ TEST(Descriptor, InvariantToRigidMotionIncludingHugeOffsetsAnd180Degrees) {
   ASSERT_TRUE(a.valid);
   const Pose T = test::poseXyYaw(1e5, -2e5, 300.0, M_PI);
   Trunks moved;
-  for (const Trunk& t : local) {
+  for (const TrunkLandmark& t : local) {
     const Eigen::Vector3d p = T * Eigen::Vector3d(t.x, t.y, t.z);
     moved.push_back({p.x(), p.y(), p.z(), t.r});
   }
@@ -145,7 +145,7 @@ TEST(Descriptor, InvariantToRigidMotionIncludingHugeOffsetsAnd180Degrees) {
 TEST(Descriptor, WireRoundTripSmallAndExact) {
   std::mt19937 rng(3);
   Trunks t = test::randomStand(rng, 40, 40, 500);
-  for (Trunk& x : t) x.x += 312000.0, x.y += 5096000.0;  // UTM-like offsets
+  for (TrunkLandmark& x : t) x.x += 312000.0, x.y += 5096000.0;  // UTM-like offsets
   for (size_t i = 0; i < t.size(); ++i) t[i].base_seen = (i * 7) % 3 != 0;
   Descriptor d = buildDescriptor(t, DescriptorParams{});
   while (d.trunks.size() % 8 == 0) {

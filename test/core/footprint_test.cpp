@@ -1,6 +1,6 @@
 // Footprints (occupied cells at trunk height) and their overlap under a pose, which
 // verification compares with DATASET.md's overlap threshold.
-#include "dtif/core/footprint.h"
+#include "dtif/core/extraction/footprint.h"
 
 #include <gtest/gtest.h>
 

@@ -1,4 +1,4 @@
-#include "dtif/core/ground_map.h"
+#include "dtif/core/extraction/ground_map.h"
 
 #include <gtest/gtest.h>
 

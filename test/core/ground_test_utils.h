@@ -6,7 +6,7 @@
 #include <random>
 #include <vector>
 
-#include "dtif/core/ground_map.h"
+#include "dtif/core/extraction/ground_map.h"
 
 namespace dtif {
 namespace test {

@@ -8,7 +8,7 @@
 #include <random>
 
 #include "core/match_test_utils.h"
-#include "dtif/core/loop_detector.h"
+#include "dtif/core/database/loop_detector.h"
 
 namespace dtif {
 namespace {

@@ -1,4 +1,4 @@
-#include "dtif/core/loop_detector.h"
+#include "dtif/core/database/loop_detector.h"
 
 #include <gtest/gtest.h>
 
@@ -118,7 +118,7 @@ TEST(LoopDetector, TiltPriorSteadiesFewCloseBases) {
     nz.z_sigma_m = 0.05;
     const Eigen::Vector2d seen_centre(53.0, 48.5);  // between the two submaps
     auto hideFar = [&](Descriptor* d, const Pose& T_w_s) {
-      for (Trunk& t : d->trunks) {
+      for (TrunkLandmark& t : d->trunks) {
         const Eigen::Vector3d w = T_w_s * Eigen::Vector3d(t.x, t.y, t.z);
         t.base_seen = (w.head<2>() - seen_centre).norm() < 6.0;
       }
@@ -153,7 +153,7 @@ TEST(LoopDetector, ElevationComesFromSeenBasesOnly) {
   std::mt19937 rng(77);
   std::uniform_real_distribution<double> u01(0.0, 1.0), lift(0.5, 3.0);
   auto hide = [&](Descriptor* d, double share, bool flag) {
-    for (Trunk& t : d->trunks) {
+    for (TrunkLandmark& t : d->trunks) {
       if (u01(rng) >= share) continue;
       t.z += lift(rng);
       t.base_seen = !flag;
@@ -219,8 +219,8 @@ TEST(LoopDetector, ElevationFromGroundMapsWhenNoBaseIsSeen) {
   std::mt19937 rng(31);
   int with_maps = 0, checked = 0;
   for (PairCase& pc : overlappingPairs(12, 515)) {
-    for (Trunk& t : pc.q.trunks) t.base_seen = false;
-    for (Trunk& t : pc.c.trunks) t.base_seen = false;
+    for (TrunkLandmark& t : pc.q.trunks) t.base_seen = false;
+    for (TrunkLandmark& t : pc.c.trunks) t.base_seen = false;
     Verification ver;
     const auto none = matchPair(pc.q, pc.c, params, nullptr, &ver);
     EXPECT_FALSE(none.has_value());
@@ -255,8 +255,8 @@ TEST(LoopDetector, ElevationIsTheModeOfSeenBasePairs) {
   for (PairCase& pc : overlappingPairs(20, 4242)) {
     Verification ver;
     if (!matchPair(pc.q, pc.c, params, nullptr, &ver) || ver.pairs.size() < 8) continue;
-    for (Trunk& t : pc.q.trunks) t.base_seen = false;
-    for (Trunk& t : pc.c.trunks) t.base_seen = false;
+    for (TrunkLandmark& t : pc.q.trunks) t.base_seen = false;
+    for (TrunkLandmark& t : pc.c.trunks) t.base_seen = false;
     const double lift[] = {0.0, 0.0, 0.0, 0.6, 1.2, 1.8};
     for (int k = 0; k < 6; ++k) {
       const auto [i, j] = ver.pairs[k];
@@ -289,8 +289,8 @@ TEST(LoopDetector, AgreeingWrongBasesMakeTheElevationAmbiguous) {
     if (!matchPair(pc.q, pc.c, params, nullptr, &ver) || ver.pairs.size() < 8) continue;
     for (const Case& cs : cases) {
       Descriptor q = pc.q, c = pc.c;
-      for (Trunk& t : q.trunks) t.base_seen = false;
-      for (Trunk& t : c.trunks) t.base_seen = false;
+      for (TrunkLandmark& t : q.trunks) t.base_seen = false;
+      for (TrunkLandmark& t : c.trunks) t.base_seen = false;
       for (int k = 0; k < cs.right + cs.wrong; ++k) {
         const auto [i, j] = ver.pairs[k];
         q.trunks[i].base_seen = c.trunks[j].base_seen = true;
@@ -325,8 +325,8 @@ TEST(LoopDetector, GroundMapsSettleAnAmbiguousElevation) {
   for (PairCase& pc : overlappingPairs(20, 4444)) {
     Verification ver;
     if (!matchPair(pc.q, pc.c, params, nullptr, &ver) || ver.pairs.size() < 8) continue;
-    for (Trunk& t : pc.q.trunks) t.base_seen = false;
-    for (Trunk& t : pc.c.trunks) t.base_seen = false;
+    for (TrunkLandmark& t : pc.q.trunks) t.base_seen = false;
+    for (TrunkLandmark& t : pc.c.trunks) t.base_seen = false;
     for (int k = 0; k < 2; ++k) {
       const auto [i, j] = ver.pairs[k];
       pc.q.trunks[i].base_seen = pc.c.trunks[j].base_seen = true;

@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "dtif/core/descriptor.h"
+#include "dtif/core/descriptor/descriptor.h"
 #include "dtif/core/types.h"
 
 namespace dtif::test {
@@ -21,11 +21,11 @@ inline Trunks randomStand(std::mt19937& rng, double w, double h, double stems_pe
   Trunks out;
   int tries = 0;
   while (static_cast<int>(out.size()) < n && tries++ < 100 * n) {
-    Trunk t;
+    TrunkLandmark t;
     t.x = ux(rng);
     t.y = uy(rng);
     bool ok = true;
-    for (const Trunk& o : out) {
+    for (const TrunkLandmark& o : out) {
       if (std::hypot(o.x - t.x, o.y - t.y) < 1.0) {
         ok = false;
         break;
@@ -45,7 +45,7 @@ inline Trunks plantation(std::mt19937& rng, double w, double h, double spacing, 
   Trunks out;
   for (double x = 0.0; x <= w; x += spacing) {
     for (double y = 0.0; y <= h; y += spacing) {
-      Trunk t;
+      TrunkLandmark t;
       t.x = x + nj(rng);
       t.y = y + nj(rng);
       t.r = nr(rng);
@@ -74,7 +74,7 @@ inline Trunks observe(std::mt19937& rng, const Trunks& world, const Eigen::Vecto
   std::uniform_real_distribution<double> u01(0.0, 1.0);
   const Pose T_s_w = T_w_s.inverse();
   Trunks out;
-  for (const Trunk& t : world) {
+  for (const TrunkLandmark& t : world) {
     if (std::hypot(t.x - centre.x(), t.y - centre.y()) > nz.radius_m) continue;
     if (u01(rng) < nz.miss_ratio) continue;
     const Eigen::Vector3d p = T_s_w * Eigen::Vector3d(t.x + np(rng), t.y + np(rng), t.z + nzz(rng));

@@ -1,4 +1,4 @@
-#include "dtif/core/matcher.h"
+#include "dtif/core/matching/matcher.h"
 
 #include <gtest/gtest.h>
 

@@ -1,5 +1,5 @@
 // Pose voting over trunk pairs and the loop detector's fallback to it.
-#include "dtif/core/pair_vote.h"
+#include "dtif/core/matching/pair_vote.h"
 
 #include <gtest/gtest.h>
 
@@ -8,7 +8,7 @@
 #include <random>
 
 #include "core/match_test_utils.h"
-#include "dtif/core/loop_detector.h"
+#include "dtif/core/database/loop_detector.h"
 
 namespace dtif {
 namespace {

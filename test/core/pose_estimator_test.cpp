@@ -1,4 +1,4 @@
-#include "dtif/core/pose_estimator.h"
+#include "dtif/core/pose/pose_estimator.h"
 
 #include <gtest/gtest.h>
 

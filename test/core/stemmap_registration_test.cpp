@@ -9,7 +9,7 @@
 #include <sstream>
 #include <string>
 
-#include "dtif/core/loop_detector.h"
+#include "dtif/core/database/loop_detector.h"
 #include "dtif_test/test_config.h"
 
 namespace dtif {
@@ -40,7 +40,7 @@ std::vector<std::string> splitCsv(const std::string& line) {
   return out;
 }
 
-/// Trunk maps (x, y, 0, dbh / 2) keyed by plot id (0 when the file has no plot_id column).
+/// TrunkLandmark maps (x, y, 0, dbh / 2) keyed by plot id (0 when the file has no plot_id column).
 std::map<int, Trunks> readStemMap(const std::string& path) {
   std::ifstream f(path);
   std::string line;
@@ -59,7 +59,7 @@ std::map<int, Trunks> readStemMap(const std::string& path) {
     if (line.empty()) continue;
     const std::vector<std::string> v = splitCsv(line);
     try {
-      Trunk t;
+      TrunkLandmark t;
       t.x = std::stod(v.at(cx));
       t.y = std::stod(v.at(cy));
       t.r = std::stod(v.at(cd)) / 2.0;

@@ -1,6 +1,6 @@
 // Trunk extraction on fixed-seed synthetic forest plots: sloped noisy ground, stems with known
 // centres / radii / bases, partial visibility, and clutter that must not become trunks.
-#include "dtif/core/trunk_extractor.h"
+#include "dtif/core/extraction/trunk_extractor.h"
 
 #include <gtest/gtest.h>
 
@@ -131,7 +131,7 @@ void expectStems(const Plot& plot, const std::vector<Stem>& stems, const Trunks&
     const double x = s.x + plot.off_x, y = s.y + plot.off_y;
     const int k = nearest(trunks, x, y, 0.5);
     ASSERT_GE(k, 0) << "stem at " << s.x << "," << s.y << " not found";
-    const Trunk& t = trunks[k];
+    const TrunkLandmark& t = trunks[k];
     EXPECT_LT(std::hypot(t.x - x, t.y - y), max_centre) << "stem " << s.x << "," << s.y;
     EXPECT_NEAR(t.r, s.r, max_radius) << "stem " << s.x << "," << s.y;
     EXPECT_NEAR(t.z, plot.groundZ(s.x, s.y) + plot.off_z, max_base) << "stem " << s.x << "," << s.y;
@@ -255,7 +255,7 @@ TEST(TrunkExtractor, SeenBasesAreMeasuredHiddenBasesAreFlagged) {
   for (const Stem& s : kStems) full.addStem(s);
   const auto all = extractTrunks(full.cloud, TrunkExtractorParams());
   EXPECT_EQ(all.stats.unseen_bases, 0u);
-  for (const Trunk& t : all.trunks) EXPECT_TRUE(t.base_seen);
+  for (const TrunkLandmark& t : all.trunks) EXPECT_TRUE(t.base_seen);
 }
 
 // Dense understory: a mat of low vegetation 0.6 m high hides the ground and the stem's foot,

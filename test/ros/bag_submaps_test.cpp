@@ -8,10 +8,10 @@
 #include <map>
 #include <mutex>
 
-#include "dtif/core/sim_bag.h"
-#include "dtif/core/simulator.h"
-#include "dtif/core/trunk_extractor.h"
+#include "dtif/bag/sim_bag.h"
+#include "dtif/core/extraction/trunk_extractor.h"
 #include "dtif/ros/submap_assembler.h"
+#include "dtif/sim/simulator.h"
 #include "dtif_test/test_config.h"
 
 namespace dtif {
@@ -74,8 +74,8 @@ Cloud toCloud(const std::vector<Eigen::Vector3f>& pts) {
 // Trunks of `a` with a trunk of `b` within tol_m horizontally.
 size_t matchedTrunks(const Trunks& a, const Trunks& b, double tol_m) {
   size_t n = 0;
-  for (const Trunk& t : a) {
-    for (const Trunk& u : b) {
+  for (const TrunkLandmark& t : a) {
+    for (const TrunkLandmark& u : b) {
       if (std::hypot(t.x - u.x, t.y - u.y) <= tol_m) {
         ++n;
         break;

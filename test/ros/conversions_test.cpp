@@ -9,7 +9,7 @@
 #include <limits>
 #include <random>
 
-#include "dtif/core/descriptor.h"
+#include "dtif/core/descriptor/descriptor.h"
 #include "test_utils.h"
 
 namespace dtif {
@@ -26,9 +26,9 @@ Trunks forest(int n, unsigned seed) {
   std::uniform_real_distribution<double> xy(-15.0, 15.0), z(-0.3, 0.3), r(0.08, 0.35);
   Trunks t;
   while (static_cast<int>(t.size()) < n) {
-    Trunk c{xy(rng), xy(rng), z(rng), r(rng)};
+    TrunkLandmark c{xy(rng), xy(rng), z(rng), r(rng)};
     bool ok = true;
-    for (const Trunk& o : t) ok = ok && std::hypot(o.x - c.x, o.y - c.y) > 2.0;
+    for (const TrunkLandmark& o : t) ok = ok && std::hypot(o.x - c.x, o.y - c.y) > 2.0;
     if (ok) t.push_back(c);
   }
   return t;
@@ -65,7 +65,7 @@ TEST(DescriptorConversion, RoundTripRebuildsTriangles) {
   d.stamp = 1234.5;
   ASSERT_FALSE(d.triangles.empty());
   const Pose T_O_S = makePose(10.0, 20.0, -1.0, 0.0, 0.0, 0.7);
-  const dtif_msgs::TrunkDescriptor m = toMsg(d, T_O_S, "alpha/odom");
+  const dtif::TrunkDescriptor m = toMsg(d, T_O_S, "alpha/odom");
   EXPECT_EQ(m.header.frame_id, "alpha/odom");
   EXPECT_EQ(m.faces.size(), 3 * d.triangles.size());
 
@@ -104,7 +104,7 @@ TEST(DescriptorConversion, RoundTripRebuildsTriangles) {
   EXPECT_TRUE(back.footprint.occupied(7, 9));
 
   // A bitmap that does not fit its size is rejected, not read past its end.
-  dtif_msgs::TrunkDescriptor bad = m;
+  dtif::TrunkDescriptor bad = m;
   bad.footprint_bits.pop_back();
   EXPECT_FALSE(fromMsg(bad, &back, &T_back, &error));
   EXPECT_NE(error.find("footprint"), std::string::npos) << error;
@@ -113,11 +113,11 @@ TEST(DescriptorConversion, RoundTripRebuildsTriangles) {
 TEST(DescriptorConversion, RejectsBadMessages) {
   const Descriptor d = buildDescriptor(forest(10, 3), DescriptorParams());
   ASSERT_FALSE(d.triangles.empty());
-  const dtif_msgs::TrunkDescriptor good = toMsg(d, Pose::Identity(), "o");
+  const dtif::TrunkDescriptor good = toMsg(d, Pose::Identity(), "o");
   Descriptor out;
   std::string error;
 
-  dtif_msgs::TrunkDescriptor m = good;
+  dtif::TrunkDescriptor m = good;
   m.faces.back() = static_cast<uint16_t>(m.trunks.size());  // index past the end
   EXPECT_FALSE(fromMsg(m, &out, nullptr, &error));
   EXPECT_NE(error.find("missing trunk"), std::string::npos) << error;
@@ -143,7 +143,7 @@ TEST(DescriptorConversion, RejectsBadMessages) {
   EXPECT_FALSE(fromMsg(m, &out, nullptr, &error));
   EXPECT_NE(error.find("odom_pose"), std::string::npos) << error;
 
-  m = dtif_msgs::TrunkDescriptor();  // empty: converts, stays invalid
+  m = dtif::TrunkDescriptor();  // empty: converts, stays invalid
   m.odom_pose.orientation.w = 1.0;
   ASSERT_TRUE(fromMsg(m, &out, nullptr, &error)) << error;
   EXPECT_TRUE(out.trunks.empty());
@@ -151,7 +151,7 @@ TEST(DescriptorConversion, RejectsBadMessages) {
 }
 
 TEST(LoopClosureConversion, RoundTrip) {
-  LoopClosure lc;
+  Loop lc;
   lc.query_robot = "bravo";
   lc.query_id = 7;
   lc.candidate_robot = "alpha";
@@ -163,9 +163,9 @@ TEST(LoopClosureConversion, RoundTrip) {
   lc.inliers = 3;
   lc.score = 0.8;
   lc.inlier_pairs = {{0, 5}, {2, 1}, {9, 4}};
-  const dtif_msgs::LoopClosure m = toMsg(lc);
+  const dtif::LoopClosure m = toMsg(lc);
   EXPECT_EQ(m.covariance[6 * 1 + 2], lc.covariance(1, 2));  // row-major
-  LoopClosure back;
+  Loop back;
   ASSERT_TRUE(fromMsg(m, &back));
   EXPECT_EQ(back.query_robot, "bravo");
   EXPECT_EQ(back.query_id, 7);
@@ -177,7 +177,7 @@ TEST(LoopClosureConversion, RoundTrip) {
   EXPECT_DOUBLE_EQ(back.score, 0.8);
   EXPECT_EQ(back.inlier_pairs, lc.inlier_pairs);
 
-  dtif_msgs::LoopClosure bad = m;
+  dtif::LoopClosure bad = m;
   bad.inlier_candidate_trunks.pop_back();
   EXPECT_FALSE(fromMsg(bad, &back));
   bad = m;

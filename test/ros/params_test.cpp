@@ -8,7 +8,7 @@
 #include <set>
 #include <string>
 
-#include "dtif/core/config.h"
+#include "dtif/io/config.h"
 #include "dtif/ros/node_params.h"
 #include "dtif/ros/submap_assembler.h"
 #include "dtif_test/test_config.h"

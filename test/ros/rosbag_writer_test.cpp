@@ -2,7 +2,7 @@
 // sums and definitions of the installed messages, counts, time order, exact field values, and
 // the index (chunk infos) checked by an independent parser of the file. Then the simulator's
 // bag sink on a shortened tiny scene, replayed through the nodelet's submap assembler.
-#include "dtif/core/rosbag_writer.h"
+#include "dtif/bag/rosbag_writer.h"
 
 #include <gtest/gtest.h>
 #include <nav_msgs/Odometry.h>
@@ -20,10 +20,10 @@
 #include <set>
 #include <tuple>
 
-#include "dtif/core/sim_bag.h"
-#include "dtif/core/simulator.h"
+#include "dtif/bag/sim_bag.h"
 #include "dtif/ros/conversions.h"
 #include "dtif/ros/submap_assembler.h"
+#include "dtif/sim/simulator.h"
 #include "dtif_test/test_config.h"
 #include "test_utils.h"
 

@@ -14,9 +14,9 @@
 
 #include "dtif/baselines/fpfh_registration.h"
 #include "dtif/baselines/scan_context.h"
-#include "dtif/core/config.h"
-#include "dtif/core/dataset.h"
-#include "dtif/core/evaluation.h"
+#include "dtif/eval/evaluation.h"
+#include "dtif/io/config.h"
+#include "dtif/io/dataset.h"
 
 namespace dtif::baselines {
 

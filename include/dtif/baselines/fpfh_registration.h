@@ -10,8 +10,8 @@
 #include <string>
 #include <vector>
 
-#include "dtif/core/matcher.h"
-#include "dtif/core/trunk_extractor.h"
+#include "dtif/core/extraction/trunk_extractor.h"
+#include "dtif/core/matching/matcher.h"
 
 namespace dtif::baselines {
 

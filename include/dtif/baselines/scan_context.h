@@ -12,7 +12,8 @@
 #include <string>
 #include <vector>
 
-#include "dtif/core/trunk_extractor.h"  // Cloud
+#include "dtif/core/cloud.h"
+#include "dtif/core/types.h"
 
 namespace dtif::baselines {
 

@@ -13,8 +13,8 @@
 #include <string>
 #include <vector>
 
-#include "dtif/core/matcher.h"
-#include "dtif/core/pose_estimator.h"
+#include "dtif/core/matching/matcher.h"
+#include "dtif/core/pose/pose_estimator.h"
 
 namespace dtif::baselines {
 

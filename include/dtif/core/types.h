@@ -9,7 +9,7 @@
 namespace dtif {
 
 /// A trunk landmark v_m = (x_m, y_m, z_m, r_m) of paper Sec. 3.B, in the submap frame S.
-struct Trunk {
+struct TrunkLandmark {
   double x = 0.0;  ///< horizontal centre [m]
   double y = 0.0;  ///< horizontal centre [m]
   double z = 0.0;  ///< stem base elevation (ground at the stem) [m]
@@ -19,7 +19,7 @@ struct Trunk {
   /// terrain: such trunks still constrain yaw and x, y, but not the elevation.
   bool base_seen = true;
 };
-using Trunks = std::vector<Trunk>;
+using Trunks = std::vector<TrunkLandmark>;
 
 /// Rigid transform; T_a_b maps coordinates in frame b to frame a (p_a = T_a_b * p_b).
 using Pose = Eigen::Isometry3d;

@@ -9,9 +9,9 @@
 
 #include <string>
 
-#include "dtif/core/descriptor.h"
-#include "dtif/core/loop_detector.h"
-#include "dtif/core/trunk_extractor.h"
+#include "dtif/core/database/loop_detector.h"
+#include "dtif/core/descriptor/descriptor.h"
+#include "dtif/core/extraction/trunk_extractor.h"
 #include "dtif/core/types.h"
 #include "dtif/ros/msgs.h"
 
@@ -27,19 +27,18 @@ geometry_msgs::Transform toTransformMsg(const Pose& T);
 /// Descriptor <-> dtif/TrunkDescriptor. The message carries the identity (robot, submap id,
 /// stamp), T_O_S, trunks, faces as canonical uint16 triples and the histograms. header.frame_id
 /// is the robot's odometry frame, given by the caller.
-dtif_msgs::TrunkDescriptor toMsg(const Descriptor& d, const Pose& T_O_S,
-                                 const std::string& odom_frame);
+dtif::TrunkDescriptor toMsg(const Descriptor& d, const Pose& T_O_S, const std::string& odom_frame);
 
 /// Rebuilds the core descriptor: triangles are re-encoded with makeCanonicalTriangle from the
 /// trunks and face triples and sorted as buildDescriptor sorts them. Fails (with a reason) on
 /// non-finite trunks or histograms, out-of-range or repeated face indices, a bad pose, or
 /// more trunks than uint16 faces can index. T_O_S may be null.
-bool fromMsg(const dtif_msgs::TrunkDescriptor& msg, Descriptor* d, Pose* T_O_S,
+bool fromMsg(const dtif::TrunkDescriptor& msg, Descriptor* d, Pose* T_O_S,
              std::string* error = nullptr);
 
-/// LoopClosure <-> dtif/LoopClosure. header is left to the caller. all_pairs is not carried.
-dtif_msgs::LoopClosure toMsg(const LoopClosure& lc);
-bool fromMsg(const dtif_msgs::LoopClosure& msg, LoopClosure* lc, std::string* error = nullptr);
+/// Loop <-> dtif/LoopClosure. header is left to the caller. all_pairs is not carried.
+dtif::LoopClosure toMsg(const Loop& lc);
+bool fromMsg(const dtif::LoopClosure& msg, Loop* lc, std::string* error = nullptr);
 
 /// PointCloud2 (fields x, y, z as float32 or float64) -> core cloud; non-finite points are
 /// dropped (count in *dropped). Fails when x, y or z is missing or the layout is inconsistent.

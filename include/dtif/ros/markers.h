@@ -9,8 +9,8 @@
 #include <mutex>
 #include <string>
 
-#include "dtif/core/descriptor.h"
-#include "dtif/core/loop_detector.h"
+#include "dtif/core/database/loop_detector.h"
+#include "dtif/core/descriptor/descriptor.h"
 #include "dtif/core/types.h"
 
 namespace dtif {
@@ -26,7 +26,7 @@ visualization_msgs::MarkerArray trunkMarkers(const Descriptor& d, const Pose& T_
 /// aligned by the estimate (T_F_Sq * inverse(T_c_q)), every solved vertex pair (grey) and the
 /// inliers (green). Replaces the previous loop's markers (fixed ids).
 visualization_msgs::MarkerArray loopMarkers(const Descriptor& q, const Descriptor& c,
-                                            const LoopClosure& lc, const Pose& T_F_Sq,
+                                            const Loop& lc, const Pose& T_F_Sq,
                                             const std::string& frame, const ros::Time& stamp);
 
 /// The marker arrays of the latest `capacity` publications (e.g. one per submap), to publish again

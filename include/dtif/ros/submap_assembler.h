@@ -15,7 +15,7 @@
 #include <optional>
 #include <string>
 
-#include "dtif/core/trunk_extractor.h"
+#include "dtif/core/extraction/trunk_extractor.h"
 #include "dtif/core/types.h"
 #include "dtif/core/voxel_grid.h"
 

@@ -26,9 +26,9 @@
 #include <set>
 #include <thread>
 
-#include "dtif/core/config.h"
-#include "dtif/core/dataset.h"
-#include "dtif/core/evaluation.h"
+#include "dtif/eval/evaluation.h"
+#include "dtif/io/config.h"
+#include "dtif/io/dataset.h"
 #include "dtif/ros/conversions.h"
 #include "dtif/ros/msgs.h"
 #include "dtif_test/test_config.h"
@@ -92,20 +92,20 @@ TEST(DemoBagRostest, LoopsMatchEvalAndGroundTruthDespiteBadInput) {
   }
   ASSERT_GE(offline_loops.size(), 3u) << "the tiny scene has loops within and between robots";
 
-  Inbox<dtif_msgs::LoopClosure> loops;
-  Inbox<dtif_msgs::TrunkDescriptor> descriptors;
+  Inbox<dtif::LoopClosure> loops;
+  Inbox<dtif::TrunkDescriptor> descriptors;
   Inbox<sensor_msgs::PointCloud2> alpha_clouds;
   ros::Subscriber loop_sub =
-      nh.subscribe("/loop_closures", 50, &Inbox<dtif_msgs::LoopClosure>::cb, &loops);
+      nh.subscribe("/loop_closures", 50, &Inbox<dtif::LoopClosure>::cb, &loops);
   ros::Subscriber da =
-      nh.subscribe("/alpha/descriptor", 50, &Inbox<dtif_msgs::TrunkDescriptor>::cb, &descriptors);
+      nh.subscribe("/alpha/descriptor", 50, &Inbox<dtif::TrunkDescriptor>::cb, &descriptors);
   ros::Subscriber db =
-      nh.subscribe("/bravo/descriptor", 50, &Inbox<dtif_msgs::TrunkDescriptor>::cb, &descriptors);
+      nh.subscribe("/bravo/descriptor", 50, &Inbox<dtif::TrunkDescriptor>::cb, &descriptors);
   ros::Subscriber ca = nh.subscribe("/alpha/cloud_registered", 5,
                                     &Inbox<sensor_msgs::PointCloud2>::cb, &alpha_clouds);
   ros::Publisher bad_cloud = nh.advertise<sensor_msgs::PointCloud2>("/alpha/cloud_registered", 5);
   ros::Publisher bad_odom = nh.advertise<nav_msgs::Odometry>("/alpha/Odometry", 5);
-  ros::Publisher bad_desc = nh.advertise<dtif_msgs::TrunkDescriptor>("/bravo/descriptor", 5);
+  ros::Publisher bad_desc = nh.advertise<dtif::TrunkDescriptor>("/bravo/descriptor", 5);
   ASSERT_TRUE(waitFor(
       [&] {
         return bad_cloud.getNumSubscribers() > 1 && bad_odom.getNumSubscribers() > 0 &&
@@ -143,7 +143,7 @@ TEST(DemoBagRostest, LoopsMatchEvalAndGroundTruthDespiteBadInput) {
   bad_odom.publish(odom);
   {
     // A descriptor of two trunks that claims to be valid, and one with a NaN trunk.
-    dtif_msgs::TrunkDescriptor two;
+    dtif::TrunkDescriptor two;
     two.header.stamp.fromSec(t);
     two.header.frame_id = "bravo/odom";
     two.robot = "bravo";
@@ -164,14 +164,14 @@ TEST(DemoBagRostest, LoopsMatchEvalAndGroundTruthDespiteBadInput) {
 
   // Every valid descriptor is queried and inserted; then the run is complete.
   ros::ServiceClient size_srv =
-      nh.serviceClient<dtif_msgs::GetDatabaseSize>("/loop_closure/database_size");
+      nh.serviceClient<dtif::GetDatabaseSize>("/loop_closure/database_size");
   auto validDescriptors = [&] {
     size_t n = 0;
     for (const auto& d : descriptors.all())
       n += d->valid && d->trunks.size() >= 3 && d->submap_id < 900;
     return n;
   };
-  dtif_msgs::GetDatabaseSize size;
+  dtif::GetDatabaseSize size;
   ASSERT_TRUE(waitFor(
       [&] {
         return descriptors.size() >= ds.submaps.size() + 2 && size_srv.call(size) &&
@@ -243,7 +243,7 @@ TEST(DemoBagRostest, LoopsMatchEvalAndGroundTruthDespiteBadInput) {
 
   // Database services: save, a corrupt file refused, load back.
   const uint64_t n = size.response.size;
-  dtif_msgs::SaveDatabase save;
+  dtif::SaveDatabase save;
   save.request.path = (dir / "db.bin").string();
   ASSERT_TRUE(ros::service::call("/loop_closure/save_database", save));
   EXPECT_TRUE(save.response.success) << save.response.message;
@@ -251,7 +251,7 @@ TEST(DemoBagRostest, LoopsMatchEvalAndGroundTruthDespiteBadInput) {
     std::ofstream corrupt(dir / "corrupt.bin");
     corrupt << "DTIF but not a database";
   }
-  dtif_msgs::LoadDatabase load;
+  dtif::LoadDatabase load;
   load.request.path = (dir / "corrupt.bin").string();
   ASSERT_TRUE(ros::service::call("/loop_closure/load_database", load));
   EXPECT_FALSE(load.response.success);

@@ -18,7 +18,7 @@
 #include <mutex>
 #include <random>
 
-#include "dtif/core/descriptor.h"
+#include "dtif/core/descriptor/descriptor.h"
 #include "dtif/ros/conversions.h"
 #include "dtif/ros/msgs.h"
 #include "rostest_utils.h"
@@ -44,10 +44,10 @@ Trunks forestW() {
   std::uniform_real_distribution<double> xy(-30.0, 30.0), r(0.1, 0.35);
   Trunks t;
   for (int tries = 0; tries < 20000 && t.size() < 110; ++tries) {
-    Trunk c{xy(rng), xy(rng), 0.0, r(rng)};
+    TrunkLandmark c{xy(rng), xy(rng), 0.0, r(rng)};
     c.z = 0.05 * c.x - 0.02 * c.y;
     bool ok = true;
-    for (const Trunk& o : t) ok = ok && std::hypot(o.x - c.x, o.y - c.y) > 3.0;
+    for (const TrunkLandmark& o : t) ok = ok && std::hypot(o.x - c.x, o.y - c.y) > 3.0;
     if (ok) t.push_back(c);
   }
   return t;
@@ -57,15 +57,15 @@ Trunks forestW() {
 Trunks submapTrunks(const Trunks& w, const Pose& T_W_S, double radius) {
   const Pose T_S_W = T_W_S.inverse();
   Trunks out;
-  for (const Trunk& t : w) {
+  for (const TrunkLandmark& t : w) {
     const Eigen::Vector3d p = T_S_W * Eigen::Vector3d(t.x, t.y, t.z);
-    if (std::hypot(p.x(), p.y()) <= radius) out.push_back(Trunk{p.x(), p.y(), p.z(), t.r});
+    if (std::hypot(p.x(), p.y()) <= radius) out.push_back(TrunkLandmark{p.x(), p.y(), p.z(), t.r});
   }
   return out;
 }
 
-dtif_msgs::TrunkDescriptor descriptorMsg(const std::string& robot, int64_t id, double stamp,
-                                         const Trunks& trunks, const Pose& T_O_S) {
+dtif::TrunkDescriptor descriptorMsg(const std::string& robot, int64_t id, double stamp,
+                                    const Trunks& trunks, const Pose& T_O_S) {
   Descriptor d = buildDescriptor(trunks, DescriptorParams());
   d.robot = robot;
   d.submap_id = id;
@@ -77,9 +77,9 @@ class LoopClosureRostest : public ::testing::Test {
  protected:
   void SetUp() override {
     spinner_.start();
-    alpha_pub_ = nh_.advertise<dtif_msgs::TrunkDescriptor>("/alpha/descriptor", 10);
-    bravo_pub_ = nh_.advertise<dtif_msgs::TrunkDescriptor>("/bravo/descriptor", 10);
-    loop_sub_ = nh_.subscribe("/loop_closures", 10, &Inbox<dtif_msgs::LoopClosure>::cb, &loops_);
+    alpha_pub_ = nh_.advertise<dtif::TrunkDescriptor>("/alpha/descriptor", 10);
+    bravo_pub_ = nh_.advertise<dtif::TrunkDescriptor>("/bravo/descriptor", 10);
+    loop_sub_ = nh_.subscribe("/loop_closures", 10, &Inbox<dtif::LoopClosure>::cb, &loops_);
     ASSERT_TRUE(waitFor(
         [&] {
           return alpha_pub_.getNumSubscribers() > 0 && bravo_pub_.getNumSubscribers() > 0 &&
@@ -93,7 +93,7 @@ class LoopClosureRostest : public ::testing::Test {
   ros::AsyncSpinner spinner_{2};
   ros::Publisher alpha_pub_, bravo_pub_;
   ros::Subscriber loop_sub_;
-  Inbox<dtif_msgs::LoopClosure> loops_;
+  Inbox<dtif::LoopClosure> loops_;
 };
 
 TEST_F(LoopClosureRostest, InterRobotLoopTfServicesAndBadInput) {
@@ -109,21 +109,21 @@ TEST_F(LoopClosureRostest, InterRobotLoopTfServicesAndBadInput) {
 
   // Bad input first: 2 trunks, a NaN trunk, a face past the end, a robot on the wrong topic.
   {
-    dtif_msgs::TrunkDescriptor two = descriptorMsg("bravo", 90, 150.0, {tb[0], tb[1]}, T_Ob_Sb);
+    dtif::TrunkDescriptor two = descriptorMsg("bravo", 90, 150.0, {tb[0], tb[1]}, T_Ob_Sb);
     two.valid = true;  // lie: the nodelet must still refuse it
     bravo_pub_.publish(two);
-    dtif_msgs::TrunkDescriptor nan = descriptorMsg("alpha", 91, 151.0, ta, T_Oa_Sa);
+    dtif::TrunkDescriptor nan = descriptorMsg("alpha", 91, 151.0, ta, T_Oa_Sa);
     nan.trunks[0].x = std::numeric_limits<float>::quiet_NaN();
     alpha_pub_.publish(nan);
-    dtif_msgs::TrunkDescriptor face = descriptorMsg("alpha", 92, 152.0, ta, T_Oa_Sa);
+    dtif::TrunkDescriptor face = descriptorMsg("alpha", 92, 152.0, ta, T_Oa_Sa);
     face.faces[0] = 60000;
     alpha_pub_.publish(face);
     bravo_pub_.publish(descriptorMsg("alpha", 93, 153.0, ta, T_Oa_Sa));
   }
   ros::ServiceClient size_srv =
-      nh_.serviceClient<dtif_msgs::GetDatabaseSize>("/loop_closure/database_size");
+      nh_.serviceClient<dtif::GetDatabaseSize>("/loop_closure/database_size");
   ASSERT_TRUE(size_srv.waitForExistence(ros::Duration(10.0)));
-  dtif_msgs::GetDatabaseSize size;
+  dtif::GetDatabaseSize size;
   // The worker drains the queue in order; the size service answers between descriptors.
   ASSERT_TRUE(size_srv.call(size));
 
@@ -170,7 +170,7 @@ TEST_F(LoopClosureRostest, InterRobotLoopTfServicesAndBadInput) {
   EXPECT_EQ(size.response.per_robot[0], 1u);
   const std::string dir = "/tmp/dtif_rostest_" + std::to_string(getpid());
   ASSERT_EQ(system(("mkdir -p " + dir).c_str()), 0);
-  dtif_msgs::SaveDatabase save;
+  dtif::SaveDatabase save;
   save.request.path = dir + "/db.bin";
   ASSERT_TRUE(ros::service::call("/loop_closure/save_database", save));
   EXPECT_TRUE(save.response.success) << save.response.message;
@@ -179,7 +179,7 @@ TEST_F(LoopClosureRostest, InterRobotLoopTfServicesAndBadInput) {
     std::ofstream corrupt(dir + "/corrupt.bin");
     corrupt << "this is not a dtif database\n";
   }
-  dtif_msgs::LoadDatabase load;
+  dtif::LoadDatabase load;
   load.request.path = dir + "/corrupt.bin";
   ASSERT_TRUE(ros::service::call("/loop_closure/load_database", load));
   EXPECT_FALSE(load.response.success);
@@ -206,9 +206,9 @@ TEST(TrunkExtractionRostest, AssemblesSubmapsAndSurvivesBadClouds) {
   ros::Publisher odom_pub = nh.advertise<nav_msgs::Odometry>("/charlie/Odometry", 100);
   ros::Publisher cloud_pub =
       nh.advertise<sensor_msgs::PointCloud2>("/charlie/cloud_registered", 20);
-  Inbox<dtif_msgs::TrunkDescriptor> descriptors;
+  Inbox<dtif::TrunkDescriptor> descriptors;
   ros::Subscriber sub =
-      nh.subscribe("/charlie/descriptor", 10, &Inbox<dtif_msgs::TrunkDescriptor>::cb, &descriptors);
+      nh.subscribe("/charlie/descriptor", 10, &Inbox<dtif::TrunkDescriptor>::cb, &descriptors);
   ASSERT_TRUE(waitFor(
       [&] {
         return odom_pub.getNumSubscribers() > 0 && cloud_pub.getNumSubscribers() > 0 &&

@@ -1,0 +1,180 @@
+// Occupied-cell footprint of a submap and the overlap of two aligned footprints.
+#include "dtif/core/extraction/footprint.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <unordered_map>
+
+namespace dtif {
+
+namespace {
+
+// DATASET.md's trunk-height band: the local ground of each 2 m tile is the 5th percentile of z
+// in the 6 m window around it; points 0.3-3.0 m above it count.
+constexpr double kTileM = 2.0;       // local-ground tile
+constexpr int kWindowTiles = 1;      // 6 m window = the tile and one tile on each side
+constexpr double kGroundPct = 0.05;  // 5th percentile
+constexpr double kMinAboveM = 0.3;   // counted band above the local ground
+constexpr double kMaxAboveM = 3.0;
+
+int64_t packCell(int64_t ix, int64_t iy) { return (ix << 32) ^ (iy & 0xffffffffLL); }
+
+}  // namespace
+
+std::vector<std::pair<int64_t, int64_t>> trunkHeightCells(const Cloud& cloud_S, const Pose& T_F_S,
+                                                          double cell_m,
+                                                          size_t max_ground_samples) {
+  std::vector<std::pair<int64_t, int64_t>> out;
+  auto tileOf = [](float v) { return static_cast<int64_t>(std::floor(v / kTileM)); };
+  int64_t tx0 = std::numeric_limits<int64_t>::max(), ty0 = tx0;
+  int64_t tx1 = std::numeric_limits<int64_t>::min(), ty1 = tx1;
+  size_t n = 0;
+  for (const auto& p : cloud_S) {
+    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) continue;
+    ++n;
+    tx0 = std::min(tx0, tileOf(p.x)), tx1 = std::max(tx1, tileOf(p.x));
+    ty0 = std::min(ty0, tileOf(p.y)), ty1 = std::max(ty1, tileOf(p.y));
+  }
+  if (n == 0 || !(cell_m > 0.0)) return out;
+  // Tiles by a dense index over the cloud's extent; a cloud spread over kilometres (stray
+  // points) falls back to a hash map, so the result never depends on the extent.
+  const double tw = static_cast<double>(tx1 - tx0) + 1.0, th = static_cast<double>(ty1 - ty0) + 1.0;
+  const bool dense = tw * th <= 4e6;
+  std::unordered_map<int64_t, int> sparse;
+  auto tileIndex = [&](int64_t tx, int64_t ty, bool insert) -> int {
+    if (dense) {
+      if (tx < tx0 || tx > tx1 || ty < ty0 || ty > ty1) return -1;
+      return static_cast<int>((ty - ty0) * static_cast<int64_t>(tw) + (tx - tx0));
+    }
+    const auto it = sparse.find(packCell(tx, ty));
+    if (it != sparse.end()) return it->second;
+    if (!insert) return -1;
+    const int id = static_cast<int>(sparse.size());
+    sparse.emplace(packCell(tx, ty), id);
+    return id;
+  };
+  // Local ground per 2 m tile (in S): 5th percentile of z inside the 6 m window around it.
+  std::vector<std::vector<float>> tile_z(dense ? static_cast<size_t>(tw * th) : 0);
+  const size_t stride = max_ground_samples > 0 ? std::max<size_t>(1, n / max_ground_samples) : 1;
+  std::vector<std::pair<int64_t, int64_t>> tiles;  // coordinates of each index (sparse case)
+  size_t k = 0;
+  for (const auto& p : cloud_S) {
+    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) continue;
+    if (k++ % stride != 0) continue;
+    const int id = tileIndex(tileOf(p.x), tileOf(p.y), true);
+    if (static_cast<size_t>(id) >= tile_z.size()) {
+      tile_z.resize(id + 1);
+      tiles.emplace_back(tileOf(p.x), tileOf(p.y));
+    }
+    tile_z[id].push_back(p.z);
+  }
+  std::vector<float> ground(tile_z.size(), std::numeric_limits<float>::quiet_NaN()), window;
+  for (size_t id = 0; id < tile_z.size(); ++id) {
+    const int64_t tx =
+        dense ? tx0 + static_cast<int64_t>(id % static_cast<size_t>(tw)) : tiles[id].first;
+    const int64_t ty =
+        dense ? ty0 + static_cast<int64_t>(id / static_cast<size_t>(tw)) : tiles[id].second;
+    window.clear();
+    for (int64_t dx = -kWindowTiles; dx <= kWindowTiles; ++dx) {
+      for (int64_t dy = -kWindowTiles; dy <= kWindowTiles; ++dy) {
+        const int o = tileIndex(tx + dx, ty + dy, false);
+        if (o >= 0) window.insert(window.end(), tile_z[o].begin(), tile_z[o].end());
+      }
+    }
+    if (window.empty()) continue;
+    const size_t q = static_cast<size_t>(kGroundPct * static_cast<double>(window.size() - 1));
+    std::nth_element(window.begin(), window.begin() + q, window.end());
+    ground[id] = window[q];
+  }
+  const Eigen::Isometry3f T = T_F_S.cast<float>();
+  for (const auto& p : cloud_S) {
+    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) continue;
+    const int id = tileIndex(tileOf(p.x), tileOf(p.y), false);
+    // No samples in the window (only when subsampling): no ground to measure from.
+    if (id < 0 || !std::isfinite(ground[id])) continue;
+    const float h = p.z - ground[id];
+    if (h < kMinAboveM || h > kMaxAboveM) continue;
+    const Eigen::Vector3f w = T * Eigen::Vector3f(p.x, p.y, p.z);
+    const std::pair<int64_t, int64_t> cell(static_cast<int64_t>(std::floor(w.x() / cell_m)),
+                                           static_cast<int64_t>(std::floor(w.y() / cell_m)));
+    if (out.empty() || out.back() != cell) out.push_back(cell);  // neighbours share cells
+  }
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
+size_t Footprint::count() const {
+  size_t n = 0;
+  for (uint8_t b : bits) n += static_cast<size_t>(__builtin_popcount(b));
+  return n;
+}
+
+bool Footprint::wellFormed() const {
+  return cell_m > 0.0 && std::isfinite(cell_m) && width > 0 && height > 0 && width <= 65535 &&
+         height <= 65535 && bits.size() == (static_cast<size_t>(width) * height + 7) / 8;
+}
+
+bool Footprint::occupied(int64_t ix, int64_t iy) const {
+  const int64_t cx = ix - x0, cy = iy - y0;
+  if (cx < 0 || cy < 0 || cx >= width || cy >= height) return false;
+  const int64_t k = cy * width + cx;
+  return (bits[static_cast<size_t>(k / 8)] >> (k % 8)) & 1u;
+}
+
+Footprint makeFootprint(const std::vector<std::pair<int64_t, int64_t>>& cells, double cell_m) {
+  Footprint f;
+  if (cells.empty() || !(cell_m > 0.0) || !std::isfinite(cell_m)) return f;
+  int64_t minx = std::numeric_limits<int64_t>::max(), miny = minx;
+  int64_t maxx = std::numeric_limits<int64_t>::min(), maxy = maxx;
+  for (const auto& [x, y] : cells) {
+    minx = std::min(minx, x), maxx = std::max(maxx, x);
+    miny = std::min(miny, y), maxy = std::max(maxy, y);
+  }
+  // Coarsen by powers of two until the bitmap fits (floor division keeps cells nested).
+  int shift = 0;
+  auto coarse = [&](int64_t v) { return v >= 0 ? v >> shift : -((-v - 1) >> shift) - 1; };
+  while (shift < 40 && (coarse(maxx) - coarse(minx) + 1 > kMaxFootprintSide ||
+                        coarse(maxy) - coarse(miny) + 1 > kMaxFootprintSide)) {
+    ++shift;
+  }
+  const int64_t x0 = coarse(minx), y0 = coarse(miny);
+  if (x0 < std::numeric_limits<int32_t>::min() || x0 > std::numeric_limits<int32_t>::max() ||
+      y0 < std::numeric_limits<int32_t>::min() || y0 > std::numeric_limits<int32_t>::max()) {
+    return f;  // beyond any survey's coordinates at this cell size
+  }
+  f.cell_m = std::ldexp(cell_m, shift);
+  f.x0 = static_cast<int32_t>(x0);
+  f.y0 = static_cast<int32_t>(y0);
+  f.width = static_cast<int32_t>(coarse(maxx) - x0 + 1);
+  f.height = static_cast<int32_t>(coarse(maxy) - y0 + 1);
+  f.bits.assign((static_cast<size_t>(f.width) * f.height + 7) / 8, 0);
+  for (const auto& [x, y] : cells) {
+    const int64_t k = (coarse(y) - y0) * f.width + (coarse(x) - x0);
+    f.bits[static_cast<size_t>(k / 8)] |= static_cast<uint8_t>(1u << (k % 8));
+  }
+  return f;
+}
+
+double footprintOverlap(const Footprint& q, const Footprint& c, const Pose& T_c_q) {
+  const size_t nq = q.count(), nc = c.count();
+  if (q.cell_m <= 0.0 || c.cell_m <= 0.0 || nq == 0 || nc == 0) return -1.0;
+  size_t shared = 0;
+  for (int32_t cy = 0; cy < q.height; ++cy) {
+    for (int32_t cx = 0; cx < q.width; ++cx) {
+      const int64_t k = static_cast<int64_t>(cy) * q.width + cx;
+      if (!((q.bits[static_cast<size_t>(k / 8)] >> (k % 8)) & 1u)) continue;
+      const Eigen::Vector3d p_q((q.x0 + cx + 0.5) * q.cell_m, (q.y0 + cy + 0.5) * q.cell_m, 0.0);
+      const Eigen::Vector3d p_c = T_c_q * p_q;
+      const auto ix = static_cast<int64_t>(std::floor(p_c.x() / c.cell_m));
+      const auto iy = static_cast<int64_t>(std::floor(p_c.y() / c.cell_m));
+      shared += c.occupied(ix, iy);
+    }
+  }
+  // Footprints coarsened to different cell sizes make this approximate; the usual case is one
+  // cell size on both sides, where it is the protocol's count.
+  return static_cast<double>(shared) / static_cast<double>(std::min(nq, nc));
+}
+
+}  // namespace dtif

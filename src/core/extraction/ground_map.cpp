@@ -1,0 +1,250 @@
+#include "dtif/core/extraction/ground_map.h"
+
+#include <zlib.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+#include "core/byte_io.h"
+
+namespace dtif {
+
+namespace {
+
+constexpr int8_t kEmptyCode = -128;
+constexpr int8_t kEscapeCode = -127;
+constexpr size_t kHeaderBytes = 4 + 4 + 8 + 4 + 4 + 2 + 2;
+/// Histogram of elevation differences: 5 cm bins over +-kMaxDz.
+constexpr double kBin = 0.05, kMaxDz = 30.0;
+
+/// Value the encoder predicts for cell k: the left neighbour, else the one above, else `last`.
+int predict(const GroundMap& m, size_t k, int last) {
+  const size_t col = k % static_cast<size_t>(m.width);
+  if (col > 0 && m.z[k - 1] != GroundMap::kUnknown) return m.z[k - 1];
+  if (k >= static_cast<size_t>(m.width) && m.z[k - m.width] != GroundMap::kUnknown)
+    return m.z[k - m.width];
+  return last;
+}
+
+}  // namespace
+
+bool GroundMap::wellFormed() const {
+  return cell_m > 0.0 && std::isfinite(cell_m) && z_step_m > 0.0 && std::isfinite(z_step_m) &&
+         std::isfinite(z0_m) && width > 0 && height > 0 && width <= 65535 && height <= 65535 &&
+         z.size() == static_cast<size_t>(width) * static_cast<size_t>(height);
+}
+
+size_t GroundMap::count() const {
+  return static_cast<size_t>(
+      std::count_if(z.begin(), z.end(), [](int16_t v) { return v != kUnknown; }));
+}
+
+bool GroundMap::at(double x, double y, double* z_m) const {
+  if (empty()) return false;
+  const double fx = std::floor(x / cell_m) - x0, fy = std::floor(y / cell_m) - y0;
+  if (!(fx >= 0.0 && fy >= 0.0 && fx < width && fy < height)) return false;
+  const int16_t v = z[static_cast<size_t>(fy) * width + static_cast<size_t>(fx)];
+  if (v == kUnknown) return false;
+  *z_m = z0_m + v * z_step_m;
+  return true;
+}
+
+GroundMap makeGroundMap(const float* x, const float* y, const float* z, size_t n,
+                        const Eigen::Vector3d& origin, const Eigen::Vector2d& lo,
+                        const Eigen::Vector2d& hi, double cell_m, double z_step_m,
+                        uint32_t min_points) {
+  GroundMap m;
+  if (!(cell_m > 0.0) || !(z_step_m > 0.0)) return m;
+  double minx = std::numeric_limits<double>::infinity(), miny = minx, minz = minx;
+  double maxx = -minx, maxy = -minx, maxz = -minx;
+  const auto inside = [&](size_t i) {
+    if (!std::isfinite(x[i]) || !std::isfinite(y[i]) || !std::isfinite(z[i])) return false;
+    const double px = x[i] + origin.x(), py = y[i] + origin.y();
+    return px >= lo.x() && py >= lo.y() && px <= hi.x() && py <= hi.y();
+  };
+  for (size_t i = 0; i < n; ++i) {
+    if (!inside(i)) continue;
+    const double px = x[i] + origin.x(), py = y[i] + origin.y(), pz = z[i] + origin.z();
+    minx = std::min(minx, px), maxx = std::max(maxx, px);
+    miny = std::min(miny, py), maxy = std::max(maxy, py);
+    minz = std::min(minz, pz), maxz = std::max(maxz, pz);
+  }
+  if (!(minx <= maxx)) return m;
+  // A tall extent in z would overflow the 16-bit values: coarser steps keep it in range.
+  while ((maxz - minz) / z_step_m > 60000.0) z_step_m *= 2.0;
+  for (;;) {
+    m.x0 = static_cast<int32_t>(std::floor(minx / cell_m));
+    m.y0 = static_cast<int32_t>(std::floor(miny / cell_m));
+    m.width = static_cast<int32_t>(std::floor(maxx / cell_m)) - m.x0 + 1;
+    m.height = static_cast<int32_t>(std::floor(maxy / cell_m)) - m.y0 + 1;
+    if (m.width <= kMaxGroundMapSide && m.height <= kMaxGroundMapSide) break;
+    cell_m *= 2.0;
+  }
+  m.cell_m = cell_m;
+  m.z_step_m = z_step_m;
+  m.z0_m = std::floor(minz);
+  std::vector<float> low(static_cast<size_t>(m.width) * m.height,
+                         std::numeric_limits<float>::infinity());
+  std::vector<uint32_t> hits(low.size(), 0);
+  for (size_t i = 0; i < n; ++i) {
+    if (!inside(i)) continue;
+    const int64_t ix = static_cast<int64_t>(std::floor((x[i] + origin.x()) / cell_m)) - m.x0;
+    const int64_t iy = static_cast<int64_t>(std::floor((y[i] + origin.y()) / cell_m)) - m.y0;
+    if (ix < 0 || iy < 0 || ix >= m.width || iy >= m.height) continue;  // rounding at the edge
+    const size_t k = static_cast<size_t>(iy) * m.width + static_cast<size_t>(ix);
+    low[k] = std::min(low[k], static_cast<float>(z[i] + origin.z() - m.z0_m));
+    ++hits[k];
+  }
+  m.z.resize(low.size());
+  for (size_t k = 0; k < low.size(); ++k) {
+    m.z[k] = std::isfinite(low[k]) && hits[k] >= min_points
+                 ? static_cast<int16_t>(std::lround(low[k] / z_step_m))
+                 : GroundMap::kUnknown;
+  }
+  return m;
+}
+
+std::vector<uint8_t> encodeGroundMap(const GroundMap& m) {
+  if (m.empty()) return {};
+  if (!m.wellFormed()) throw std::runtime_error("ground map is not well formed");
+  detail::ByteWriter raw;
+  raw.bytes.reserve(m.z.size());
+  int last = 0;
+  for (size_t k = 0; k < m.z.size(); ++k) {
+    const int v = m.z[k];
+    if (v == GroundMap::kUnknown) {
+      raw.put<int8_t>(kEmptyCode);
+      continue;
+    }
+    const int d = v - predict(m, k, last);
+    last = v;
+    if (d > kEscapeCode && d <= 127) {
+      raw.put<int8_t>(static_cast<int8_t>(d));
+    } else {
+      raw.put<int8_t>(kEscapeCode);
+      raw.put<int16_t>(static_cast<int16_t>(v));
+    }
+  }
+  detail::ByteWriter out;
+  out.put<float>(static_cast<float>(m.cell_m));
+  out.put<float>(static_cast<float>(m.z_step_m));
+  out.put<double>(m.z0_m);
+  out.put<int32_t>(m.x0);
+  out.put<int32_t>(m.y0);
+  out.put<uint16_t>(static_cast<uint16_t>(m.width));
+  out.put<uint16_t>(static_cast<uint16_t>(m.height));
+  const size_t header = out.bytes.size();
+  uLongf packed = compressBound(raw.bytes.size());
+  out.bytes.resize(header + packed);
+  if (compress2(out.bytes.data() + header, &packed, raw.bytes.data(), raw.bytes.size(),
+                Z_BEST_COMPRESSION) != Z_OK) {
+    throw std::runtime_error("ground map compression failed");
+  }
+  out.bytes.resize(header + packed);
+  return out.bytes;
+}
+
+GroundMap decodeGroundMap(const uint8_t* data, size_t size) {
+  GroundMap m;
+  if (size == 0) return m;
+  if (size <= kHeaderBytes) throw std::runtime_error("ground map shorter than its header");
+  detail::ByteReader head(data, kHeaderBytes, "ground map header");
+  m.cell_m = head.get<float>();
+  m.z_step_m = head.get<float>();
+  m.z0_m = head.get<double>();
+  m.x0 = head.get<int32_t>();
+  m.y0 = head.get<int32_t>();
+  m.width = head.get<uint16_t>();
+  m.height = head.get<uint16_t>();
+  const size_t cells = static_cast<size_t>(m.width) * m.height;
+  if (!(m.cell_m > 0.0) || !std::isfinite(m.cell_m) || !(m.z_step_m > 0.0) ||
+      !std::isfinite(m.z_step_m) || !std::isfinite(m.z0_m) || cells == 0) {
+    throw std::runtime_error("ground map header is invalid");
+  }
+  // Every cell takes one byte, an escaped one three.
+  std::vector<uint8_t> raw(3 * cells + 1);
+  uLongf unpacked = raw.size();
+  if (uncompress(raw.data(), &unpacked, data + kHeaderBytes, size - kHeaderBytes) != Z_OK) {
+    throw std::runtime_error("ground map stream is corrupt");
+  }
+  m.z.resize(cells);
+  detail::ByteReader r(raw.data(), unpacked, "ground map stream");
+  int last = 0;
+  for (size_t k = 0; k < cells; ++k) {
+    const int8_t code = r.get<int8_t>();
+    if (code == kEmptyCode) {
+      m.z[k] = GroundMap::kUnknown;
+      continue;
+    }
+    int v;
+    if (code == kEscapeCode) {
+      v = r.get<int16_t>();
+    } else {
+      v = predict(m, k, last) + code;
+    }
+    if (v == GroundMap::kUnknown || v > std::numeric_limits<int16_t>::max() ||
+        v < std::numeric_limits<int16_t>::min()) {
+      throw std::runtime_error("ground map value out of range");
+    }
+    m.z[k] = static_cast<int16_t>(v);
+    last = v;
+  }
+  if (r.remaining() != 0) throw std::runtime_error("ground map stream has trailing bytes");
+  return m;
+}
+
+GroundElevation groundElevation(const GroundMap& q, const GroundMap& c, const Pose& T_c_q,
+                                double window_m) {
+  GroundElevation out;
+  if (q.empty() || c.empty()) return out;
+  const int nb = static_cast<int>(std::lround(kMaxDz / kBin));
+  std::vector<double> hist(2 * nb + 1, 0.0);
+  std::vector<double> dz;
+  for (int32_t iy = 0; iy < q.height; ++iy) {
+    for (int32_t ix = 0; ix < q.width; ++ix) {
+      const int16_t v = q.z[static_cast<size_t>(iy) * q.width + ix];
+      if (v == GroundMap::kUnknown) continue;
+      const Eigen::Vector3d p =
+          T_c_q * Eigen::Vector3d((q.x0 + ix + 0.5) * q.cell_m, (q.y0 + iy + 0.5) * q.cell_m,
+                                  q.z0_m + v * q.z_step_m);
+      double zc;
+      if (!c.at(p.x(), p.y(), &zc)) continue;
+      const double d = zc - p.z();
+      ++out.compared;
+      const long b = std::lround(d / kBin);
+      if (std::abs(b) > nb) continue;
+      hist[static_cast<size_t>(b + nb)] += 1.0;
+      dz.push_back(d);
+    }
+  }
+  if (dz.empty()) return out;
+  // Smoothed [1 2 1]: the true difference straddles bins.
+  std::vector<double> s(hist.size(), 0.0);
+  for (size_t i = 1; i + 1 < hist.size(); ++i) s[i] = hist[i - 1] + 2.0 * hist[i] + hist[i + 1];
+  const size_t peak = static_cast<size_t>(std::max_element(s.begin(), s.end()) - s.begin());
+  const double mode = (static_cast<double>(peak) - nb) * kBin;
+  double sum = 0.0, sum2 = 0.0;
+  for (double d : dz) {
+    if (std::abs(d - mode) > window_m) continue;
+    ++out.support;
+    sum += d;
+    sum2 += d * d;
+  }
+  if (out.support == 0) return out;
+  out.dz_m = sum / out.support;
+  out.spread_m = std::sqrt(std::max(0.0, sum2 / out.support - out.dz_m * out.dz_m));
+  double second = 0.0;
+  const double exclude = 2.0 * window_m + kBin;
+  for (size_t i = 0; i < s.size(); ++i) {
+    if (std::abs((static_cast<double>(i) - nb) * kBin - mode) > exclude)
+      second = std::max(second, s[i]);
+  }
+  out.ambiguity = s[peak] > 0.0 ? second / s[peak] : 1.0;
+  out.ok = true;
+  return out;
+}
+
+}  // namespace dtif

@@ -1,0 +1,223 @@
+// Hierarchical vertex correspondence construction, paper Algorithm 1.
+#include "dtif/core/matching/matcher.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <sstream>
+
+namespace dtif {
+namespace {
+
+/// Cons_l / Cons_r of Eq. (3.4): relative tolerance, plus an absolute one so that short edges and
+/// thin stems are not held to a tolerance below the measurement noise.
+inline bool consistent(float a, float b, double rel, double abs_tol) {
+  const double diff = std::fabs(static_cast<double>(a) - b);
+  return diff <= abs_tol || diff <= rel * std::max(a, b);
+}
+
+}  // namespace
+
+/// Computed from the trunks on both sides, so nothing extra crosses the radio link.
+std::vector<MatchTriangle> matchTriangles(const Descriptor& d, int k) {
+  std::vector<MatchTriangle> out;
+  if (k <= 0 || d.trunks.size() < 3) {
+    for (const Triangle& t : d.triangles) out.push_back({t, true});
+    return out;
+  }
+  const int n = static_cast<int>(d.trunks.size());
+  const int kk = std::min(k, n - 1);
+  std::vector<std::array<int, 3>> keys;
+  keys.reserve(d.triangles.size() + static_cast<size_t>(n) * kk * (kk - 1) / 2);
+  auto key = [](int a, int b, int c) {
+    std::array<int, 3> t{a, b, c};
+    std::sort(t.begin(), t.end());
+    return t;
+  };
+  for (const Triangle& t : d.triangles) keys.push_back(key(t.v[0], t.v[1], t.v[2]));
+  std::vector<std::pair<double, int>> nn;
+  for (int i = 0; i < n; ++i) {
+    nn.clear();
+    for (int j = 0; j < n; ++j) {
+      if (j == i) continue;
+      nn.emplace_back(std::hypot(d.trunks[i].x - d.trunks[j].x, d.trunks[i].y - d.trunks[j].y), j);
+    }
+    std::partial_sort(nn.begin(), nn.begin() + kk, nn.end());
+    for (int a = 0; a < kk; ++a)
+      for (int b = a + 1; b < kk; ++b) keys.push_back(key(i, nn[a].second, nn[b].second));
+  }
+  const size_t n_delaunay = d.triangles.size();
+  std::vector<std::array<int, 3>> faces(keys.begin(), keys.begin() + n_delaunay);
+  std::sort(faces.begin(), faces.end());
+  std::sort(keys.begin(), keys.end());
+  keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+  out.reserve(keys.size());
+  for (const auto& t : keys) {
+    const Triangle tri = makeCanonicalTriangle(d.trunks, t[0], t[1], t[2]);
+    if (tri.len[2] <= 1e-3) continue;  // collinear or duplicate trunks
+    // Thin slivers: their shortest edge tells nothing reliable about the correspondence.
+    const double s = 0.5 * (tri.len[0] + tri.len[1] + tri.len[2]);
+    const double area2 = s * (s - tri.len[0]) * (s - tri.len[1]) * (s - tri.len[2]);
+    const bool face = std::binary_search(faces.begin(), faces.end(), t);
+    if (!face && (area2 <= 0.0 || std::sqrt(area2) < 0.05 * tri.len[0] * tri.len[0])) continue;
+    out.push_back({tri, face});
+  }
+  std::stable_sort(out.begin(), out.end(), [](const MatchTriangle& a, const MatchTriangle& b) {
+    return a.t.len[0] < b.t.len[0];
+  });
+  return out;
+}
+
+std::string MatcherParams::validate() const {
+  std::ostringstream err;
+  auto unit = [&](const char* n, double v) {
+    if (!(v >= 0.0 && v <= 1.0)) err << n << " must be in [0, 1]; ";
+  };
+  unit("min_edge_hist_sim", min_edge_hist_sim);
+  unit("min_radius_hist_sim", min_radius_hist_sim);
+  if (!(edge_rel_tol >= 0.0 && edge_rel_tol < 1.0)) err << "edge_rel_tol must be in [0, 1); ";
+  if (!(edge_abs_tol_m >= 0.0 && std::isfinite(edge_abs_tol_m))) {
+    err << "edge_abs_tol_m must be >= 0; ";
+  }
+  if (!(radius_rel_tol >= 0.0 && radius_rel_tol <= 1.0))
+    err << "radius_rel_tol must be in [0, 1]; ";
+  if (!(radius_abs_tol_m >= 0.0 && std::isfinite(radius_abs_tol_m))) {
+    err << "radius_abs_tol_m must be >= 0; ";
+  }
+  if (weak_support_min < 0) err << "weak_support_min must be >= 0; ";
+  if (!(alpha_w >= 0.0 && std::isfinite(alpha_s))) err << "alpha_s, alpha_w must be >= 0; ";
+  if (!(alpha_s > alpha_w)) err << "alpha_s must exceed alpha_w (Eq. 3.9); ";
+  if (max_correspondences < 2) err << "max_correspondences must be >= 2; ";
+  if (neighbour_triangles < 0 || neighbour_triangles > 12) {
+    err << "neighbour_triangles must be in [0, 12]; ";
+  }
+  if (!(vote_max_pair_m >= 2.0 && vote_max_pair_m <= 100.0)) {
+    err << "vote_max_pair_m must be in [2, 100]; ";
+  }
+  if (!(vote_yaw_bin_deg >= 0.1 && vote_yaw_bin_deg <= 30.0)) {
+    err << "vote_yaw_bin_deg must be in [0.1, 30]; ";
+  }
+  if (!(vote_xy_bin_m >= 0.05 && vote_xy_bin_m <= 10.0)) {
+    err << "vote_xy_bin_m must be in [0.05, 10]; ";
+  }
+  return err.str();
+}
+
+double histogramIntersection(const std::vector<float>& a, const std::vector<float>& b) {
+  if (a.size() != b.size() || a.empty()) return 0.0;  // different binning: not comparable
+  double s = 0.0;
+  for (size_t i = 0; i < a.size(); ++i) s += std::min(a[i], b[i]);
+  return s;
+}
+
+std::vector<Correspondence> buildCorrespondences(const Descriptor& query,
+                                                 const Descriptor& candidate,
+                                                 const MatcherParams& params, MatchStats* stats) {
+  return buildCorrespondences(query, candidate, params, stats, nullptr, nullptr);
+}
+
+std::vector<Correspondence> buildCorrespondences(
+    const Descriptor& query, const Descriptor& candidate, const MatcherParams& params,
+    MatchStats* stats, const std::vector<MatchTriangle>* query_triangles,
+    const std::vector<MatchTriangle>* candidate_triangles) {
+  MatchStats local;
+  MatchStats& st = stats ? *stats : local;
+  st = MatchStats{};
+  std::vector<Correspondence> out;
+
+  // Alg. 1 lines 4-7: histogram screening.
+  st.edge_hist_sim = histogramIntersection(query.edge_hist, candidate.edge_hist);
+  st.radius_hist_sim = histogramIntersection(query.radius_hist, candidate.radius_hist);
+  if (st.edge_hist_sim < params.min_edge_hist_sim ||
+      st.radius_hist_sim < params.min_radius_hist_sim) {
+    st.screened_out = true;
+    return out;
+  }
+  const size_t nq = query.trunks.size(), nc = candidate.trunks.size();
+  if (nq == 0 || nc == 0 || query.triangles.empty() || candidate.triangles.empty()) return out;
+  std::vector<MatchTriangle> own_q, own_c;
+  if (!query_triangles) own_q = matchTriangles(query, params.neighbour_triangles);
+  if (!candidate_triangles) own_c = matchTriangles(candidate, params.neighbour_triangles);
+  const std::vector<MatchTriangle>& tq = query_triangles ? *query_triangles : own_q;
+  const std::vector<MatchTriangle>& tc = candidate_triangles ? *candidate_triangles : own_c;
+
+  // Eq. (3.5): support matrices, flat |Vq| x |Vc| (submaps hold tens to a few hundred trunks).
+  // The touched list lets the final scan visit only non-zero entries.
+  std::vector<uint16_t> es(nq * nc, 0), ew(nq * nc, 0);
+  std::vector<uint32_t> touched;
+  auto bump = [&](std::vector<uint16_t>& m, int iq, int ic) {
+    const size_t k = static_cast<size_t>(iq) * nc + ic;
+    if (es[k] == 0 && ew[k] == 0) touched.push_back(static_cast<uint32_t>(k));
+    if (m[k] < 65535) ++m[k];
+  };
+
+  const double rel = params.edge_rel_tol, abs_tol = params.edge_abs_tol_m;
+  for (const MatchTriangle& mq : tq) {
+    const Triangle& q = mq.t;
+    // Triangles are sorted by len[0]; Cons_l on e1 bounds l_c to [lo, hi], so a binary search
+    // finds the only candidate triangles whose longest edge can be consistent. A pair whose
+    // longest edges disagree could still give weak support through e2/e3 in Alg. 1; dtif drops
+    // that evidence on purpose: such edge-only coincidences are the bulk of random support.
+    const double l = q.len[0];
+    const double lo = std::min(l - abs_tol, l * (1.0 - rel));
+    const double hi = std::max(l + abs_tol, l / (1.0 - rel));
+    auto first = std::lower_bound(tc.begin(), tc.end(), lo,
+                                  [](const MatchTriangle& t, double v) { return t.t.len[0] < v; });
+    for (auto it = first; it != tc.end() && it->t.len[0] <= hi; ++it) {
+      const Triangle& c = it->t;
+      ++st.triangle_pairs;
+      // Eq. (3.4): chi_a for the three canonical edges.
+      int mask = 0, count = 0;
+      for (int a = 0; a < 3; ++a) {
+        const int u = kEdgeEnds[a][0], v = kEdgeEnds[a][1];
+        if (consistent(q.len[a], c.len[a], rel, abs_tol) &&
+            consistent(q.r[u], c.r[u], params.radius_rel_tol, params.radius_abs_tol_m) &&
+            consistent(q.r[v], c.r[v], params.radius_rel_tol, params.radius_abs_tol_m)) {
+          mask |= 1 << a;
+          ++count;
+        }
+      }
+      if (count == 3) {
+        for (int b = 0; b < 3; ++b) bump(es, q.v[b], c.v[b]);  // Eq. (3.6)
+      } else if (count > 0 && mq.delaunay && it->delaunay) {
+        // Neighbour triangles share their edges many times over: their partial matches would
+        // pile up weak support on every edge; only Delaunay faces give weak support (Eq. 3.7).
+        for (int a = 0; a < 3; ++a) {  // Eq. (3.7)
+          if (!(mask & (1 << a))) continue;
+          bump(ew, q.v[kEdgeEnds[a][0]], c.v[kEdgeEnds[a][0]]);
+          bump(ew, q.v[kEdgeEnds[a][1]], c.v[kEdgeEnds[a][1]]);
+        }
+      }
+    }
+  }
+
+  for (uint32_t k : touched) {
+    const int s = es[k], w = ew[k];
+    if (!(s > 0 || w > params.weak_support_min)) continue;  // Eq. (3.8)
+    Correspondence cr;
+    cr.iq = static_cast<int>(k / nc);
+    cr.ic = static_cast<int>(k % nc);
+    const TrunkLandmark& a = query.trunks[cr.iq];
+    const TrunkLandmark& b = candidate.trunks[cr.ic];
+    cr.pq = Eigen::Vector3d(a.x, a.y, a.z);
+    cr.pc = Eigen::Vector3d(b.x, b.y, b.z);
+    cr.z_ok = a.base_seen && b.base_seen;
+    cr.strong = s;
+    cr.weak = w;
+    cr.w = 1.0 + params.alpha_s * std::log1p(s) + params.alpha_w * std::log1p(w);  // Eq. (3.9)
+    out.push_back(cr);
+  }
+  // Eq. (3.10), heaviest first; ties by index so the order is deterministic.
+  std::sort(out.begin(), out.end(), [](const Correspondence& a, const Correspondence& b) {
+    if (a.w != b.w) return a.w > b.w;
+    if (a.iq != b.iq) return a.iq < b.iq;
+    return a.ic < b.ic;
+  });
+  if (static_cast<int>(out.size()) > params.max_correspondences) {
+    out.resize(params.max_correspondences);
+  }
+  return out;
+}
+
+}  // namespace dtif

@@ -1,0 +1,177 @@
+// Pose voting over trunk pairs (see pair_vote.h).
+#include "dtif/core/matching/pair_vote.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <unordered_map>
+
+namespace dtif {
+namespace {
+
+constexpr double kTwoPi = 6.283185307179586;
+/// Shorter pairs fix the yaw too poorly (2 cm of centre noise turn a 1.5 m pair by ~1 deg).
+constexpr double kMinPairM = 1.5;
+/// Bins ranked by their own count before the neighbourhood sums; enough for a few peaks.
+constexpr size_t kSeedBins = 64;
+/// A pose that fewer pairs propose is no peak: three common trunks give three votes by chance
+/// alignment far too often, four in a cluster give six.
+constexpr double kMinPeakVotes = 4.0;
+
+struct PairRec {
+  double len;           ///< [m]
+  double cos_a, sin_a;  ///< direction of i -> j
+  Eigen::Vector2d mid;
+  int i, j;
+};
+
+std::vector<PairRec> pairsOf(const Descriptor& d, double max_len) {
+  std::vector<PairRec> out;
+  const int n = static_cast<int>(d.trunks.size());
+  for (int i = 0; i < n; ++i) {
+    for (int j = i + 1; j < n; ++j) {
+      const Eigen::Vector2d a(d.trunks[i].x, d.trunks[i].y), b(d.trunks[j].x, d.trunks[j].y);
+      const Eigen::Vector2d e = b - a;
+      const double len = e.norm();
+      if (!(len >= kMinPairM && len <= max_len)) continue;  // also drops non-finite trunks
+      out.push_back({len, e.x() / len, e.y() / len, 0.5 * (a + b), i, j});
+    }
+  }
+  std::sort(out.begin(), out.end(), [](const PairRec& x, const PairRec& y) {
+    return x.len != y.len ? x.len < y.len : (x.i != y.i ? x.i < y.i : x.j < y.j);
+  });
+  return out;
+}
+
+struct Bin {
+  int64_t iyaw = 0, ix = 0, iy = 0;
+  double count = 0.0, cos_sum = 0.0, sin_sum = 0.0;
+  Eigen::Vector2d t_sum = Eigen::Vector2d::Zero();
+};
+
+inline int64_t packBin(int64_t iyaw, int64_t ix, int64_t iy) {
+  // 12 bits of yaw (up to 4096 bins), 26 bits per translation axis (+-33,000 bins).
+  constexpr int64_t kHalf = int64_t{1} << 25;
+  return (iyaw << 52) | ((ix + kHalf) << 26) | (iy + kHalf);
+}
+
+}  // namespace
+
+std::vector<VotePeak> votePoses(const Descriptor& q, const Descriptor& c,
+                                const MatcherParams& params, int max_peaks) {
+  std::vector<VotePeak> peaks;
+  if (q.trunks.size() < 2 || c.trunks.size() < 2 || max_peaks <= 0) return peaks;
+  const std::vector<PairRec> pq = pairsOf(q, params.vote_max_pair_m);
+  const std::vector<PairRec> pc = pairsOf(c, params.vote_max_pair_m);
+  if (pq.empty() || pc.empty()) return peaks;
+
+  const int64_t n_yaw = std::clamp<int64_t>(std::llround(360.0 / params.vote_yaw_bin_deg), 1, 4095);
+  const double yaw_bin = kTwoPi / static_cast<double>(n_yaw);
+  const double xy_bin = params.vote_xy_bin_m;
+  // Translations beyond the packing range are no poses of overlapping submaps.
+  const double max_t = 3.0e4 * xy_bin;
+  // Length-compatible candidate pairs by a sliding window over both sorted lists (Cons_l),
+  // counted first so that the accumulator is sized once. The radii do not vote: where stems are
+  // partly hidden their fitted radii are off by half or more (dense_slope: 9 of 32 pairs of
+  // common trunks pass Cons_r on both ends).
+  auto forCompatible = [&](const auto& f) {
+    size_t lo = 0;
+    for (const PairRec& a : pq) {
+      const double tol = std::max(params.edge_abs_tol_m, params.edge_rel_tol * a.len);
+      while (lo < pc.size() && pc[lo].len < a.len - tol) ++lo;
+      for (size_t k = lo; k < pc.size() && pc[k].len <= a.len + tol; ++k) f(a, pc[k]);
+    }
+  };
+  size_t n_compatible = 0;
+  forCompatible([&](const PairRec&, const PairRec&) { ++n_compatible; });
+  std::unordered_map<int64_t, Bin> bins;
+  bins.reserve(2 * n_compatible);
+  // A proposal: T_c_q turns by yaw (cos cy, sin sy) and maps the query pair's midpoint onto the
+  // candidate's.
+  auto vote = [&](double cy, double sy, const Eigen::Vector2d& mq, const Eigen::Vector2d& mc) {
+    const Eigen::Vector2d t(mc.x() - (cy * mq.x() - sy * mq.y()),
+                            mc.y() - (sy * mq.x() + cy * mq.y()));
+    if (!(std::abs(t.x()) < max_t && std::abs(t.y()) < max_t)) return;
+    double yaw = std::atan2(sy, cy);
+    if (yaw < 0.0) yaw += kTwoPi;
+    const int64_t iyaw = std::min<int64_t>(static_cast<int64_t>(yaw / yaw_bin), n_yaw - 1);
+    const int64_t ix = static_cast<int64_t>(std::floor(t.x() / xy_bin));
+    const int64_t iy = static_cast<int64_t>(std::floor(t.y() / xy_bin));
+    Bin& b = bins[packBin(iyaw, ix, iy)];
+    b.iyaw = iyaw, b.ix = ix, b.iy = iy;
+    b.count += 1.0, b.cos_sum += cy, b.sin_sum += sy, b.t_sum += t;
+  };
+  forCompatible([&](const PairRec& a, const PairRec& b) {
+    // yaw = direction of b - direction of a pairs a.i with b.i and a.j with b.j;
+    // yaw + pi pairs a.i with b.j and a.j with b.i.
+    const double cy = b.cos_a * a.cos_a + b.sin_a * a.sin_a;
+    const double sy = b.sin_a * a.cos_a - b.cos_a * a.sin_a;
+    vote(cy, sy, a.mid, b.mid);
+    vote(-cy, -sy, a.mid, b.mid);
+  });
+  if (bins.empty()) return peaks;
+
+  // Seeds: the fullest bins (ties by position, so the result does not depend on hashing).
+  std::vector<const Bin*> seeds;
+  seeds.reserve(bins.size());
+  for (const auto& kv : bins) seeds.push_back(&kv.second);
+  auto fuller = [](const Bin* x, const Bin* y) {
+    if (x->count != y->count) return x->count > y->count;
+    if (x->iyaw != y->iyaw) return x->iyaw < y->iyaw;
+    return x->ix != y->ix ? x->ix < y->ix : x->iy < y->iy;
+  };
+  const size_t n_seeds = std::min(kSeedBins, seeds.size());
+  std::partial_sort(seeds.begin(), seeds.begin() + n_seeds, seeds.end(), fuller);
+  seeds.resize(n_seeds);
+
+  // Each seed's 3 x 3 x 3 neighbourhood (yaw wraps around): votes and mean pose.
+  struct Scored {
+    const Bin* seed;
+    Bin sum;
+  };
+  std::vector<Scored> scored;
+  for (const Bin* s : seeds) {
+    Scored sc{s, Bin{}};
+    for (int64_t dyaw = -1; dyaw <= 1; ++dyaw) {
+      const int64_t iyaw = (s->iyaw + dyaw + n_yaw) % n_yaw;
+      for (int64_t dx = -1; dx <= 1; ++dx) {
+        for (int64_t dy = -1; dy <= 1; ++dy) {
+          const auto it = bins.find(packBin(iyaw, s->ix + dx, s->iy + dy));
+          if (it == bins.end()) continue;
+          sc.sum.count += it->second.count;
+          sc.sum.cos_sum += it->second.cos_sum;
+          sc.sum.sin_sum += it->second.sin_sum;
+          sc.sum.t_sum += it->second.t_sum;
+        }
+      }
+    }
+    scored.push_back(sc);
+  }
+  std::stable_sort(scored.begin(), scored.end(),
+                   [](const Scored& x, const Scored& y) { return x.sum.count > y.sum.count; });
+  // Non-maximum suppression: a peak within one bin of a stronger one is the same pose.
+  std::vector<const Bin*> taken;
+  for (const Scored& sc : scored) {
+    bool near = false;
+    for (const Bin* t : taken) {
+      int64_t dyaw = std::abs(sc.seed->iyaw - t->iyaw);
+      dyaw = std::min(dyaw, n_yaw - dyaw);
+      if (dyaw <= 1 && std::abs(sc.seed->ix - t->ix) <= 1 && std::abs(sc.seed->iy - t->iy) <= 1) {
+        near = true;
+        break;
+      }
+    }
+    if (near) continue;
+    if (sc.sum.count < kMinPeakVotes) break;
+    taken.push_back(sc.seed);
+    VotePeak p;
+    p.yaw = std::atan2(sc.sum.sin_sum, sc.sum.cos_sum);
+    p.t = sc.sum.t_sum / sc.sum.count;
+    p.votes = sc.sum.count;
+    peaks.push_back(p);
+    if (static_cast<int>(peaks.size()) >= max_peaks) break;
+  }
+  return peaks;
+}
+
+}  // namespace dtif

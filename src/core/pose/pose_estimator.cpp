@@ -1,0 +1,376 @@
+// Decoupled robust pose, paper Sec. 3.D, Eqs. (3.11)-(3.17).
+#include "dtif/core/pose/pose_estimator.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <numeric>
+#include <sstream>
+
+#include "dtif/core/pose/rigid2d.h"
+
+namespace dtif {
+namespace {
+
+/// One translation-invariant measurement (Eq. 3.13).
+struct Tim {
+  int a, b;
+  double qx, qy, cx, cy;  // d^q_ab, d^c_ab
+  double w;               // omega_ab
+};
+
+double wrapAngle(double a) { return std::atan2(std::sin(a), std::cos(a)); }
+
+/// Squared TIM residual ||d^c - R(theta) d^q||^2.
+inline double timResidual2(const Tim& m, double c, double s) {
+  const double rx = m.cx - (c * m.qx - s * m.qy);
+  const double ry = m.cy - (s * m.qx + c * m.qy);
+  return rx * rx + ry * ry;
+}
+
+/// Weighted least squares 2-D rotation: argmin sum w ||d^c - R d^q||^2 has the closed form
+/// theta = atan2(sum w (d^q x d^c), sum w (d^q . d^c)). No small-angle assumption.
+double weightedYaw(const std::vector<Tim>& tims, const std::vector<double>& w) {
+  double sc = 0.0, ss = 0.0;
+  for (size_t i = 0; i < tims.size(); ++i) {
+    const Tim& m = tims[i];
+    sc += w[i] * m.w * (m.qx * m.cx + m.qy * m.cy);
+    ss += w[i] * m.w * (m.qx * m.cy - m.qy * m.cx);
+  }
+  return std::atan2(ss, sc);
+}
+
+double tlsCost(const std::vector<Tim>& tims, double theta, double beta2) {
+  const double c = std::cos(theta), s = std::sin(theta);
+  double cost = 0.0;
+  for (const Tim& m : tims) cost += m.w * std::min(timResidual2(m, c, s), beta2);
+  return cost;
+}
+
+/// GNC-TLS (Yang et al. 2020) for Eq. (3.14): continuation on mu from a convex surrogate to
+/// the truncated least squares cost; each step is the closed-form weighted rotation.
+double gncTlsYaw(const std::vector<Tim>& tims, double beta, const PoseEstimatorParams& p) {
+  const double c2 = beta * beta;
+  std::vector<double> u(tims.size(), 1.0);
+  double theta = weightedYaw(tims, u);
+  double max_r2 = 0.0;
+  {
+    const double c = std::cos(theta), s = std::sin(theta);
+    for (const Tim& m : tims) max_r2 = std::max(max_r2, timResidual2(m, c, s));
+  }
+  if (max_r2 <= c2) return theta;  // every measurement is already an inlier
+  double mu = c2 / std::max(2.0 * max_r2 - c2, 1e-12);
+  for (int it = 0; it < p.gnc_max_iterations; ++it) {
+    const double c = std::cos(theta), s = std::sin(theta);
+    const double lo = mu / (mu + 1.0) * c2, hi = (mu + 1.0) / mu * c2;
+    bool binary = true;
+    for (size_t i = 0; i < tims.size(); ++i) {
+      const double r2 = timResidual2(tims[i], c, s);
+      if (r2 >= hi) {
+        u[i] = 0.0;
+      } else if (r2 <= lo) {
+        u[i] = 1.0;
+      } else {
+        u[i] = beta * std::sqrt(mu * (mu + 1.0) / r2) - mu;
+        binary = false;
+      }
+    }
+    const double next = weightedYaw(tims, u);
+    const double step = std::fabs(wrapAngle(next - theta));
+    theta = next;
+    if (binary && step < 1e-9) break;
+    mu *= p.gnc_factor;
+  }
+  return theta;
+}
+
+/// Global maximiser of the weighted TIM consensus over the circle. Every TIM is an inlier
+/// (residual <= beta) on an arc of theta; sweeping the arc ends finds the densest yaw exactly.
+/// This guards GNC, which can converge to a local minimum above ~70-80% outliers.
+/// Returns (best yaw, best consensus weight, runner-up consensus weight at least
+/// kSeparation away from the best).
+struct ArcSweep {
+  double theta = 0.0;
+  double best = 0.0;
+  double runner_up = 0.0;
+};
+
+ArcSweep consensusYaw(const std::vector<Tim>& tims, double beta) {
+  constexpr double kSeparation = 10.0 * M_PI / 180.0;
+  struct Event {
+    double angle;
+    double dw;
+  };
+  std::vector<Event> ev;
+  std::vector<std::pair<double, double>> arcs;  // (centre, half width) for the runner-up pass
+  ev.reserve(tims.size() * 2);
+  double wrap_start = 0.0;  // weight of arcs covering angle -pi
+  for (const Tim& m : tims) {
+    const double a = std::hypot(m.qx, m.qy), b = std::hypot(m.cx, m.cy);
+    // r^2(theta) = a^2 + b^2 - 2ab cos(theta - phi) <= beta^2
+    const double cosd = (a * a + b * b - beta * beta) / (2.0 * a * b);
+    if (cosd > 1.0) continue;
+    const double half = cosd <= -1.0 ? M_PI : std::acos(cosd);
+    const double phi = std::atan2(m.qx * m.cy - m.qy * m.cx, m.qx * m.cx + m.qy * m.cy);
+    arcs.emplace_back(phi, half);
+    if (half >= M_PI) {
+      wrap_start += m.w;
+      continue;
+    }
+    double s = wrapAngle(phi - half), e = wrapAngle(phi + half);
+    ev.push_back({s, m.w});
+    ev.push_back({e, -m.w});
+    if (s > e) wrap_start += m.w;  // the arc covers -pi
+  }
+  std::sort(ev.begin(), ev.end(), [](const Event& x, const Event& y) {
+    return x.angle < y.angle || (x.angle == y.angle && x.dw > y.dw);  // open before close
+  });
+  ArcSweep out;
+  double cur = wrap_start;
+  out.best = cur;
+  out.theta = -M_PI;
+  for (size_t i = 0; i < ev.size(); ++i) {
+    cur += ev[i].dw;
+    if (cur > out.best + 1e-12) {
+      out.best = cur;
+      // Middle of the interval up to the next event.
+      const double next = i + 1 < ev.size() ? ev[i + 1].angle : M_PI;
+      out.theta = 0.5 * (ev[i].angle + next);
+    }
+  }
+  // Runner-up: the same sweep restricted to yaws far from the best one.
+  double cur2 = wrap_start;
+  auto far = [&](double ang) { return std::fabs(wrapAngle(ang - out.theta)) > kSeparation; };
+  if (far(-M_PI)) out.runner_up = cur2;
+  for (size_t i = 0; i < ev.size(); ++i) {
+    cur2 += ev[i].dw;
+    const double next = i + 1 < ev.size() ? ev[i + 1].angle : M_PI;
+    if (far(0.5 * (ev[i].angle + next))) out.runner_up = std::max(out.runner_up, cur2);
+  }
+  return out;
+}
+
+/// Truncated least squares refinement by alternation: inliers at theta, then their LS yaw.
+double refineYaw(const std::vector<Tim>& tims, double theta, double beta2) {
+  std::vector<double> u(tims.size());
+  for (int it = 0; it < 20; ++it) {
+    const double c = std::cos(theta), s = std::sin(theta);
+    for (size_t i = 0; i < tims.size(); ++i) u[i] = timResidual2(tims[i], c, s) <= beta2;
+    const double next = weightedYaw(tims, u);
+    if (std::fabs(wrapAngle(next - theta)) < 1e-10) return next;
+    theta = next;
+  }
+  return theta;
+}
+
+/// Weighted TLS location estimate in `dim` (1 or 2) dimensions: the densest mode first (each
+/// observation as a seed, weighted count within beta), then TLS alternation (inlier mean).
+/// Returns (location, runner-up mode weight outside 2 beta of it).
+struct Location {
+  Eigen::Vector2d t = Eigen::Vector2d::Zero();
+  double best = 0.0;
+  double runner_up = 0.0;
+};
+
+Location tlsLocation(const std::vector<Eigen::Vector2d>& obs, const std::vector<double>& w,
+                     double beta) {
+  const double b2 = beta * beta;
+  Location out;
+  const size_t n = obs.size();
+  if (n == 0) return out;
+  std::vector<double> support(n, 0.0);
+  for (size_t i = 0; i < n; ++i) {
+    for (size_t j = 0; j < n; ++j) {
+      if ((obs[i] - obs[j]).squaredNorm() <= b2) support[i] += w[j];
+    }
+  }
+  size_t seed = 0;
+  for (size_t i = 1; i < n; ++i) {
+    if (support[i] > support[seed]) seed = i;
+  }
+  Eigen::Vector2d t = obs[seed];
+  for (int it = 0; it < 20; ++it) {
+    Eigen::Vector2d sum = Eigen::Vector2d::Zero();
+    double ws = 0.0;
+    for (size_t i = 0; i < n; ++i) {
+      if ((obs[i] - t).squaredNorm() <= b2) {
+        sum += w[i] * obs[i];
+        ws += w[i];
+      }
+    }
+    if (ws <= 0.0) break;
+    const Eigen::Vector2d next = sum / ws;
+    const bool done = (next - t).norm() < 1e-10;
+    t = next;
+    if (done) break;
+  }
+  out.t = t;
+  for (size_t i = 0; i < n; ++i) {
+    if ((obs[i] - t).squaredNorm() <= b2) out.best += w[i];
+  }
+  for (size_t i = 0; i < n; ++i) {
+    if ((obs[i] - t).squaredNorm() > 4.0 * b2) out.runner_up = std::max(out.runner_up, support[i]);
+  }
+  return out;
+}
+
+}  // namespace
+
+std::string PoseEstimatorParams::validate() const {
+  std::ostringstream err;
+  if (!(beta_yaw_m > 0.0 && std::isfinite(beta_yaw_m))) err << "beta_yaw_m must be > 0; ";
+  if (!(beta_xy_m > 0.0 && std::isfinite(beta_xy_m))) err << "beta_xy_m must be > 0; ";
+  if (!(beta_z_m > 0.0 && std::isfinite(beta_z_m))) err << "beta_z_m must be > 0; ";
+  if (!(gnc_factor > 1.0 && std::isfinite(gnc_factor))) err << "gnc_factor must be > 1; ";
+  if (gnc_max_iterations < 1) err << "gnc_max_iterations must be >= 1; ";
+  if (max_tim_pairs < 1) err << "max_tim_pairs must be >= 1; ";
+  return err.str();
+}
+
+PoseEstimate estimatePose(const std::vector<Correspondence>& corrs,
+                          const PoseEstimatorParams& params) {
+  PoseEstimate est;
+  const int k = static_cast<int>(corrs.size());
+  if (k < 2) return est;
+  std::vector<double> w(k);
+  for (int i = 0; i < k; ++i) w[i] = params.unit_weights ? 1.0 : corrs[i].w;
+
+  // Eq. (3.13): translation-invariant measurements over correspondence pairs (a fixed subsample
+  // beyond max_tim_pairs).
+  const double beta_r = params.beta_yaw_m, beta_r2 = beta_r * beta_r;
+  const int64_t total_pairs = static_cast<int64_t>(k) * (k - 1) / 2;
+  std::vector<Tim> tims;
+  tims.reserve(std::min<int64_t>(total_pairs, params.max_tim_pairs));
+  std::vector<int> pair_count(k, 0);  // TIMs each correspondence takes part in
+  forEachSampledPair(k, params.max_tim_pairs, [&](int a, int b) {
+    // Two correspondences sharing a trunk are alternatives (one of them is wrong), never
+    // independent evidence.
+    if (corrs[a].iq == corrs[b].iq || corrs[a].ic == corrs[b].ic) return;
+    Tim m{a,
+          b,
+          corrs[a].pq.x() - corrs[b].pq.x(),
+          corrs[a].pq.y() - corrs[b].pq.y(),
+          corrs[a].pc.x() - corrs[b].pc.x(),
+          corrs[a].pc.y() - corrs[b].pc.y(),
+          std::sqrt(w[a] * w[b])};  // omega_ab of Eq. (3.13)
+    const double lq = std::hypot(m.qx, m.qy), lc = std::hypot(m.cx, m.cy);
+    if (lq < 1e-9 || lc < 1e-9) return;
+    // A rotation preserves length: a TIM with | |d^q| - |d^c| | > beta_R has residual
+    // > beta_R at every theta, so it adds the constant beta_R^2 to Eq. (3.14) and cannot
+    // move the minimiser. Dropping it is exact and removes most outliers before GNC.
+    if (std::fabs(lq - lc) > beta_r) return;
+    tims.push_back(m);
+  });
+  if (tims.empty()) return est;
+
+  // Eq. (3.14): GNC-TLS, guarded by the exact 1-D consensus sweep; keep the lower TLS cost.
+  const double theta_gnc = refineYaw(tims, gncTlsYaw(tims, beta_r, params), beta_r2);
+  const ArcSweep sweep = consensusYaw(tims, beta_r);
+  const double theta_sweep = refineYaw(tims, sweep.theta, beta_r2);
+  const double cost_gnc = tlsCost(tims, theta_gnc, beta_r2);
+  const double cost_sweep = tlsCost(tims, theta_sweep, beta_r2);
+  double theta = cost_sweep < cost_gnc ? theta_sweep : theta_gnc;
+  est.yaw_consensus = sweep.best;
+  est.yaw_runner_up = sweep.runner_up;
+
+  // I_R: a correspondence is rotation-consistent when it takes part in enough inlier TIMs.
+  // One lucky TIM is not enough: an outlier b agrees with an inlier a exactly when b happens to
+  // satisfy the translation too; requiring a share of the best vote count filters singletons.
+  std::vector<int> votes(k, 0);
+  {
+    const double c = std::cos(theta), s = std::sin(theta);
+    for (const Tim& m : tims) {
+      if (timResidual2(m, c, s) <= beta_r2) {
+        ++votes[m.a];
+        ++votes[m.b];
+      }
+    }
+  }
+  const int max_votes = *std::max_element(votes.begin(), votes.end());
+  const int min_votes = std::max(1, static_cast<int>(std::ceil(0.2 * max_votes)));
+  for (int i = 0; i < k; ++i) {
+    if (votes[i] >= min_votes) est.inliers_R.push_back(i);
+  }
+  if (est.inliers_R.size() < 2) return est;
+
+  // Eqs. (3.15)-(3.16): rotation-compensated observations, weighted TLS location.
+  auto solveTranslation = [&](double yaw, const std::vector<int>& set, Location* loc) {
+    const Eigen::Matrix2d r = Eigen::Rotation2Dd(yaw).toRotationMatrix();
+    std::vector<Eigen::Vector2d> obs;
+    std::vector<double> ow;
+    for (int i : set) {
+      obs.push_back(corrs[i].pc.head<2>() - r * corrs[i].pq.head<2>());
+      ow.push_back(w[i]);
+    }
+    *loc = tlsLocation(obs, ow, params.beta_xy_m);
+    std::vector<int> inl;
+    for (size_t j = 0; j < set.size(); ++j) {
+      if ((obs[j] - loc->t).squaredNorm() <= params.beta_xy_m * params.beta_xy_m) {
+        inl.push_back(set[j]);
+      }
+    }
+    return inl;
+  };
+  Location loc;
+  std::vector<int> inl_t = solveTranslation(theta, est.inliers_R, &loc);
+  est.translation_runner_up = loc.runner_up;
+  est.translation_consensus = loc.best;
+
+  // Joint refinement of Eq. (3.11) on I_T: weighted 2-D Procrustes is its exact LS solution
+  // once the inliers are fixed. It removes the small bias of estimating yaw from TIMs alone
+  // (each TIM mixes two noisy trunks). Kept only when it does not lose inliers.
+  for (int it = 0; it < 3 && inl_t.size() >= 2; ++it) {
+    std::vector<PointPair2d> pairs;
+    std::vector<double> pw;
+    for (int i : inl_t) {
+      pairs.emplace_back(corrs[i].pq.head<2>(), corrs[i].pc.head<2>());
+      pw.push_back(w[i]);
+    }
+    Eigen::Vector2d mq, mc;
+    const double yaw = procrustesYaw(pairs, &pw, &mq, &mc);
+    Location l2;
+    std::vector<int> inl2 = solveTranslation(yaw, est.inliers_R, &l2);
+    if (inl2.size() < inl_t.size()) break;
+    const bool same = inl2 == inl_t;
+    theta = yaw;
+    loc = l2;
+    inl_t = inl2;
+    if (same) break;
+  }
+  est.inliers_T = inl_t;
+  if (est.inliers_T.empty()) return est;
+
+  // Eq. (3.17): weighted TLS elevation over I_T. Only pairs whose stem bases were both seen
+  // measure it (a hidden base is extrapolated terrain); with none of those, all of I_T vote.
+  std::vector<Eigen::Vector2d> dz;
+  std::vector<double> wz;
+  for (int pass = 0; pass < 2 && dz.empty(); ++pass) {
+    for (int i : est.inliers_T) {
+      if (pass == 0 && !corrs[i].z_ok) continue;
+      dz.emplace_back(corrs[i].pc.z() - corrs[i].pq.z(), 0.0);
+      wz.push_back(w[i]);
+    }
+  }
+  const Location lz = tlsLocation(dz, wz, params.beta_z_m);
+
+  est.yaw_rad = wrapAngle(theta);
+  est.T_c_q = Pose::Identity();
+  est.T_c_q.linear() = rotZ(est.yaw_rad);
+  est.T_c_q.translation() = Eigen::Vector3d(loc.t.x(), loc.t.y(), lz.t.x());
+  double sxy = 0.0, sz = 0.0, nz = 0.0;
+  const bool any_z_ok =
+      std::any_of(est.inliers_T.begin(), est.inliers_T.end(), [&](int i) { return corrs[i].z_ok; });
+  for (int i : est.inliers_T) {
+    const Eigen::Vector3d r = corrs[i].pc - est.T_c_q * corrs[i].pq;
+    sxy += r.head<2>().squaredNorm();
+    if (corrs[i].z_ok || !any_z_ok) sz += r.z() * r.z(), nz += 1.0;
+    est.inlier_weight += w[i];
+  }
+  const double n = static_cast<double>(est.inliers_T.size());
+  est.rms_xy_m = std::sqrt(sxy / n);
+  est.rms_z_m = std::sqrt(sz / nz);
+  est.ok = true;
+  return est;
+}
+
+}  // namespace dtif
