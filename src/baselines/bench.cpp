@@ -13,6 +13,7 @@
 
 #include "dtif/baselines/solvers.h"
 #include "dtif/core/database/loop_detector.h"
+#include "dtif/core/descriptor/describe.h"
 #include "dtif/core/descriptor/descriptor.h"
 #include "dtif/core/extraction/trunk_extractor.h"
 
@@ -105,26 +106,25 @@ SceneBench runSceneBench(const Dataset& ds, const std::string& scene, const Dtif
     SubmapStats st;
     st.id = rec.id;
     st.points = cloud->size();
-    auto t0 = Clock::now();
-    const TrunkExtractionResult ext = extractTrunks(*cloud, params.trunk_extraction);
-    st.t_extract_ms = msSince(t0);
-    descs[i] = std::make_shared<Descriptor>(describeSubmap(ext, params.descriptor));
-    st.t_desc_ms = msSince(t0);
-    descs[i]->robot = rec.robot;
-    descs[i]->submap_id = rec.id;
-    descs[i]->stamp = rec.stamp;
+    TrunkExtractionResult ext;
+    DescribeTimings timings;
+    descs[i] = std::make_shared<Descriptor>(describeCloud(*cloud, {rec.robot, rec.id, rec.stamp},
+                                                          params.trunk_extraction,
+                                                          params.descriptor, &timings, &ext));
+    st.t_extract_ms = timings.extract_ms;
+    st.t_desc_ms = timings.total_ms;
     st.trunks = ext.trunks.size();
     st.bytes = encodeDescriptor(*descs[i]).size();
     bytes_sum += static_cast<double>(st.bytes);
     if (options.front_ends) {
-      t0 = Clock::now();
+      const auto t0 = Clock::now();
       feats[i] = computeFpfh(*cloud, options.fpfh);
       st.t_fpfh_ms = msSince(t0);
       st.fpfh_points = fpfhPoints(*feats[i]);
       fpfh_bytes_sum += static_cast<double>(fpfhBytes(*feats[i]));
     }
     if (options.place_recognition) {
-      t0 = Clock::now();
+      const auto t0 = Clock::now();
       scs[i] = makeScanContext(*cloud, options.scan_context);
       st.t_scan_context_ms = msSince(t0);
       sc_bytes_sum += static_cast<double>(scs[i].bytes());

@@ -16,6 +16,7 @@
 #include <unordered_map>
 
 #include "dtif/core/database/loop_detector.h"
+#include "dtif/core/descriptor/describe.h"
 #include "dtif/core/descriptor/descriptor.h"
 #include "dtif/core/extraction/trunk_extractor.h"
 
@@ -370,13 +371,12 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
     row.query = rec.id;
 
     // 1. Descriptor (timed: desc).
-    auto t0 = std::chrono::steady_clock::now();
-    const TrunkExtractionResult ext = extractTrunks(*cloud, params.trunk_extraction);
-    auto desc = std::make_shared<Descriptor>(describeSubmap(ext, params.descriptor));
-    row.t_desc_ms = msSince(t0);
-    desc->robot = rec.robot;
-    desc->submap_id = rec.id;
-    desc->stamp = rec.stamp;
+    TrunkExtractionResult ext;
+    DescribeTimings timings;
+    auto desc = std::make_shared<Descriptor>(describeCloud(*cloud, {rec.robot, rec.id, rec.stamp},
+                                                           params.trunk_extraction,
+                                                           params.descriptor, &timings, &ext));
+    row.t_desc_ms = timings.total_ms;
     row.trunks = ext.trunks.size();
     if (!ds.stems.empty()) {
       result.detection.push_back(trunkDetection(*cloud, T_W_q, ext.trunks, ds.stems));
@@ -387,7 +387,7 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
 
     // 2.-3. Query against all earlier descriptors (timed: loop; solver alone: solver).
     QueryStats qs;
-    t0 = std::chrono::steady_clock::now();
+    const auto t0 = std::chrono::steady_clock::now();
     const std::optional<Loop> loop = detector.query(*desc, &qs);
     row.t_loop_ms = msSince(t0);
     row.t_solver_ms = qs.solver_ms;

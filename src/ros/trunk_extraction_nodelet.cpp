@@ -20,6 +20,7 @@
 #include <regex>
 #include <thread>
 
+#include "dtif/core/descriptor/describe.h"
 #include "dtif/core/descriptor/descriptor.h"
 #include "dtif/core/extraction/trunk_extractor.h"
 #include "dtif/ros/conversions.h"
@@ -250,11 +251,8 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
   void process(ros_glue::AssembledSubmap& s, const std::string& frame) {
     const auto t0 = std::chrono::steady_clock::now();
     if (voxel_grid_) ros_glue::voxelFilterSubmap(voxel_grid_.get(), s.cloud.get());
-    const TrunkExtractionResult r = extractTrunks(*s.cloud, extractor_params_);
-    Descriptor d = describeSubmap(r, descriptor_params_);
-    d.robot = node_.robot;
-    d.submap_id = s.id;
-    d.stamp = s.stamp;
+    const Descriptor d = describeCloud(*s.cloud, {node_.robot, s.id, s.stamp}, extractor_params_,
+                                       descriptor_params_);
     const double ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     NODELET_DEBUG("submap %ld: %zu points, %zu trunks, %zu faces, %.1f ms%s%s",

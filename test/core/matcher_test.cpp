@@ -7,6 +7,7 @@
 #include <random>
 
 #include "core/match_test_utils.h"
+#include "dtif/core/matching/matcher_stages.h"
 
 namespace dtif {
 namespace {
@@ -254,6 +255,98 @@ TEST(Matcher, NeighbourTrianglesFindCorrectPairsWhenFewTrunksAreShared) {
   // More evidence, not more noise: the share of correct pairs does not drop much.
   EXPECT_GT(static_cast<double>(correct[1]) / (correct[1] + wrong[1]),
             0.95 * static_cast<double>(correct[0]) / std::max(1, correct[0] + wrong[0]));
+}
+
+// --- Stages (matcher_stages.h) ---
+
+TEST(MatcherStages, ScreeningSetsBothSimilaritiesAndRejectsBelowEitherThreshold) {
+  HandCase h;
+  const MatcherParams p;
+  MatchStats st;
+  EXPECT_TRUE(matcher_stages::passesScreening(h.q, h.c, p, &st));
+  EXPECT_NEAR(st.edge_hist_sim, 1.0, 1e-6);
+  EXPECT_NEAR(st.radius_hist_sim, 1.0, 1e-6);
+  EXPECT_FALSE(st.screened_out);
+  h.c.radius_hist.assign(10, 0.0f);
+  h.c.radius_hist[0] = 1.0f;  // intersection 0.1 < 0.4
+  st = MatchStats{};
+  EXPECT_FALSE(matcher_stages::passesScreening(h.q, h.c, p, &st));
+  EXPECT_NEAR(st.radius_hist_sim, 0.1, 1e-6);
+  EXPECT_TRUE(st.screened_out);
+}
+
+TEST(MatcherStages, ConsistentEdgesFollowEq34) {
+  HandCase h;
+  const MatcherParams p;
+  const Triangle q = makeCanonicalTriangle(h.q.trunks, 0, 1, 2);
+  const Triangle same = makeCanonicalTriangle(h.c.trunks, 0, 1, 2);
+  const Triangle other = makeCanonicalTriangle(h.c.trunks, 3, 4, 5);
+  EXPECT_EQ(matcher_stages::consistentEdges(q, same, p), 0b111);
+  EXPECT_EQ(matcher_stages::consistentEdges(q, other, p), 0b011);  // e3: 2 m vs 3 m
+  Trunks fat = h.c.trunks;
+  fat[2].r = 0.6;  // at position 2 of `same`: e1 and e3 end there
+  EXPECT_EQ(matcher_stages::consistentEdges(q, makeCanonicalTriangle(fat, 0, 1, 2), p), 0b010);
+}
+
+TEST(MatcherStages, AccumulateSupportCountsStrongAndWeakVertexSupport) {
+  HandCase h;
+  MatcherParams p;
+  p.neighbour_triangles = 0;
+  const auto tq = matchTriangles(h.q, 0), tc = matchTriangles(h.c, 0);
+  size_t pairs = 0;
+  const matcher_stages::VertexSupport sup =
+      matcher_stages::accumulateSupport(tq, tc, 3, 6, p, &pairs);
+  EXPECT_EQ(pairs, 2u);
+  ASSERT_EQ(sup.strong.size(), 18u);
+  ASSERT_EQ(sup.weak.size(), 18u);
+  EXPECT_EQ(sup.touched.size(), 6u);
+  auto at = [](const std::vector<uint16_t>& m, int iq, int ic) { return m[iq * 6 + ic]; };
+  int strong_sum = 0, weak_sum = 0;
+  for (int k = 0; k < 18; ++k) strong_sum += sup.strong[k], weak_sum += sup.weak[k];
+  EXPECT_EQ(strong_sum, 3);
+  EXPECT_EQ(weak_sum, 4);
+  EXPECT_EQ(at(sup.strong, 1, 1), 1);
+  EXPECT_EQ(at(sup.strong, 0, 0), 1);
+  EXPECT_EQ(at(sup.strong, 2, 2), 1);
+  EXPECT_EQ(at(sup.weak, 1, 3), 2);
+  EXPECT_EQ(at(sup.weak, 2, 4), 1);
+  EXPECT_EQ(at(sup.weak, 0, 5), 1);
+  // Neighbour triangles give no weak support: the same pair marked as non-Delaunay.
+  std::vector<MatchTriangle> tq_nb = tq;
+  for (MatchTriangle& t : tq_nb) t.delaunay = false;
+  const auto sup_nb = matcher_stages::accumulateSupport(tq_nb, tc, 3, 6, p, &pairs);
+  EXPECT_EQ(pairs, 4u);  // added to
+  EXPECT_EQ(sup_nb.touched.size(), 3u);
+  for (uint16_t w : sup_nb.weak) EXPECT_EQ(w, 0);
+}
+
+TEST(MatcherStages, WeightedCorrespondencesKeepSupportedPairsHeaviestFirst) {
+  HandCase h;
+  MatcherParams p;  // weak_support_min = 2
+  matcher_stages::VertexSupport sup;
+  sup.nq = 3;
+  sup.nc = 6;
+  sup.strong.assign(18, 0);
+  sup.weak.assign(18, 0);
+  sup.weak[1 * 6 + 3] = 3;  // kept: E^w > tau_w
+  sup.weak[2 * 6 + 4] = 2;  // dropped: E^w = tau_w
+  sup.strong[0 * 6 + 5] = 1;
+  sup.weak[0 * 6 + 5] = 1;
+  sup.touched = {1 * 6 + 3, 2 * 6 + 4, 0 * 6 + 5};
+  const auto corrs = matcher_stages::weightedCorrespondences(sup, h.q, h.c, p);
+  ASSERT_EQ(corrs.size(), 2u);
+  EXPECT_EQ(corrs[0].iq, 0);  // 1 + log 2 + 0.25 log 2 outweighs 1 + 0.25 log 4
+  EXPECT_EQ(corrs[0].ic, 5);
+  EXPECT_NEAR(corrs[0].w, 1.0 + std::log(2.0) + 0.25 * std::log(2.0), 1e-12);
+  EXPECT_EQ(corrs[1].iq, 1);
+  EXPECT_EQ(corrs[1].ic, 3);
+  EXPECT_NEAR(corrs[1].w, 1.0 + 0.25 * std::log(4.0), 1e-12);
+  EXPECT_EQ(corrs[1].pc, Eigen::Vector3d(20, 0, 0));
+  p.max_correspondences = 2;
+  sup.weak[2 * 6 + 4] = 5;  // now kept, but only the heaviest two are
+  const auto top = matcher_stages::weightedCorrespondences(sup, h.q, h.c, p);
+  ASSERT_EQ(top.size(), 2u);
+  EXPECT_EQ(top[1].iq, 2);  // 1 + 0.25 log 6 > 1 + 0.25 log 4
 }
 
 TEST(Matcher, ParamsValidate) {

@@ -9,6 +9,7 @@
 
 #include "core/match_test_utils.h"
 #include "dtif/core/database/loop_detector.h"
+#include "dtif/core/matching/pair_vote_stages.h"
 
 namespace dtif {
 namespace {
@@ -99,6 +100,116 @@ TEST(VotePoses, DeterministicAndEmptyWithoutPairs) {
   const auto clean = votePoses(with_nan, cases[0].c, params, 4);
   ASSERT_FALSE(clean.empty());
   for (const VotePeak& p : clean) EXPECT_TRUE(std::isfinite(p.yaw) && p.t.allFinite());
+}
+
+// --- Stages (pair_vote_stages.h) ---
+
+Descriptor trunksOnly(const Trunks& t) {
+  Descriptor d;
+  d.trunks = t;
+  return d;
+}
+
+TEST(PairVoteStages, TrunkPairsKeepLengthsInRangeSortedByLengthThenIndex) {
+  const Descriptor d = trunksOnly({{0, 0, 0, 0.1},
+                                   {1, 0, 0, 0.1},
+                                   {3, 0, 0, 0.1},
+                                   {0, 2, 0, 0.1},
+                                   {std::numeric_limits<double>::quiet_NaN(), 0, 0, 0.1}});
+  const auto pairs = pair_vote_stages::trunkPairs(d, 2.5);
+  // Lengths: (0,1) 1 and (0,2) 3 and (2,3) 3.6 out of [1.5, 2.5]; the NaN trunk pairs with none.
+  ASSERT_EQ(pairs.size(), 3u);
+  EXPECT_EQ(std::make_pair(pairs[0].i, pairs[0].j), std::make_pair(0, 3));  // 2 m
+  EXPECT_EQ(std::make_pair(pairs[1].i, pairs[1].j), std::make_pair(1, 2));  // 2 m
+  EXPECT_EQ(std::make_pair(pairs[2].i, pairs[2].j), std::make_pair(1, 3));  // sqrt(5) m
+  EXPECT_DOUBLE_EQ(pairs[2].len, std::sqrt(5.0));
+  EXPECT_DOUBLE_EQ(pairs[2].cos_a, -1.0 / std::sqrt(5.0));
+  EXPECT_DOUBLE_EQ(pairs[2].sin_a, 2.0 / std::sqrt(5.0));
+  EXPECT_EQ(pairs[2].mid, Eigen::Vector2d(0.5, 1.0));
+}
+
+TEST(PairVoteStages, OnePairVotesForThePoseAndItsHalfTurn) {
+  // Query pair (0,0)-(2,0); the candidate sees it turned by 90 deg and moved by (1.2, 1.1).
+  const Pose T = poseXyYaw(1.2, 1.1, 0.0, M_PI / 2);
+  const Eigen::Vector3d a = T * Eigen::Vector3d(0, 0, 0), b = T * Eigen::Vector3d(2, 0, 0);
+  const auto pq = pair_vote_stages::trunkPairs(trunksOnly({{0, 0, 0, .1}, {2, 0, 0, .1}}), 6.0);
+  const auto pc =
+      pair_vote_stages::trunkPairs(trunksOnly({{a.x(), a.y(), 0, .1}, {b.x(), b.y(), 0, .1}}), 6.0);
+  const MatcherParams params;
+  const pair_vote_stages::VoteAccumulator acc = pair_vote_stages::accumulateVotes(pq, pc, params);
+  EXPECT_EQ(acc.n_yaw, 180);
+  ASSERT_EQ(acc.bins.size(), 2u);
+  int found = 0;
+  for (const auto& kv : acc.bins) {
+    const pair_vote_stages::VoteBin& bin = kv.second;
+    EXPECT_EQ(bin.count, 1.0);
+    EXPECT_EQ(acc.find(bin.iyaw, bin.ix, bin.iy), &bin);
+    // yaw 90 deg maps the midpoint (1, 0) onto (1.2, 2.1) with t = (1.2, 1.1); the half turn
+    // with t = (1.2, 3.1).
+    const Eigen::Vector2d t_expected(1.2, bin.sin_sum > 0.0 ? 1.1 : 3.1);
+    EXPECT_NEAR(std::abs(bin.sin_sum), 1.0, 1e-12);
+    EXPECT_NEAR((bin.t_sum - t_expected).norm(), 0.0, 1e-12);
+    EXPECT_EQ(bin.ix, 2);
+    found += bin.sin_sum > 0.0;
+  }
+  EXPECT_EQ(found, 1);
+  EXPECT_EQ(acc.find(0, 0, 0), nullptr);
+}
+
+TEST(PairVoteStages, SeedsSumTheirNeighbourhoodStrongestFirst) {
+  // Three pairs of different lengths, each seen turned by 0.3 rad and moved: three votes for the
+  // true pose, three scattered half turns.
+  const Pose T = poseXyYaw(10.2, -4.3, 0.0, 0.3);
+  const Trunks q{{0, 0, 0, .1}, {2, 0, 0, .1}, {0, 3, 0, .1}};
+  Trunks c;
+  for (const TrunkLandmark& t : q) {
+    const Eigen::Vector3d p = T * Eigen::Vector3d(t.x, t.y, 0.0);
+    c.push_back({p.x(), p.y(), 0.0, t.r});
+  }
+  const MatcherParams params;
+  const auto acc =
+      pair_vote_stages::accumulateVotes(pair_vote_stages::trunkPairs(trunksOnly(q), 6.0),
+                                        pair_vote_stages::trunkPairs(trunksOnly(c), 6.0), params);
+  const std::vector<pair_vote_stages::ScoredSeed> scored = pair_vote_stages::scoreSeeds(acc);
+  ASSERT_EQ(scored.size(), acc.bins.size());
+  ASSERT_EQ(scored.size(), 4u);
+  EXPECT_EQ(scored[0].sum.count, 3.0);
+  EXPECT_NEAR((scored[0].sum.t_sum / 3.0 - Eigen::Vector2d(10.2, -4.3)).norm(), 0.0, 1e-9);
+  EXPECT_NEAR(std::atan2(scored[0].sum.sin_sum, scored[0].sum.cos_sum), 0.3, 1e-12);
+  for (size_t k = 1; k < scored.size(); ++k) EXPECT_EQ(scored[k].sum.count, 1.0);
+  // Below four votes no peak.
+  EXPECT_TRUE(pair_vote_stages::selectPeaks(scored, acc.n_yaw, 4).empty());
+}
+
+TEST(PairVoteStages, SelectPeaksSuppressesNeighboursAcrossTheYawWrap) {
+  using pair_vote_stages::ScoredSeed;
+  using pair_vote_stages::VoteBin;
+  auto bin = [](int64_t iyaw, int64_t ix, int64_t iy) {
+    VoteBin b;
+    b.iyaw = iyaw, b.ix = ix, b.iy = iy;
+    return b;
+  };
+  auto sum = [](double count, double yaw, const Eigen::Vector2d& t) {
+    VoteBin b;
+    b.count = count, b.cos_sum = count * std::cos(yaw), b.sin_sum = count * std::sin(yaw);
+    b.t_sum = count * t;
+    return b;
+  };
+  const VoteBin a = bin(0, 0, 0), near = bin(1, 1, 0), wrapped = bin(179, 0, 1),
+                far = bin(179, 5, 5), weak = bin(90, 20, 20);
+  const std::vector<ScoredSeed> scored{{&a, sum(10, 0.01, {0.2, 0.1})},
+                                       {&near, sum(8, 0.03, {0.7, 0.1})},
+                                       {&wrapped, sum(7, -0.01, {0.2, 0.6})},
+                                       {&far, sum(6, -0.02, {2.7, 2.6})},
+                                       {&weak, sum(3, 1.6, {10.2, 10.1})}};
+  const auto peaks = pair_vote_stages::selectPeaks(scored, 180, 4);
+  ASSERT_EQ(peaks.size(), 2u);  // a and far: near and wrapped are a's neighbours, weak < 4
+  EXPECT_EQ(peaks[0].votes, 10.0);
+  EXPECT_NEAR(peaks[0].yaw, 0.01, 1e-12);
+  EXPECT_NEAR((peaks[0].t - Eigen::Vector2d(0.2, 0.1)).norm(), 0.0, 1e-12);
+  EXPECT_EQ(peaks[1].votes, 6.0);
+  EXPECT_NEAR(peaks[1].yaw, -0.02, 1e-12);
+  EXPECT_EQ(pair_vote_stages::selectPeaks(scored, 180, 1).size(), 1u);
 }
 
 /// The fallback is what finds these pairs: without it the triangles give no hypothesis for most

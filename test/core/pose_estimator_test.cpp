@@ -4,9 +4,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numeric>
 #include <random>
 
 #include "core/match_test_utils.h"
+#include "dtif/core/pose/pose_estimator_stages.h"
 
 namespace dtif {
 namespace {
@@ -145,6 +147,155 @@ TEST(PoseEstimator, ParamsValidate) {
   p = PoseEstimatorParams{};
   p.max_tim_pairs = 0;
   EXPECT_NE(p.validate(), "");
+}
+
+// --- Stages (pose_estimator_stages.h) ---
+
+Correspondence corr(int iq, int ic, const Eigen::Vector3d& pq, const Eigen::Vector3d& pc,
+                    double w = 1.0, bool z_ok = true) {
+  Correspondence c;
+  c.iq = iq;
+  c.ic = ic;
+  c.pq = pq;
+  c.pc = pc;
+  c.w = w;
+  c.z_ok = z_ok;
+  return c;
+}
+
+TEST(PoseStages, TimsSkipSharedTrunksCoincidentPointsAndLengthMismatches) {
+  using pose_stages::Tim;
+  const std::vector<Correspondence> corrs{
+      corr(0, 0, {0, 0, 0}, {0, 0, 0}), corr(1, 1, {3, 0, 0}, {0, 3, 0}),
+      corr(0, 2, {0, 0, 0}, {5, 5, 0}),  // shares query trunk 0 with the first
+      corr(3, 3, {3, 0, 0}, {0, 3, 0}),  // same points as the second: coincident with it
+  };
+  const std::vector<double> w{4.0, 1.0, 1.0, 9.0};
+  const std::vector<Tim> tims =
+      pose_stages::translationInvariantMeasurements(corrs, w, PoseEstimatorParams{});
+  // (0, 2) share a trunk, (1, 3) coincide, (1, 2) and (2, 3) differ in length by 2.4 m.
+  ASSERT_EQ(tims.size(), 2u);
+  EXPECT_EQ(tims[0].a, 0);
+  EXPECT_EQ(tims[0].b, 1);
+  EXPECT_EQ(tims[1].a, 0);
+  EXPECT_EQ(tims[1].b, 3);
+  EXPECT_DOUBLE_EQ(tims[0].qx, -3.0);
+  EXPECT_DOUBLE_EQ(tims[0].cy, -3.0);
+  EXPECT_DOUBLE_EQ(tims[0].w, 2.0);  // omega_ab = sqrt(4 * 1)
+  EXPECT_DOUBLE_EQ(tims[1].w, 6.0);  // sqrt(4 * 9)
+}
+
+TEST(PoseStages, EstimateYawIsExactOnCleanTimsAndReportsConsensus) {
+  std::mt19937 rng(11);
+  const Pose T = test::poseXyYaw(4.0, -2.0, 0.0, -2.5);
+  const auto corrs = makeCorrs(rng, T, 12, 0.0, 0.0);
+  std::vector<double> w;
+  for (const Correspondence& c : corrs) w.push_back(c.w);
+  const PoseEstimatorParams p;
+  const auto tims = pose_stages::translationInvariantMeasurements(corrs, w, p);
+  ASSERT_EQ(tims.size(), 66u);
+  const pose_stages::YawEstimate yaw = pose_stages::estimateYaw(tims, p);
+  EXPECT_NEAR(std::remainder(yaw.theta + 2.5, 2.0 * M_PI), 0.0, 1e-9);
+  double total = 0.0;
+  for (const auto& m : tims) total += m.w;
+  EXPECT_NEAR(yaw.consensus, total, 1e-9);        // every TIM agrees
+  EXPECT_LT(yaw.runner_up, 0.5 * yaw.consensus);  // short TIMs only, far from the yaw
+}
+
+TEST(PoseStages, RotationInliersNeedAFifthOfTheBestVoteCount) {
+  using pose_stages::Tim;
+  std::vector<Tim> tims;
+  const Tim in{0, 0, 1.0, 0.0, 1.0, 0.0, 1.0}, out{0, 0, 1.0, 0.0, -1.0, 0.0, 1.0};
+  auto add = [&](Tim m, int a, int b) {
+    m.a = a;
+    m.b = b;
+    tims.push_back(m);
+  };
+  for (int a = 0; a < 6; ++a)
+    for (int b = a + 1; b < 6; ++b) add(in, a, b);  // 5 votes each, 6 for correspondence 0
+  add(in, 0, 6);                                    // correspondence 6: one lucky TIM
+  add(out, 1, 6);                                   // residual 2 m at yaw 0
+  add(out, 2, 7);
+  // min votes = ceil(0.2 * 6) = 2: 6 has one, 7 none.
+  EXPECT_EQ(pose_stages::rotationInliers(tims, 8, 0.0, 0.3), (std::vector<int>{0, 1, 2, 3, 4, 5}));
+  // At yaw pi the outlier TIMs agree and the others do not.
+  EXPECT_EQ(pose_stages::rotationInliers(tims, 8, M_PI, 0.3), (std::vector<int>{1, 2, 6, 7}));
+}
+
+TEST(PoseStages, TlsLocationTakesTheHeaviestModeAndReportsTheRunnerUp) {
+  const std::vector<Eigen::Vector2d> obs{
+      {0.0, 0.0}, {5.0, 5.0}, {0.1, 0.0}, {5.1, 5.0}, {0.0, 0.1}};
+  const std::vector<double> w{1.0, 1.2, 1.0, 1.2, 1.0};
+  const pose_stages::Location loc = pose_stages::tlsLocation(obs, w, 0.3);
+  EXPECT_NEAR(loc.t.x(), 0.1 / 3.0, 1e-12);
+  EXPECT_NEAR(loc.t.y(), 0.1 / 3.0, 1e-12);
+  EXPECT_DOUBLE_EQ(loc.best, 3.0);
+  EXPECT_DOUBLE_EQ(loc.runner_up, 2.4);
+  const pose_stages::Location none = pose_stages::tlsLocation({}, {}, 0.3);
+  EXPECT_EQ(none.t, Eigen::Vector2d::Zero());
+  EXPECT_EQ(none.best, 0.0);
+}
+
+TEST(PoseStages, SolveTranslationKeepsTheSetMembersNearTheMode) {
+  const Pose T = test::poseXyYaw(2.0, -1.0, 0.0, 0.5);
+  std::vector<Correspondence> corrs;
+  for (int i = 0; i < 5; ++i) {
+    const Eigen::Vector3d pq(3.0 * i, 1.0 - i, 0.0);
+    // Correspondence 2 is 1 m off in x.
+    corrs.push_back(corr(i, i, pq, T * pq + Eigen::Vector3d(i == 2 ? 1.0 : 0.0, 0.0, 0.0)));
+  }
+  const std::vector<double> w(5, 1.0);
+  pose_stages::Location loc;
+  const std::vector<int> inl =
+      pose_stages::solveTranslation(corrs, w, 0.5, {4, 2, 1, 0}, 0.3, &loc);
+  EXPECT_EQ(inl, (std::vector<int>{4, 1, 0}));  // in the order of the set, without 2
+  EXPECT_NEAR(loc.t.x(), 2.0, 1e-12);
+  EXPECT_NEAR(loc.t.y(), -1.0, 1e-12);
+  EXPECT_DOUBLE_EQ(loc.best, 3.0);
+}
+
+TEST(PoseStages, RefineJointlyRemovesAYawBias) {
+  std::mt19937 rng(12);
+  const Pose T = test::poseXyYaw(-3.0, 6.0, 0.0, 0.4);
+  const auto corrs = makeCorrs(rng, T, 20, 0.0, 0.0);
+  const std::vector<double> w(corrs.size(), 1.0);
+  std::vector<int> all(corrs.size());
+  std::iota(all.begin(), all.end(), 0);
+  double theta = 0.4 + 0.004;  // 0.23 deg off: every trunk within 15 m still within beta
+  pose_stages::Location loc;
+  std::vector<int> inl = pose_stages::solveTranslation(corrs, w, theta, all, 0.3, &loc);
+  ASSERT_EQ(inl.size(), corrs.size());
+  pose_stages::refineJointly(corrs, w, all, 0.3, &theta, &loc, &inl);
+  EXPECT_NEAR(theta, 0.4, 1e-12);
+  EXPECT_NEAR((loc.t - T.translation().head<2>()).norm(), 0.0, 1e-9);
+  EXPECT_EQ(inl, all);
+}
+
+TEST(PoseStages, ElevationFromSeenBasesOnlyUnlessThereAreNone) {
+  std::vector<Correspondence> corrs{
+      corr(0, 0, {0, 0, 0}, {0, 0, 1.0}, 1.0, true),
+      corr(1, 1, {1, 0, 0}, {1, 0, 1.0}, 1.0, true),
+      corr(2, 2, {2, 0, 0}, {2, 0, 3.0}, 1.0, false),  // hidden bases: extrapolated terrain
+      corr(3, 3, {3, 0, 0}, {3, 0, 3.0}, 1.0, false),
+      corr(4, 4, {4, 0, 0}, {4, 0, 3.0}, 1.0, false),
+  };
+  const std::vector<double> w(corrs.size(), 1.0);
+  EXPECT_DOUBLE_EQ(pose_stages::estimateElevation(corrs, w, {0, 1, 2, 3, 4}, 0.3), 1.0);
+  EXPECT_DOUBLE_EQ(pose_stages::estimateElevation(corrs, w, {2, 3, 4}, 0.3), 3.0);
+}
+
+TEST(PoseStages, ResidualsCountSeenBasesForTheElevation) {
+  std::vector<Correspondence> corrs{
+      corr(0, 0, {0, 0, 0}, {0.3, 0.4, 0.2}, 2.0, true),   // xy residual 0.5
+      corr(1, 1, {1, 0, 0}, {1.0, 0.0, -0.2}, 3.0, true),  // xy residual 0
+      corr(2, 2, {2, 0, 0}, {2.0, 0.0, 5.0}, 4.0, false),  // z ignored: bases hidden
+  };
+  PoseEstimate est;
+  est.inliers_T = {0, 1, 2};
+  pose_stages::addResiduals(corrs, {2.0, 3.0, 4.0}, &est);
+  EXPECT_NEAR(est.rms_xy_m, std::sqrt(0.25 / 3.0), 1e-12);
+  EXPECT_NEAR(est.rms_z_m, 0.2, 1e-12);
+  EXPECT_DOUBLE_EQ(est.inlier_weight, 9.0);
 }
 
 }  // namespace

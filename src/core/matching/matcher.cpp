@@ -7,6 +7,8 @@
 #include <cstdint>
 #include <sstream>
 
+#include "dtif/core/matching/matcher_stages.h"
+
 namespace dtif {
 namespace {
 
@@ -117,41 +119,49 @@ std::vector<Correspondence> buildCorrespondences(const Descriptor& query,
   return buildCorrespondences(query, candidate, params, stats, nullptr, nullptr);
 }
 
-std::vector<Correspondence> buildCorrespondences(
-    const Descriptor& query, const Descriptor& candidate, const MatcherParams& params,
-    MatchStats* stats, const std::vector<MatchTriangle>* query_triangles,
-    const std::vector<MatchTriangle>* candidate_triangles) {
-  MatchStats local;
-  MatchStats& st = stats ? *stats : local;
-  st = MatchStats{};
-  std::vector<Correspondence> out;
+namespace matcher_stages {
 
-  // Alg. 1 lines 4-7: histogram screening.
-  st.edge_hist_sim = histogramIntersection(query.edge_hist, candidate.edge_hist);
-  st.radius_hist_sim = histogramIntersection(query.radius_hist, candidate.radius_hist);
-  if (st.edge_hist_sim < params.min_edge_hist_sim ||
-      st.radius_hist_sim < params.min_radius_hist_sim) {
-    st.screened_out = true;
-    return out;
+bool passesScreening(const Descriptor& query, const Descriptor& candidate,
+                     const MatcherParams& params, MatchStats* stats) {
+  stats->edge_hist_sim = histogramIntersection(query.edge_hist, candidate.edge_hist);
+  stats->radius_hist_sim = histogramIntersection(query.radius_hist, candidate.radius_hist);
+  if (stats->edge_hist_sim < params.min_edge_hist_sim ||
+      stats->radius_hist_sim < params.min_radius_hist_sim) {
+    stats->screened_out = true;
+    return false;
   }
-  const size_t nq = query.trunks.size(), nc = candidate.trunks.size();
-  if (nq == 0 || nc == 0 || query.triangles.empty() || candidate.triangles.empty()) return out;
-  std::vector<MatchTriangle> own_q, own_c;
-  if (!query_triangles) own_q = matchTriangles(query, params.neighbour_triangles);
-  if (!candidate_triangles) own_c = matchTriangles(candidate, params.neighbour_triangles);
-  const std::vector<MatchTriangle>& tq = query_triangles ? *query_triangles : own_q;
-  const std::vector<MatchTriangle>& tc = candidate_triangles ? *candidate_triangles : own_c;
+  return true;
+}
 
-  // Eq. (3.5): support matrices, flat |Vq| x |Vc| (submaps hold tens to a few hundred trunks).
-  // The touched list lets the final scan visit only non-zero entries.
-  std::vector<uint16_t> es(nq * nc, 0), ew(nq * nc, 0);
-  std::vector<uint32_t> touched;
+int consistentEdges(const Triangle& q, const Triangle& c, const MatcherParams& params) {
+  const double rel = params.edge_rel_tol, abs_tol = params.edge_abs_tol_m;
+  int mask = 0;
+  for (int a = 0; a < 3; ++a) {
+    const int u = kEdgeEnds[a][0], v = kEdgeEnds[a][1];
+    if (consistent(q.len[a], c.len[a], rel, abs_tol) &&
+        consistent(q.r[u], c.r[u], params.radius_rel_tol, params.radius_abs_tol_m) &&
+        consistent(q.r[v], c.r[v], params.radius_rel_tol, params.radius_abs_tol_m)) {
+      mask |= 1 << a;
+    }
+  }
+  return mask;
+}
+
+VertexSupport accumulateSupport(const std::vector<MatchTriangle>& tq,
+                                const std::vector<MatchTriangle>& tc, size_t nq, size_t nc,
+                                const MatcherParams& params, size_t* triangle_pairs) {
+  // Flat matrices: submaps hold tens to a few hundred trunks. The touched list lets the final
+  // scan visit only non-zero entries.
+  VertexSupport sup;
+  sup.nq = nq;
+  sup.nc = nc;
+  sup.strong.assign(nq * nc, 0);
+  sup.weak.assign(nq * nc, 0);
   auto bump = [&](std::vector<uint16_t>& m, int iq, int ic) {
     const size_t k = static_cast<size_t>(iq) * nc + ic;
-    if (es[k] == 0 && ew[k] == 0) touched.push_back(static_cast<uint32_t>(k));
+    if (sup.strong[k] == 0 && sup.weak[k] == 0) sup.touched.push_back(static_cast<uint32_t>(k));
     if (m[k] < 65535) ++m[k];
   };
-
   const double rel = params.edge_rel_tol, abs_tol = params.edge_abs_tol_m;
   for (const MatchTriangle& mq : tq) {
     const Triangle& q = mq.t;
@@ -166,34 +176,32 @@ std::vector<Correspondence> buildCorrespondences(
                                   [](const MatchTriangle& t, double v) { return t.t.len[0] < v; });
     for (auto it = first; it != tc.end() && it->t.len[0] <= hi; ++it) {
       const Triangle& c = it->t;
-      ++st.triangle_pairs;
-      // Eq. (3.4): chi_a for the three canonical edges.
-      int mask = 0, count = 0;
-      for (int a = 0; a < 3; ++a) {
-        const int u = kEdgeEnds[a][0], v = kEdgeEnds[a][1];
-        if (consistent(q.len[a], c.len[a], rel, abs_tol) &&
-            consistent(q.r[u], c.r[u], params.radius_rel_tol, params.radius_abs_tol_m) &&
-            consistent(q.r[v], c.r[v], params.radius_rel_tol, params.radius_abs_tol_m)) {
-          mask |= 1 << a;
-          ++count;
-        }
-      }
-      if (count == 3) {
-        for (int b = 0; b < 3; ++b) bump(es, q.v[b], c.v[b]);  // Eq. (3.6)
-      } else if (count > 0 && mq.delaunay && it->delaunay) {
+      ++*triangle_pairs;
+      const int mask = consistentEdges(q, c, params);  // Eq. (3.4): chi_a per canonical edge
+      if (mask == 7) {
+        for (int b = 0; b < 3; ++b) bump(sup.strong, q.v[b], c.v[b]);  // Eq. (3.6)
+      } else if (mask != 0 && mq.delaunay && it->delaunay) {
         // Neighbour triangles share their edges many times over: their partial matches would
         // pile up weak support on every edge; only Delaunay faces give weak support (Eq. 3.7).
         for (int a = 0; a < 3; ++a) {  // Eq. (3.7)
           if (!(mask & (1 << a))) continue;
-          bump(ew, q.v[kEdgeEnds[a][0]], c.v[kEdgeEnds[a][0]]);
-          bump(ew, q.v[kEdgeEnds[a][1]], c.v[kEdgeEnds[a][1]]);
+          bump(sup.weak, q.v[kEdgeEnds[a][0]], c.v[kEdgeEnds[a][0]]);
+          bump(sup.weak, q.v[kEdgeEnds[a][1]], c.v[kEdgeEnds[a][1]]);
         }
       }
     }
   }
+  return sup;
+}
 
-  for (uint32_t k : touched) {
-    const int s = es[k], w = ew[k];
+std::vector<Correspondence> weightedCorrespondences(const VertexSupport& support,
+                                                    const Descriptor& query,
+                                                    const Descriptor& candidate,
+                                                    const MatcherParams& params) {
+  std::vector<Correspondence> out;
+  const size_t nc = support.nc;
+  for (uint32_t k : support.touched) {
+    const int s = support.strong[k], w = support.weak[k];
     if (!(s > 0 || w > params.weak_support_min)) continue;  // Eq. (3.8)
     Correspondence cr;
     cr.iq = static_cast<int>(k / nc);
@@ -218,6 +226,28 @@ std::vector<Correspondence> buildCorrespondences(
     out.resize(params.max_correspondences);
   }
   return out;
+}
+
+}  // namespace matcher_stages
+
+std::vector<Correspondence> buildCorrespondences(
+    const Descriptor& query, const Descriptor& candidate, const MatcherParams& params,
+    MatchStats* stats, const std::vector<MatchTriangle>* query_triangles,
+    const std::vector<MatchTriangle>* candidate_triangles) {
+  MatchStats local;
+  MatchStats& st = stats ? *stats : local;
+  st = MatchStats{};
+  if (!matcher_stages::passesScreening(query, candidate, params, &st)) return {};
+  const size_t nq = query.trunks.size(), nc = candidate.trunks.size();
+  if (nq == 0 || nc == 0 || query.triangles.empty() || candidate.triangles.empty()) return {};
+  std::vector<MatchTriangle> own_q, own_c;
+  if (!query_triangles) own_q = matchTriangles(query, params.neighbour_triangles);
+  if (!candidate_triangles) own_c = matchTriangles(candidate, params.neighbour_triangles);
+  const std::vector<MatchTriangle>& tq = query_triangles ? *query_triangles : own_q;
+  const std::vector<MatchTriangle>& tc = candidate_triangles ? *candidate_triangles : own_c;
+  const matcher_stages::VertexSupport support =
+      matcher_stages::accumulateSupport(tq, tc, nq, nc, params, &st.triangle_pairs);
+  return matcher_stages::weightedCorrespondences(support, query, candidate, params);
 }
 
 }  // namespace dtif

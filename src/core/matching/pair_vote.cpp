@@ -6,6 +6,8 @@
 #include <cstdint>
 #include <unordered_map>
 
+#include "dtif/core/matching/pair_vote_stages.h"
+
 namespace dtif {
 namespace {
 
@@ -18,15 +20,18 @@ constexpr size_t kSeedBins = 64;
 /// alignment far too often, four in a cluster give six.
 constexpr double kMinPeakVotes = 4.0;
 
-struct PairRec {
-  double len;           ///< [m]
-  double cos_a, sin_a;  ///< direction of i -> j
-  Eigen::Vector2d mid;
-  int i, j;
-};
+inline int64_t packBin(int64_t iyaw, int64_t ix, int64_t iy) {
+  // 12 bits of yaw (up to 4096 bins), 26 bits per translation axis (+-33,000 bins).
+  constexpr int64_t kHalf = int64_t{1} << 25;
+  return (iyaw << 52) | ((ix + kHalf) << 26) | (iy + kHalf);
+}
 
-std::vector<PairRec> pairsOf(const Descriptor& d, double max_len) {
-  std::vector<PairRec> out;
+}  // namespace
+
+namespace pair_vote_stages {
+
+std::vector<TrunkPair> trunkPairs(const Descriptor& d, double max_len) {
+  std::vector<TrunkPair> out;
   const int n = static_cast<int>(d.trunks.size());
   for (int i = 0; i < n; ++i) {
     for (int j = i + 1; j < n; ++j) {
@@ -37,37 +42,26 @@ std::vector<PairRec> pairsOf(const Descriptor& d, double max_len) {
       out.push_back({len, e.x() / len, e.y() / len, 0.5 * (a + b), i, j});
     }
   }
-  std::sort(out.begin(), out.end(), [](const PairRec& x, const PairRec& y) {
+  std::sort(out.begin(), out.end(), [](const TrunkPair& x, const TrunkPair& y) {
     return x.len != y.len ? x.len < y.len : (x.i != y.i ? x.i < y.i : x.j < y.j);
   });
   return out;
 }
 
-struct Bin {
-  int64_t iyaw = 0, ix = 0, iy = 0;
-  double count = 0.0, cos_sum = 0.0, sin_sum = 0.0;
-  Eigen::Vector2d t_sum = Eigen::Vector2d::Zero();
-};
-
-inline int64_t packBin(int64_t iyaw, int64_t ix, int64_t iy) {
-  // 12 bits of yaw (up to 4096 bins), 26 bits per translation axis (+-33,000 bins).
-  constexpr int64_t kHalf = int64_t{1} << 25;
-  return (iyaw << 52) | ((ix + kHalf) << 26) | (iy + kHalf);
+const VoteBin* VoteAccumulator::find(int64_t iyaw, int64_t ix, int64_t iy) const {
+  const auto it = bins.find(packBin(iyaw, ix, iy));
+  return it == bins.end() ? nullptr : &it->second;
 }
 
-}  // namespace
-
-std::vector<VotePeak> votePoses(const Descriptor& q, const Descriptor& c,
-                                const MatcherParams& params, int max_peaks) {
-  std::vector<VotePeak> peaks;
-  if (q.trunks.size() < 2 || c.trunks.size() < 2 || max_peaks <= 0) return peaks;
-  const std::vector<PairRec> pq = pairsOf(q, params.vote_max_pair_m);
-  const std::vector<PairRec> pc = pairsOf(c, params.vote_max_pair_m);
-  if (pq.empty() || pc.empty()) return peaks;
-
+VoteAccumulator accumulateVotes(const std::vector<TrunkPair>& pq, const std::vector<TrunkPair>& pc,
+                                const MatcherParams& params) {
+  VoteAccumulator acc;
   const int64_t n_yaw = std::clamp<int64_t>(std::llround(360.0 / params.vote_yaw_bin_deg), 1, 4095);
   const double yaw_bin = kTwoPi / static_cast<double>(n_yaw);
   const double xy_bin = params.vote_xy_bin_m;
+  acc.n_yaw = n_yaw;
+  acc.yaw_bin = yaw_bin;
+  acc.xy_bin = xy_bin;
   // Translations beyond the packing range are no poses of overlapping submaps.
   const double max_t = 3.0e4 * xy_bin;
   // Length-compatible candidate pairs by a sliding window over both sorted lists (Cons_l),
@@ -76,15 +70,15 @@ std::vector<VotePeak> votePoses(const Descriptor& q, const Descriptor& c,
   // common trunks pass Cons_r on both ends).
   auto forCompatible = [&](const auto& f) {
     size_t lo = 0;
-    for (const PairRec& a : pq) {
+    for (const TrunkPair& a : pq) {
       const double tol = std::max(params.edge_abs_tol_m, params.edge_rel_tol * a.len);
       while (lo < pc.size() && pc[lo].len < a.len - tol) ++lo;
       for (size_t k = lo; k < pc.size() && pc[k].len <= a.len + tol; ++k) f(a, pc[k]);
     }
   };
   size_t n_compatible = 0;
-  forCompatible([&](const PairRec&, const PairRec&) { ++n_compatible; });
-  std::unordered_map<int64_t, Bin> bins;
+  forCompatible([&](const TrunkPair&, const TrunkPair&) { ++n_compatible; });
+  std::unordered_map<int64_t, VoteBin>& bins = acc.bins;
   bins.reserve(2 * n_compatible);
   // A proposal: T_c_q turns by yaw (cos cy, sin sy) and maps the query pair's midpoint onto the
   // candidate's.
@@ -97,11 +91,11 @@ std::vector<VotePeak> votePoses(const Descriptor& q, const Descriptor& c,
     const int64_t iyaw = std::min<int64_t>(static_cast<int64_t>(yaw / yaw_bin), n_yaw - 1);
     const int64_t ix = static_cast<int64_t>(std::floor(t.x() / xy_bin));
     const int64_t iy = static_cast<int64_t>(std::floor(t.y() / xy_bin));
-    Bin& b = bins[packBin(iyaw, ix, iy)];
+    VoteBin& b = bins[packBin(iyaw, ix, iy)];
     b.iyaw = iyaw, b.ix = ix, b.iy = iy;
     b.count += 1.0, b.cos_sum += cy, b.sin_sum += sy, b.t_sum += t;
   };
-  forCompatible([&](const PairRec& a, const PairRec& b) {
+  forCompatible([&](const TrunkPair& a, const TrunkPair& b) {
     // yaw = direction of b - direction of a pairs a.i with b.i and a.j with b.j;
     // yaw + pi pairs a.i with b.j and a.j with b.i.
     const double cy = b.cos_a * a.cos_a + b.sin_a * a.sin_a;
@@ -109,13 +103,14 @@ std::vector<VotePeak> votePoses(const Descriptor& q, const Descriptor& c,
     vote(cy, sy, a.mid, b.mid);
     vote(-cy, -sy, a.mid, b.mid);
   });
-  if (bins.empty()) return peaks;
+  return acc;
+}
 
-  // Seeds: the fullest bins (ties by position, so the result does not depend on hashing).
-  std::vector<const Bin*> seeds;
-  seeds.reserve(bins.size());
-  for (const auto& kv : bins) seeds.push_back(&kv.second);
-  auto fuller = [](const Bin* x, const Bin* y) {
+std::vector<ScoredSeed> scoreSeeds(const VoteAccumulator& acc) {
+  std::vector<const VoteBin*> seeds;
+  seeds.reserve(acc.bins.size());
+  for (const auto& kv : acc.bins) seeds.push_back(&kv.second);
+  auto fuller = [](const VoteBin* x, const VoteBin* y) {
     if (x->count != y->count) return x->count > y->count;
     if (x->iyaw != y->iyaw) return x->iyaw < y->iyaw;
     return x->ix != y->ix ? x->ix < y->ix : x->iy < y->iy;
@@ -124,36 +119,38 @@ std::vector<VotePeak> votePoses(const Descriptor& q, const Descriptor& c,
   std::partial_sort(seeds.begin(), seeds.begin() + n_seeds, seeds.end(), fuller);
   seeds.resize(n_seeds);
 
-  // Each seed's 3 x 3 x 3 neighbourhood (yaw wraps around): votes and mean pose.
-  struct Scored {
-    const Bin* seed;
-    Bin sum;
-  };
-  std::vector<Scored> scored;
-  for (const Bin* s : seeds) {
-    Scored sc{s, Bin{}};
+  const int64_t n_yaw = acc.n_yaw;
+  std::vector<ScoredSeed> scored;
+  for (const VoteBin* s : seeds) {
+    ScoredSeed sc{s, VoteBin{}};
     for (int64_t dyaw = -1; dyaw <= 1; ++dyaw) {
       const int64_t iyaw = (s->iyaw + dyaw + n_yaw) % n_yaw;
       for (int64_t dx = -1; dx <= 1; ++dx) {
         for (int64_t dy = -1; dy <= 1; ++dy) {
-          const auto it = bins.find(packBin(iyaw, s->ix + dx, s->iy + dy));
-          if (it == bins.end()) continue;
-          sc.sum.count += it->second.count;
-          sc.sum.cos_sum += it->second.cos_sum;
-          sc.sum.sin_sum += it->second.sin_sum;
-          sc.sum.t_sum += it->second.t_sum;
+          const VoteBin* b = acc.find(iyaw, s->ix + dx, s->iy + dy);
+          if (!b) continue;
+          sc.sum.count += b->count;
+          sc.sum.cos_sum += b->cos_sum;
+          sc.sum.sin_sum += b->sin_sum;
+          sc.sum.t_sum += b->t_sum;
         }
       }
     }
     scored.push_back(sc);
   }
-  std::stable_sort(scored.begin(), scored.end(),
-                   [](const Scored& x, const Scored& y) { return x.sum.count > y.sum.count; });
-  // Non-maximum suppression: a peak within one bin of a stronger one is the same pose.
-  std::vector<const Bin*> taken;
-  for (const Scored& sc : scored) {
+  std::stable_sort(scored.begin(), scored.end(), [](const ScoredSeed& x, const ScoredSeed& y) {
+    return x.sum.count > y.sum.count;
+  });
+  return scored;
+}
+
+std::vector<VotePeak> selectPeaks(const std::vector<ScoredSeed>& scored, int64_t n_yaw,
+                                  int max_peaks) {
+  std::vector<VotePeak> peaks;
+  std::vector<const VoteBin*> taken;
+  for (const ScoredSeed& sc : scored) {
     bool near = false;
-    for (const Bin* t : taken) {
+    for (const VoteBin* t : taken) {
       int64_t dyaw = std::abs(sc.seed->iyaw - t->iyaw);
       dyaw = std::min(dyaw, n_yaw - dyaw);
       if (dyaw <= 1 && std::abs(sc.seed->ix - t->ix) <= 1 && std::abs(sc.seed->iy - t->iy) <= 1) {
@@ -172,6 +169,20 @@ std::vector<VotePeak> votePoses(const Descriptor& q, const Descriptor& c,
     if (static_cast<int>(peaks.size()) >= max_peaks) break;
   }
   return peaks;
+}
+
+}  // namespace pair_vote_stages
+
+std::vector<VotePeak> votePoses(const Descriptor& q, const Descriptor& c,
+                                const MatcherParams& params, int max_peaks) {
+  using pair_vote_stages::TrunkPair;
+  if (q.trunks.size() < 2 || c.trunks.size() < 2 || max_peaks <= 0) return {};
+  const std::vector<TrunkPair> pq = pair_vote_stages::trunkPairs(q, params.vote_max_pair_m);
+  const std::vector<TrunkPair> pc = pair_vote_stages::trunkPairs(c, params.vote_max_pair_m);
+  if (pq.empty() || pc.empty()) return {};
+  const pair_vote_stages::VoteAccumulator acc = pair_vote_stages::accumulateVotes(pq, pc, params);
+  if (acc.bins.empty()) return {};
+  return pair_vote_stages::selectPeaks(pair_vote_stages::scoreSeeds(acc), acc.n_yaw, max_peaks);
 }
 
 }  // namespace dtif

@@ -7,17 +7,13 @@
 #include <numeric>
 #include <sstream>
 
+#include "dtif/core/pose/pose_estimator_stages.h"
 #include "dtif/core/pose/rigid2d.h"
 
 namespace dtif {
 namespace {
 
-/// One translation-invariant measurement (Eq. 3.13).
-struct Tim {
-  int a, b;
-  double qx, qy, cx, cy;  // d^q_ab, d^c_ab
-  double w;               // omega_ab
-};
+using pose_stages::Tim;
 
 double wrapAngle(double a) { return std::atan2(std::sin(a), std::cos(a)); }
 
@@ -163,14 +159,9 @@ double refineYaw(const std::vector<Tim>& tims, double theta, double beta2) {
   return theta;
 }
 
-/// Weighted TLS location estimate in `dim` (1 or 2) dimensions: the densest mode first (each
-/// observation as a seed, weighted count within beta), then TLS alternation (inlier mean).
-/// Returns (location, runner-up mode weight outside 2 beta of it).
-struct Location {
-  Eigen::Vector2d t = Eigen::Vector2d::Zero();
-  double best = 0.0;
-  double runner_up = 0.0;
-};
+}  // namespace
+
+namespace pose_stages {
 
 Location tlsLocation(const std::vector<Eigen::Vector2d>& obs, const std::vector<double>& w,
                      double beta) {
@@ -214,34 +205,14 @@ Location tlsLocation(const std::vector<Eigen::Vector2d>& obs, const std::vector<
   return out;
 }
 
-}  // namespace
-
-std::string PoseEstimatorParams::validate() const {
-  std::ostringstream err;
-  if (!(beta_yaw_m > 0.0 && std::isfinite(beta_yaw_m))) err << "beta_yaw_m must be > 0; ";
-  if (!(beta_xy_m > 0.0 && std::isfinite(beta_xy_m))) err << "beta_xy_m must be > 0; ";
-  if (!(beta_z_m > 0.0 && std::isfinite(beta_z_m))) err << "beta_z_m must be > 0; ";
-  if (!(gnc_factor > 1.0 && std::isfinite(gnc_factor))) err << "gnc_factor must be > 1; ";
-  if (gnc_max_iterations < 1) err << "gnc_max_iterations must be >= 1; ";
-  if (max_tim_pairs < 1) err << "max_tim_pairs must be >= 1; ";
-  return err.str();
-}
-
-PoseEstimate estimatePose(const std::vector<Correspondence>& corrs,
-                          const PoseEstimatorParams& params) {
-  PoseEstimate est;
+std::vector<Tim> translationInvariantMeasurements(const std::vector<Correspondence>& corrs,
+                                                  const std::vector<double>& w,
+                                                  const PoseEstimatorParams& params) {
   const int k = static_cast<int>(corrs.size());
-  if (k < 2) return est;
-  std::vector<double> w(k);
-  for (int i = 0; i < k; ++i) w[i] = params.unit_weights ? 1.0 : corrs[i].w;
-
-  // Eq. (3.13): translation-invariant measurements over correspondence pairs (a fixed subsample
-  // beyond max_tim_pairs).
-  const double beta_r = params.beta_yaw_m, beta_r2 = beta_r * beta_r;
+  const double beta_r = params.beta_yaw_m;
   const int64_t total_pairs = static_cast<int64_t>(k) * (k - 1) / 2;
   std::vector<Tim> tims;
   tims.reserve(std::min<int64_t>(total_pairs, params.max_tim_pairs));
-  std::vector<int> pair_count(k, 0);  // TIMs each correspondence takes part in
   forEachSampledPair(k, params.max_tim_pairs, [&](int a, int b) {
     // Two correspondences sharing a trunk are alternatives (one of them is wrong), never
     // independent evidence.
@@ -261,114 +232,170 @@ PoseEstimate estimatePose(const std::vector<Correspondence>& corrs,
     if (std::fabs(lq - lc) > beta_r) return;
     tims.push_back(m);
   });
-  if (tims.empty()) return est;
+  return tims;
+}
 
-  // Eq. (3.14): GNC-TLS, guarded by the exact 1-D consensus sweep; keep the lower TLS cost.
+YawEstimate estimateYaw(const std::vector<Tim>& tims, const PoseEstimatorParams& params) {
+  const double beta_r = params.beta_yaw_m, beta_r2 = beta_r * beta_r;
   const double theta_gnc = refineYaw(tims, gncTlsYaw(tims, beta_r, params), beta_r2);
   const ArcSweep sweep = consensusYaw(tims, beta_r);
   const double theta_sweep = refineYaw(tims, sweep.theta, beta_r2);
   const double cost_gnc = tlsCost(tims, theta_gnc, beta_r2);
   const double cost_sweep = tlsCost(tims, theta_sweep, beta_r2);
-  double theta = cost_sweep < cost_gnc ? theta_sweep : theta_gnc;
-  est.yaw_consensus = sweep.best;
-  est.yaw_runner_up = sweep.runner_up;
+  YawEstimate out;
+  out.theta = cost_sweep < cost_gnc ? theta_sweep : theta_gnc;
+  out.consensus = sweep.best;
+  out.runner_up = sweep.runner_up;
+  return out;
+}
 
-  // I_R: a correspondence is rotation-consistent when it takes part in enough inlier TIMs.
+std::vector<int> rotationInliers(const std::vector<Tim>& tims, int k, double theta, double beta_r) {
   // One lucky TIM is not enough: an outlier b agrees with an inlier a exactly when b happens to
   // satisfy the translation too; requiring a share of the best vote count filters singletons.
+  const double beta_r2 = beta_r * beta_r;
   std::vector<int> votes(k, 0);
-  {
-    const double c = std::cos(theta), s = std::sin(theta);
-    for (const Tim& m : tims) {
-      if (timResidual2(m, c, s) <= beta_r2) {
-        ++votes[m.a];
-        ++votes[m.b];
-      }
+  const double c = std::cos(theta), s = std::sin(theta);
+  for (const Tim& m : tims) {
+    if (timResidual2(m, c, s) <= beta_r2) {
+      ++votes[m.a];
+      ++votes[m.b];
     }
   }
   const int max_votes = *std::max_element(votes.begin(), votes.end());
   const int min_votes = std::max(1, static_cast<int>(std::ceil(0.2 * max_votes)));
+  std::vector<int> inliers;
   for (int i = 0; i < k; ++i) {
-    if (votes[i] >= min_votes) est.inliers_R.push_back(i);
+    if (votes[i] >= min_votes) inliers.push_back(i);
   }
-  if (est.inliers_R.size() < 2) return est;
+  return inliers;
+}
 
-  // Eqs. (3.15)-(3.16): rotation-compensated observations, weighted TLS location.
-  auto solveTranslation = [&](double yaw, const std::vector<int>& set, Location* loc) {
-    const Eigen::Matrix2d r = Eigen::Rotation2Dd(yaw).toRotationMatrix();
-    std::vector<Eigen::Vector2d> obs;
-    std::vector<double> ow;
-    for (int i : set) {
-      obs.push_back(corrs[i].pc.head<2>() - r * corrs[i].pq.head<2>());
-      ow.push_back(w[i]);
-    }
-    *loc = tlsLocation(obs, ow, params.beta_xy_m);
-    std::vector<int> inl;
-    for (size_t j = 0; j < set.size(); ++j) {
-      if ((obs[j] - loc->t).squaredNorm() <= params.beta_xy_m * params.beta_xy_m) {
-        inl.push_back(set[j]);
-      }
-    }
-    return inl;
-  };
-  Location loc;
-  std::vector<int> inl_t = solveTranslation(theta, est.inliers_R, &loc);
-  est.translation_runner_up = loc.runner_up;
-  est.translation_consensus = loc.best;
+std::vector<int> solveTranslation(const std::vector<Correspondence>& corrs,
+                                  const std::vector<double>& w, double yaw,
+                                  const std::vector<int>& set, double beta_xy, Location* loc) {
+  const Eigen::Matrix2d r = Eigen::Rotation2Dd(yaw).toRotationMatrix();
+  std::vector<Eigen::Vector2d> obs;  // Eq. (3.15)
+  std::vector<double> ow;
+  for (int i : set) {
+    obs.push_back(corrs[i].pc.head<2>() - r * corrs[i].pq.head<2>());
+    ow.push_back(w[i]);
+  }
+  *loc = tlsLocation(obs, ow, beta_xy);  // Eq. (3.16)
+  std::vector<int> inl;
+  for (size_t j = 0; j < set.size(); ++j) {
+    if ((obs[j] - loc->t).squaredNorm() <= beta_xy * beta_xy) inl.push_back(set[j]);
+  }
+  return inl;
+}
 
-  // Joint refinement of Eq. (3.11) on I_T: weighted 2-D Procrustes is its exact LS solution
-  // once the inliers are fixed. It removes the small bias of estimating yaw from TIMs alone
-  // (each TIM mixes two noisy trunks). Kept only when it does not lose inliers.
-  for (int it = 0; it < 3 && inl_t.size() >= 2; ++it) {
+void refineJointly(const std::vector<Correspondence>& corrs, const std::vector<double>& w,
+                   const std::vector<int>& inliers_r, double beta_xy, double* theta, Location* loc,
+                   std::vector<int>* inliers_t) {
+  // Removes the small bias of estimating yaw from TIMs alone (each TIM mixes two noisy trunks).
+  for (int it = 0; it < 3 && inliers_t->size() >= 2; ++it) {
     std::vector<PointPair2d> pairs;
     std::vector<double> pw;
-    for (int i : inl_t) {
+    for (int i : *inliers_t) {
       pairs.emplace_back(corrs[i].pq.head<2>(), corrs[i].pc.head<2>());
       pw.push_back(w[i]);
     }
     Eigen::Vector2d mq, mc;
     const double yaw = procrustesYaw(pairs, &pw, &mq, &mc);
     Location l2;
-    std::vector<int> inl2 = solveTranslation(yaw, est.inliers_R, &l2);
-    if (inl2.size() < inl_t.size()) break;
-    const bool same = inl2 == inl_t;
-    theta = yaw;
-    loc = l2;
-    inl_t = inl2;
+    std::vector<int> inl2 = solveTranslation(corrs, w, yaw, inliers_r, beta_xy, &l2);
+    if (inl2.size() < inliers_t->size()) break;
+    const bool same = inl2 == *inliers_t;
+    *theta = yaw;
+    *loc = l2;
+    *inliers_t = inl2;
     if (same) break;
   }
-  est.inliers_T = inl_t;
-  if (est.inliers_T.empty()) return est;
+}
 
-  // Eq. (3.17): weighted TLS elevation over I_T. Only pairs whose stem bases were both seen
-  // measure it (a hidden base is extrapolated terrain); with none of those, all of I_T vote.
+double estimateElevation(const std::vector<Correspondence>& corrs, const std::vector<double>& w,
+                         const std::vector<int>& inliers_t, double beta_z) {
+  // A hidden base is extrapolated terrain, so it measures nothing while seen ones exist.
   std::vector<Eigen::Vector2d> dz;
   std::vector<double> wz;
   for (int pass = 0; pass < 2 && dz.empty(); ++pass) {
-    for (int i : est.inliers_T) {
+    for (int i : inliers_t) {
       if (pass == 0 && !corrs[i].z_ok) continue;
       dz.emplace_back(corrs[i].pc.z() - corrs[i].pq.z(), 0.0);
       wz.push_back(w[i]);
     }
   }
-  const Location lz = tlsLocation(dz, wz, params.beta_z_m);
+  return tlsLocation(dz, wz, beta_z).t.x();
+}
+
+void addResiduals(const std::vector<Correspondence>& corrs, const std::vector<double>& w,
+                  PoseEstimate* est) {
+  double sxy = 0.0, sz = 0.0, nz = 0.0;
+  const bool any_z_ok = std::any_of(est->inliers_T.begin(), est->inliers_T.end(),
+                                    [&](int i) { return corrs[i].z_ok; });
+  for (int i : est->inliers_T) {
+    const Eigen::Vector3d r = corrs[i].pc - est->T_c_q * corrs[i].pq;
+    sxy += r.head<2>().squaredNorm();
+    if (corrs[i].z_ok || !any_z_ok) sz += r.z() * r.z(), nz += 1.0;
+    est->inlier_weight += w[i];
+  }
+  const double n = static_cast<double>(est->inliers_T.size());
+  est->rms_xy_m = std::sqrt(sxy / n);
+  est->rms_z_m = std::sqrt(sz / nz);
+}
+}  // namespace pose_stages
+
+std::string PoseEstimatorParams::validate() const {
+  std::ostringstream err;
+  if (!(beta_yaw_m > 0.0 && std::isfinite(beta_yaw_m))) err << "beta_yaw_m must be > 0; ";
+  if (!(beta_xy_m > 0.0 && std::isfinite(beta_xy_m))) err << "beta_xy_m must be > 0; ";
+  if (!(beta_z_m > 0.0 && std::isfinite(beta_z_m))) err << "beta_z_m must be > 0; ";
+  if (!(gnc_factor > 1.0 && std::isfinite(gnc_factor))) err << "gnc_factor must be > 1; ";
+  if (gnc_max_iterations < 1) err << "gnc_max_iterations must be >= 1; ";
+  if (max_tim_pairs < 1) err << "max_tim_pairs must be >= 1; ";
+  return err.str();
+}
+
+PoseEstimate estimatePose(const std::vector<Correspondence>& corrs,
+                          const PoseEstimatorParams& params) {
+  using pose_stages::Location;
+  using pose_stages::Tim;
+  using pose_stages::YawEstimate;
+  PoseEstimate est;
+  const int k = static_cast<int>(corrs.size());
+  if (k < 2) return est;
+  std::vector<double> w(k);
+  for (int i = 0; i < k; ++i) w[i] = params.unit_weights ? 1.0 : corrs[i].w;
+
+  // Eq. (3.13): translation-invariant measurements.
+  const std::vector<Tim> tims = pose_stages::translationInvariantMeasurements(corrs, w, params);
+  if (tims.empty()) return est;
+
+  // Eq. (3.14): robust yaw; I_R: the rotation-consistent correspondences.
+  const YawEstimate yaw = pose_stages::estimateYaw(tims, params);
+  double theta = yaw.theta;
+  est.yaw_consensus = yaw.consensus;
+  est.yaw_runner_up = yaw.runner_up;
+  est.inliers_R = pose_stages::rotationInliers(tims, k, theta, params.beta_yaw_m);
+  if (est.inliers_R.size() < 2) return est;
+
+  // Eqs. (3.15)-(3.16): weighted TLS translation, then the joint refinement of Eq. (3.11).
+  Location loc;
+  std::vector<int> inl_t =
+      pose_stages::solveTranslation(corrs, w, theta, est.inliers_R, params.beta_xy_m, &loc);
+  est.translation_runner_up = loc.runner_up;
+  est.translation_consensus = loc.best;
+  pose_stages::refineJointly(corrs, w, est.inliers_R, params.beta_xy_m, &theta, &loc, &inl_t);
+  est.inliers_T = inl_t;
+  if (est.inliers_T.empty()) return est;
+
+  // Eq. (3.17): weighted TLS elevation over I_T.
+  const double t_z = pose_stages::estimateElevation(corrs, w, est.inliers_T, params.beta_z_m);
 
   est.yaw_rad = wrapAngle(theta);
   est.T_c_q = Pose::Identity();
   est.T_c_q.linear() = rotZ(est.yaw_rad);
-  est.T_c_q.translation() = Eigen::Vector3d(loc.t.x(), loc.t.y(), lz.t.x());
-  double sxy = 0.0, sz = 0.0, nz = 0.0;
-  const bool any_z_ok =
-      std::any_of(est.inliers_T.begin(), est.inliers_T.end(), [&](int i) { return corrs[i].z_ok; });
-  for (int i : est.inliers_T) {
-    const Eigen::Vector3d r = corrs[i].pc - est.T_c_q * corrs[i].pq;
-    sxy += r.head<2>().squaredNorm();
-    if (corrs[i].z_ok || !any_z_ok) sz += r.z() * r.z(), nz += 1.0;
-    est.inlier_weight += w[i];
-  }
-  const double n = static_cast<double>(est.inliers_T.size());
-  est.rms_xy_m = std::sqrt(sxy / n);
-  est.rms_z_m = std::sqrt(sz / nz);
+  est.T_c_q.translation() = Eigen::Vector3d(loc.t.x(), loc.t.y(), t_z);
+  pose_stages::addResiduals(corrs, w, &est);
   est.ok = true;
   return est;
 }
