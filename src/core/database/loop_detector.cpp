@@ -31,8 +31,6 @@ constexpr double kSinglePairZVar = 0.3 * 0.3;
 /// t_z from the ground maps: hundreds of agreeing cells, but 5 cm steps and the cells' slope
 /// (a 0.5 m cell spans 0.18 m of a 20 deg slope) bound it at a few centimetres.
 constexpr double kGroundZVar = 0.05 * 0.05;
-/// Floor on the variance of a roll/pitch fitted to seen stem bases: (0.05 deg)^2.
-constexpr double kMinFittedTiltVar = (0.05 * M_PI / 180.0) * (0.05 * M_PI / 180.0);
 constexpr double kMinYawVar = (0.1 * M_PI / 180.0) * (0.1 * M_PI / 180.0);
 
 /// Pose from correspondences, then verification (both timed into stats).
