@@ -16,14 +16,12 @@
 #include "dtif/core/descriptor/describe.h"
 #include "dtif/core/descriptor/descriptor.h"
 #include "dtif/core/extraction/trunk_extractor.h"
+#include "dtif/core/timing.h"
 
 namespace dtif::baselines {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double msSince(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
 
 std::string displayName(const std::string& back_end) {
   if (back_end == "dtif") return "dtif (weighted)";

@@ -11,6 +11,7 @@
 #include <stdexcept>
 
 #include "dtif/baselines/solvers.h"
+#include "dtif/core/timing.h"
 
 namespace dtif::baselines {
 
@@ -21,9 +22,6 @@ struct FpfhFeatures {
 
 namespace {
 using Clock = std::chrono::steady_clock;
-double msSince(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
 }  // namespace
 
 FpfhFeaturesPtr computeFpfh(const Cloud& cloud, const FpfhParams& params) {

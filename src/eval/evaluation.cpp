@@ -16,9 +16,11 @@
 #include <unordered_map>
 
 #include "dtif/core/database/loop_detector.h"
+#include "dtif/core/database/loop_pair.h"
 #include "dtif/core/descriptor/describe.h"
 #include "dtif/core/descriptor/descriptor.h"
 #include "dtif/core/extraction/trunk_extractor.h"
+#include "dtif/core/timing.h"
 
 namespace dtif {
 
@@ -28,10 +30,6 @@ constexpr double kRadToDeg = 180.0 / M_PI;
 constexpr double kCellM = 1.0;  // overlap cell (DATASET.md)
 
 int64_t packCell(int64_t ix, int64_t iy) { return (ix << 32) ^ (iy & 0xffffffffLL); }
-
-double msSince(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-}
 
 }  // namespace
 
@@ -179,7 +177,7 @@ double cellOverlap(const std::unordered_set<int64_t>& a, const std::unordered_se
 }
 
 bool eligiblePair(const SubmapRecord& q, const SubmapRecord& c, double exclude_recent_s) {
-  return c.robot != q.robot || std::fabs(c.stamp - q.stamp) >= exclude_recent_s;
+  return eligibleLoopPair(q.robot, q.stamp, c.robot, c.stamp, exclude_recent_s);
 }
 
 void scoreAcceptedLoop(const Pose& T_c_q_gt, const Pose& T_c_q_est, double overlap,
@@ -245,7 +243,7 @@ MissRow explainMiss(const Dataset& ds, const CellSets& cells,
   PoseEstimate est;
   Verification ver;
   const bool ok = matchPair(q, c, params, &est, &ver).has_value();
-  m.outcome = ok ? "accepted" : ver.reason;
+  m.outcome = ok ? "accepted" : ver.reason();
   m.hypothesis_inliers = est.inliers_T.size();
   if (est.ok) m.hypothesis_err = poseError(trueTcq(ds, i, best), est.T_c_q);
   m.ambiguity = ver.ambiguity;

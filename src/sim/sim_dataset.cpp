@@ -7,6 +7,7 @@
 #include <mutex>
 #include <sstream>
 
+#include "dtif/core/database/loop_pair.h"
 #include "dtif/io/dataset.h"
 #include "dtif/sim/sim_world.h"
 #include "dtif/sim/simulator.h"
@@ -123,7 +124,7 @@ class DatasetWriter : public SubmapSink {
         const Entry& a = entries_[i];
         const Entry& b = entries_[j];
         const bool same = a.robot == b.robot;
-        if (same && std::abs(a.stamp - b.stamp) < exclude_recent_s) continue;
+        if (!eligibleLoopPair(a.robot, a.stamp, b.robot, b.stamp, exclude_recent_s)) continue;
         ++s.pairs;
         const double o = overlap(a.cells, b.cells);
         if (o >= 0.3) {

@@ -75,7 +75,7 @@ int runRegister(const Args& args) {
   if (!loop) {
     std::cout << "result: no verified registration (screened in: " << qs.screened_in
               << ", reached pose estimation: " << qs.matched << ")"
-              << (qs.screened_in > 0 && !ver.reason.empty() ? ": " + ver.reason : std::string())
+              << (qs.screened_in > 0 && !ver.reason().empty() ? ": " + ver.reason() : std::string())
               << "\n";
     return 1;
   }

@@ -107,7 +107,7 @@ Result registerMaps(const Trunks& field, const Trunks& lidar, const LoopDetector
   PoseEstimate est;
   Verification ver;
   const auto lc = matchPair(q, c, p, &est, &ver);
-  r.reason = ver.reason;
+  r.reason = ver.reason();
   r.inliers = static_cast<int>(ver.pairs.size());
   r.rms = ver.rms_xy_m;
   const Pose& T = lc ? lc->T_c_q : est.T_c_q;

@@ -13,96 +13,9 @@
 #include "dtif/core/descriptor/descriptor.h"
 #include "dtif/core/matching/matcher.h"
 #include "dtif/core/pose/pose_estimator.h"
+#include "dtif/core/verification/verification.h"
 
 namespace dtif {
-
-/// Acceptance of a loop. False loops corrupt merged maps, so these err on rejecting.
-struct VerifierParams {
-  int min_hypothesis_inliers = 4;  ///< |I_T| from the descriptor correspondences at least
-  int min_inliers = 6;             ///< trunk pairs co-located after guided refinement at least
-  double min_inlier_weight = 8.0;  ///< sum of omega_k over I_T at least
-  double max_rms_xy_m = 0.2;       ///< RMS horizontal residual of the refined pairs at most [m]
-  double match_radius_m = 0.4;     ///< trunks this close after alignment co-locate [m]
-  /// Co-located share of trunks in the common area at least [0..1]. Dense understory hides
-  /// half of the stems from either side, so correct loops there score 0.35-0.45.
-  double min_covisible_ratio = 0.35;
-  int min_covisible = 6;  ///< co-located trunks (both directions summed) at least
-  /// Runner-up hypothesis (another yaw > 10 deg away, or another translation mode) with more
-  /// than this share of the best one's support: ambiguous (repetitive stand), rejected [0..1].
-  double max_ambiguity = 0.5;
-  /// Residual roll/pitch: submaps are gravity-aligned only up to the odometry's tilt error
-  /// (a few tenths of a degree). With at least this many refined pairs whose stem bases were
-  /// both seen, the refinement fits the tilt to their elevations; 0 keeps the paper's 4-DoF
-  /// model (Eq. 3.1).
-  int tilt_min_pairs = 4;
-  double tilt_min_spread_m = 0.0;  ///< the pairs' horizontal spread (smaller std dev) at least [m]
-  double max_tilt_deg = 2.0;       ///< a larger fitted tilt is not trusted; 4-DoF kept [deg]
-  /// Prior on the residual tilt between two submaps (std dev per axis; the front end's
-  /// levelling error, ~0.3 deg per submap): the fit is a MAP estimate that shrinks towards no
-  /// tilt when the pairs are few or close together. 0: plain least squares [deg].
-  double tilt_prior_deg = 0.5;
-  double base_sigma_m = 0.05;  ///< std dev of a seen stem base's elevation (weighs the prior) [m]
-  /// Overlap of the aligned footprints (occupied cells at trunk height, DATASET.md's measure)
-  /// at least; pairs without footprints (trunk maps) skip the check [0..1].
-  double min_overlap = 0.3;
-  /// An ambiguous hypothesis (max_ambiguity) is replaced by the best fit to all trunks of every
-  /// lattice-consistent pose (its yaw turned by 0/90/180/270 deg, each with the translations
-  /// where at least min_inliers trunks pair up); that fit is kept when the runner-up pose scores
-  /// at most this share of it. 0: ambiguous is always rejected [0..1).
-  double max_fit_ambiguity = 0.7;
-  /// A fit scores each refined pair (1 - (d / r)^2)^2 for residuals d below this r: tight, so
-  /// a wrong lattice site, paired only to the planting jitter, scores little [m].
-  double fit_score_radius_m = 0.2;
-  /// The fitted winner's median horizontal pair residual at most: a wrong site of a jittered
-  /// lattice pairs the trunks only to the planting jitter (0.15 m: median 0.18-0.21 m), the
-  /// right one to the centre noise (0.04-0.09 m in the plantation scene) [m].
-  double max_fit_median_m = 0.1;
-  /// Refined pairs whose stem bases were both seen and agree on t_z at least; with none t_z is
-  /// a guess and the loop is rejected rather than reported with a wrong elevation. One pair is
-  /// enough once bases on vegetation are flagged (TrunkExtractorParams::max_base_below_points)
-  /// and a disagreeing pair makes the elevation ambiguous (max_z_ambiguity): over 3 seeds of
-  /// the six scenes 16 more loops, none false; a lone pair's t_z gets a 0.3 m std dev.
-  int min_z_pairs = 1;
-  /// Another group of seen-base pairs agreeing on a different t_z, over the mode's pairs, at
-  /// most this; else the loop is rejected as `elevation ambiguous` (two stems on one shrub).
-  double max_z_ambiguity = 0.5;
-  /// A loop without such a pair takes t_z from the submaps' ground maps (lowest point per
-  /// cell, TrunkExtractorParams::ground_map_cell_m) when at least this many cells agree on it
-  /// within ground_window_m; 0: never, such loops are rejected as `elevation unobserved`.
-  int min_ground_cells = 100;
-  double ground_window_m = 0.15;  ///< cells within this of the mode agree [m]
-  /// The highest other difference (more than 2 ground_window_m away) over the mode, at most;
-  /// a wrong horizontal pose gives a flat histogram [0..1].
-  double max_ground_ambiguity = 0.6;
-
-  std::string validate() const;
-
-  template <class V>
-  void visit(V& v) {
-    v("min_hypothesis_inliers", min_hypothesis_inliers);
-    v("min_inliers", min_inliers);
-    v("min_inlier_weight", min_inlier_weight);
-    v("max_rms_xy_m", max_rms_xy_m);
-    v("match_radius_m", match_radius_m);
-    v("min_covisible_ratio", min_covisible_ratio);
-    v("min_covisible", min_covisible);
-    v("max_ambiguity", max_ambiguity);
-    v("tilt_min_pairs", tilt_min_pairs);
-    v("tilt_min_spread_m", tilt_min_spread_m);
-    v("max_tilt_deg", max_tilt_deg);
-    v("tilt_prior_deg", tilt_prior_deg);
-    v("base_sigma_m", base_sigma_m);
-    v("min_overlap", min_overlap);
-    v("max_fit_ambiguity", max_fit_ambiguity);
-    v("max_fit_median_m", max_fit_median_m);
-    v("fit_score_radius_m", fit_score_radius_m);
-    v("min_z_pairs", min_z_pairs);
-    v("max_z_ambiguity", max_z_ambiguity);
-    v("min_ground_cells", min_ground_cells);
-    v("ground_window_m", ground_window_m);
-    v("max_ground_ambiguity", max_ground_ambiguity);
-  }
-};
 
 struct DatabaseParams {
   double exclude_recent_s = 30.0;  ///< same-robot submaps closer in time are not loops [s]
@@ -166,37 +79,6 @@ struct QueryStats {
   size_t verified = 0;              ///< candidates that passed verification
   std::vector<int64_t> candidates;  ///< submap ids of the screened candidates, best first
 };
-
-/// Outcome of verifying one pose hypothesis (exposed for tests and diagnostics).
-struct Verification {
-  bool accepted = false;
-  Pose T_c_q = Pose::Identity();           ///< pose after guided refinement (the one verified)
-  std::vector<std::pair<int, int>> pairs;  ///< mutual nearest trunk pairs under T_c_q
-  double rms_xy_m = 0.0;                   ///< RMS horizontal residual of pairs [m]
-  double rms_z_m = 0.0;                    ///< RMS elevation residual of the z pairs [m]
-  int z_pairs = 0;  ///< pairs with both stem bases seen that agree on t_z (0: t_z unobserved)
-  bool tilt_fitted = false;      ///< residual roll/pitch estimated from those pairs
-  double z_ambiguity = -1.0;     ///< runner-up / mode group of seen-base pairs; -1: none seen
-  int ground_cells = 0;          ///< ground-map cells that fixed t_z (0: not used)
-  double ground_ambiguity = -1;  ///< runner-up / mode of the ground-map differences; -1: none
-  double ground_sigma_m = 0.0;   ///< std dev of the agreeing ground-map differences [m]
-  double roll_var = 0.0;         ///< when fitted: posterior variance of the roll [rad^2]
-  double pitch_var = 0.0;        ///< when fitted: posterior variance of the pitch [rad^2]
-  double overlap = -1.0;         ///< overlap of the aligned footprints; -1 when not measured
-  double fit_ambiguity = -1.0;   ///< runner-up / best lattice fit; -1 when not needed
-  std::string reason;            ///< why rejected (empty when accepted)
-  double covisible_ratio = 0.0;  ///< co-located share of trunks inside the other's hull
-  int covisible = 0;             ///< co-located trunks (both directions)
-  double ambiguity = 0.0;        ///< runner-up / best support (max of yaw and translation)
-  double score = 0.0;            ///< covisible_ratio x inlier weight share
-};
-
-/// Verifies T_c_q (from estimatePose on corrs) between query q and candidate c. The pose is
-/// first refined on every mutually nearest trunk pair (guided matching): the descriptor
-/// correspondences give the hypothesis, all co-located trunks then fix it more precisely.
-Verification verifyLoop(const Descriptor& q, const Descriptor& c,
-                        const std::vector<Correspondence>& corrs, const PoseEstimate& est,
-                        const VerifierParams& params);
 
 /// Matches one pair end to end (correspondences, pose, verification), without the database.
 /// Returns the loop when verified; `est`/`ver` (optional) receive the intermediate results.

@@ -1,0 +1,300 @@
+// Lattice search for repetitive stands (see lattice.h).
+#include "dtif/core/verification/lattice.h"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
+#include "dtif/core/pose/rigid2d.h"
+
+namespace dtif {
+namespace {
+
+using P2 = Eigen::Vector2d;
+
+/// Votes of every (query, candidate) trunk pair for a translation, in square bins with one
+/// empty bin of margin on each side (the 3 x 3 neighbourhoods stay inside the array).
+struct TranslationVotes {
+  static constexpr double kBin = 0.5;  ///< bin side [m]
+  double x0 = 0.0, y0 = 0.0;           ///< lower corner [m]
+  size_t w = 0, h = 0;                 ///< bins per row, rows
+  std::vector<int> n;                  ///< votes per bin
+  std::vector<Eigen::Vector2d> sum;    ///< sum of the voted translations per bin [m]
+};
+
+/// Votes c_j - rq_i; false when the bins would exceed a bound on memory.
+bool voteTranslations(const std::vector<Eigen::Vector2d>& rq, const Descriptor& c,
+                      TranslationVotes* v) {
+  constexpr double kBin = TranslationVotes::kBin;
+  constexpr size_t kMaxBins = size_t{1} << 22;  // 1 km x 1 km of translations: a bound on memory
+  // The votes' bounds: candidate extent minus rotated query extent.
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  Eigen::Vector2d c_lo(kInf, kInf), q_lo(kInf, kInf);
+  Eigen::Vector2d c_hi = -c_lo, q_hi = -q_lo;
+  for (const TrunkLandmark& b : c.trunks) {
+    c_lo = c_lo.cwiseMin(Eigen::Vector2d(b.x, b.y));
+    c_hi = c_hi.cwiseMax(Eigen::Vector2d(b.x, b.y));
+  }
+  for (const Eigen::Vector2d& p : rq) {
+    q_lo = q_lo.cwiseMin(p);
+    q_hi = q_hi.cwiseMax(p);
+  }
+  const Eigen::Vector2d lo = c_lo - q_hi, hi = c_hi - q_lo;
+  const double x0 = std::floor(lo.x() / kBin) * kBin - kBin,
+               y0 = std::floor(lo.y() / kBin) * kBin - kBin;
+  const size_t w = static_cast<size_t>((hi.x() - x0) / kBin) + 2;
+  const size_t h = static_cast<size_t>((hi.y() - y0) / kBin) + 2;
+  if (w * h > kMaxBins) return false;
+  v->x0 = x0, v->y0 = y0, v->w = w, v->h = h;
+  v->n.assign(w * h, 0);
+  v->sum.assign(w * h, Eigen::Vector2d::Zero());
+  for (const TrunkLandmark& b : c.trunks) {
+    for (const Eigen::Vector2d& p : rq) {
+      const Eigen::Vector2d t = Eigen::Vector2d(b.x, b.y) - p;
+      const size_t k =
+          static_cast<size_t>((t.y() - y0) / kBin) * w + static_cast<size_t>((t.x() - x0) / kBin);
+      ++v->n[k];
+      v->sum[k] += t;
+    }
+  }
+  return true;
+}
+
+/// Votes in each bin's 3 x 3 neighbourhood (0 on the margin); `top` receives the highest.
+std::vector<int> neighbourhoodVotes(const TranslationVotes& v, int* top) {
+  const size_t w = v.w, h = v.h;
+  std::vector<int> around(w * h, 0);
+  *top = 0;
+  for (size_t y = 1; y + 1 < h; ++y) {
+    for (size_t x = 1; x + 1 < w; ++x) {
+      int a = 0;
+      for (size_t yy = y - 1; yy <= y + 1; ++yy)
+        for (size_t xx = x - 1; xx <= x + 1; ++xx) a += v.n[yy * w + xx];
+      around[y * w + x] = a;
+      *top = std::max(*top, a);
+    }
+  }
+  return around;
+}
+
+/// (votes, bin) of the local maxima of `around` with at least floor_votes (ties: first bin).
+std::vector<std::pair<int, size_t>> localMaxima(const std::vector<int>& around, size_t w, size_t h,
+                                                int floor_votes) {
+  std::vector<std::pair<int, size_t>> peaks;
+  for (size_t y = 1; y + 1 < h; ++y) {
+    for (size_t x = 1; x + 1 < w; ++x) {
+      const size_t k = y * w + x;
+      if (around[k] < floor_votes) continue;
+      bool peak = true;
+      for (size_t yy = y - 1; yy <= y + 1 && peak; ++yy) {
+        for (size_t xx = x - 1; xx <= x + 1 && peak; ++xx) {
+          const size_t m = yy * w + xx;
+          if (m != k && (around[m] > around[k] || (around[m] == around[k] && m < k))) peak = false;
+        }
+      }
+      if (peak) peaks.emplace_back(around[k], k);
+    }
+  }
+  return peaks;
+}
+
+/// Candidate trunk centres in a dense grid of square cells, for nearest-trunk lookups within a
+/// cell side.
+class TrunkGrid {
+ public:
+  TrunkGrid(const Descriptor& c, double cell) : cell_(cell) {
+    Eigen::Vector2d lo(std::numeric_limits<double>::infinity(),
+                       std::numeric_limits<double>::infinity());
+    for (const TrunkLandmark& t : c.trunks) {
+      xy_.emplace_back(t.x, t.y);
+      lo = lo.cwiseMin(xy_.back());
+    }
+    if (xy_.empty()) return;
+    origin_ = lo - Eigen::Vector2d(cell, cell);  // a margin cell below
+    int64_t w = 0, h = 0;
+    for (const Eigen::Vector2d& p : xy_) {
+      w = std::max(w, cellOf(p.x() - origin_.x()) + 2);
+      h = std::max(h, cellOf(p.y() - origin_.y()) + 2);
+    }
+    w_ = w, h_ = h;
+    head_.assign(static_cast<size_t>(w_ * h_), -1);
+    next_.assign(xy_.size(), -1);
+    for (size_t j = 0; j < xy_.size(); ++j) {
+      const int64_t k = cellOf(xy_[j].y() - origin_.y()) * w_ + cellOf(xy_[j].x() - origin_.x());
+      next_[j] = head_[k];
+      head_[k] = static_cast<int>(j);
+    }
+  }
+  /// Squared distance from p to the nearest trunk within radius (<= the cell side); -1: none.
+  double nearest2(const Eigen::Vector2d& p, double radius, int* index) const {
+    *index = -1;
+    if (xy_.empty()) return -1.0;
+    const int64_t ix = cellOf(p.x() - origin_.x()), iy = cellOf(p.y() - origin_.y());
+    double best = radius * radius;
+    for (int64_t y = std::max<int64_t>(iy - 1, 0); y <= std::min(iy + 1, h_ - 1); ++y) {
+      for (int64_t x = std::max<int64_t>(ix - 1, 0); x <= std::min(ix + 1, w_ - 1); ++x) {
+        for (int j = head_[y * w_ + x]; j >= 0; j = next_[j]) {
+          const double d = (xy_[j] - p).squaredNorm();
+          if (d <= best) best = d, *index = j;
+        }
+      }
+    }
+    return *index >= 0 ? best : -1.0;
+  }
+  const Eigen::Vector2d& at(int j) const { return xy_[j]; }
+
+ private:
+  int64_t cellOf(double v) const { return static_cast<int64_t>(std::floor(v / cell_)); }
+  double cell_;
+  Eigen::Vector2d origin_ = Eigen::Vector2d::Zero();
+  int64_t w_ = 0, h_ = 0;
+  std::vector<Eigen::Vector2d> xy_;
+  std::vector<int> head_, next_;  // per cell its first trunk, per trunk the next in its cell
+};
+
+/// A cheap fitPose for ranking many lattice poses: two rounds of 2-D Procrustes on each query
+/// trunk's nearest candidate trunk within `radius` (not mutual), then the same Tukey score; on
+/// `sample`, an even subset of the query trunks.
+std::pair<double, Pose> quickFit(const std::vector<Eigen::Vector2d>& sample, const TrunkGrid& grid,
+                                 Pose T, double radius, double score_radius) {
+  double score = 0.0;
+  std::vector<std::pair<P2, P2>> pairs;
+  for (int it = 0; it <= 2; ++it) {
+    pairs.clear();
+    score = 0.0;
+    for (const Eigen::Vector2d& t : sample) {
+      const Eigen::Vector2d p = (T * Eigen::Vector3d(t.x(), t.y(), 0.0)).head<2>();
+      int j = -1;
+      const double d2 = grid.nearest2(p, radius, &j);
+      if (j < 0) continue;
+      const double u = d2 / (score_radius * score_radius);
+      if (u < 1.0) score += (1.0 - u) * (1.0 - u);
+      pairs.emplace_back(t, grid.at(j));
+    }
+    if (it == 2 || pairs.size() < 2) break;
+    T = rigid2d(pairs, T.translation().z());
+  }
+  return {score, T};
+}
+
+/// The best poses of every lattice-consistent candidate (T0's yaw turned by 0, 90, 180 and
+/// 270 deg, each with its translationPeaks), ranked by quickFit on an even sample of the query
+/// trunks: the best `full` of them, (score, pose), best first.
+std::vector<std::pair<double, Pose>> rankLatticePoses(const Descriptor& q, const Descriptor& c,
+                                                      const Pose& T0, const VerifierParams& params,
+                                                      size_t* full) {
+  constexpr size_t kPeaksPerTurn = 2000;  // a bound on the work, far above a submap's sites
+  constexpr size_t kFullFits = 8;
+  constexpr size_t kSample = 80;
+  const double radius = params.match_radius_m;
+  const double score_radius = params.fit_score_radius_m;
+  const double yaw0 = std::atan2(T0.linear()(1, 0), T0.linear()(0, 0));
+  const TrunkGrid grid(c, radius);
+  std::vector<Eigen::Vector2d> sample;  // at most kSample query trunks, evenly over the list
+  const size_t stride = (q.trunks.size() + kSample - 1) / kSample;
+  for (size_t i = 0; i < q.trunks.size(); i += stride)
+    sample.emplace_back(q.trunks[i].x, q.trunks[i].y);
+  std::vector<std::pair<double, Pose>> ranked;
+  for (int turn = 0; turn < 4; ++turn) {
+    const double yaw = yaw0 + turn * M_PI / 2.0;
+    const Eigen::Matrix2d R = Eigen::Rotation2Dd(yaw).toRotationMatrix();
+    for (const Eigen::Vector2d& t : translationPeaks(q, c, R, params.min_inliers, kPeaksPerTurn)) {
+      Pose T = Pose::Identity();
+      T.linear() = rotZ(yaw);
+      T.translation() = Eigen::Vector3d(t.x(), t.y(), T0.translation().z());
+      ranked.push_back(quickFit(sample, grid, T, radius, score_radius));
+    }
+  }
+  *full = std::min(kFullFits, ranked.size());
+  std::partial_sort(ranked.begin(), ranked.begin() + *full, ranked.end(),
+                    [](const auto& x, const auto& y) { return x.first > y.first; });
+  return ranked;
+}
+
+}  // namespace
+
+Fit fitPose(const Descriptor& q, const Descriptor& c, const Pose& T0, double radius,
+            double score_radius) {
+  Fit f;
+  const Refined r = guidedRefine(q, c, T0, radius);
+  f.T = r.T;
+  f.pairs = r.pairs;
+  std::vector<double> residual;
+  for (const auto& [i, j] : r.pairs) {
+    const Eigen::Vector2d d = (r.T * Eigen::Vector3d(q.trunks[i].x, q.trunks[i].y, 0.0)).head<2>() -
+                              Eigen::Vector2d(c.trunks[j].x, c.trunks[j].y);
+    const double u = d.squaredNorm() / (score_radius * score_radius);
+    if (u < 1.0) f.score += (1.0 - u) * (1.0 - u);
+    residual.push_back(d.norm());
+  }
+  if (!residual.empty()) {
+    const auto mid = residual.begin() + residual.size() / 2;
+    std::nth_element(residual.begin(), mid, residual.end());
+    f.median_xy = *mid;
+  }
+  return f;
+}
+
+std::vector<Eigen::Vector2d> translationPeaks(const Descriptor& q, const Descriptor& c,
+                                              const Eigen::Matrix2d& R, int min_votes,
+                                              size_t max_peaks) {
+  std::vector<Eigen::Vector2d> rq;
+  for (const TrunkLandmark& a : q.trunks) rq.push_back(R * Eigen::Vector2d(a.x, a.y));
+  if (rq.empty() || c.trunks.empty()) return {};
+  TranslationVotes v;
+  if (!voteTranslations(rq, c, &v)) return {};
+  int top = 0;
+  const std::vector<int> around = neighbourhoodVotes(v, &top);
+  // A site pairing under a third of the trunks that the best-paired site pairs cannot beat it
+  // by the margin that verification demands (max_fit_ambiguity): a true site scores up to ~0.9
+  // per pair, a wrong one ~0.2 (fit_score_radius_m 0.2 m, 0.15 m jitter).
+  const int floor_votes = std::max(min_votes, top / 3);
+  std::vector<std::pair<int, size_t>> peaks = localMaxima(around, v.w, v.h, floor_votes);
+  std::stable_sort(peaks.begin(), peaks.end(),
+                   [](const auto& u, const auto& w) { return u.first > w.first; });
+  if (peaks.size() > max_peaks) peaks.resize(max_peaks);
+  const size_t w = v.w;
+  std::vector<Eigen::Vector2d> out;
+  for (const auto& [votes, k] : peaks) {
+    Eigen::Vector2d t = Eigen::Vector2d::Zero();
+    for (size_t yy = k / w - 1; yy <= k / w + 1; ++yy)
+      for (size_t xx = k % w - 1; xx <= k % w + 1; ++xx) t += v.sum[yy * w + xx];
+    out.push_back(t / static_cast<double>(votes));
+  }
+  return out;
+}
+
+std::pair<Fit, double> resolveByFit(const Descriptor& q, const Descriptor& c, const Pose& T0,
+                                    const VerifierParams& params) {
+  const double radius = params.match_radius_m;
+  const double score_radius = params.fit_score_radius_m;
+  Eigen::Vector2d centroid = Eigen::Vector2d::Zero();
+  for (const TrunkLandmark& t : q.trunks) centroid += Eigen::Vector2d(t.x, t.y);
+  centroid /= static_cast<double>(q.trunks.size());
+  // Every lattice pose ranked by quickFit; the best few are fitted exactly.
+  size_t full = 0;
+  const std::vector<std::pair<double, Pose>> ranked = rankLatticePoses(q, c, T0, params, &full);
+  std::vector<Fit> fits{fitPose(q, c, T0, radius, score_radius)};
+  for (size_t k = 0; k < full; ++k)
+    fits.push_back(fitPose(q, c, ranked[k].second, radius, score_radius));
+  std::stable_sort(fits.begin(), fits.end(),
+                   [](const Fit& x, const Fit& y) { return x.score > y.score; });
+  const Fit& best = fits.front();
+  // The runner-up must be another pose, not the winner reached from a second start.
+  double runner = 0.0;
+  for (size_t i = 1; i < fits.size(); ++i) {
+    const Pose D = best.T.inverse() * fits[i].T;
+    const Eigen::Vector3d p = fits[i].T * Eigen::Vector3d(centroid.x(), centroid.y(), 0.0);
+    const Eigen::Vector3d pb = best.T * Eigen::Vector3d(centroid.x(), centroid.y(), 0.0);
+    const double dyaw = std::abs(std::atan2(D.linear()(1, 0), D.linear()(0, 0)));
+    if ((p - pb).head<2>().norm() > radius || dyaw > 5.0 * M_PI / 180.0) {
+      runner = fits[i].score;
+      break;
+    }
+  }
+  return {best, best.score > 0.0 ? runner / best.score : 1.0};
+}
+
+}  // namespace dtif
