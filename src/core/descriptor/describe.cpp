@@ -4,14 +4,9 @@
 #include <chrono>
 #include <utility>
 
+#include "dtif/core/timing.h"
+
 namespace dtif {
-namespace {
-
-double msSince(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-}
-
-}  // namespace
 
 Descriptor describeCloud(const Cloud& cloud_S, const SubmapKey& key,
                          const TrunkExtractorParams& extractor_params,
