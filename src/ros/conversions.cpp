@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
-#include <limits>
-#include <set>
+
+#include "dtif/core/descriptor/validation.h"
 
 namespace dtif {
 namespace ros_glue {
@@ -97,67 +97,38 @@ dtif::TrunkDescriptor toMsg(const Descriptor& d, const Pose& T_O_S, const std::s
   return m;
 }
 
-bool fromMsg(const dtif::TrunkDescriptor& msg, Descriptor* d, Pose* T_O_S, std::string* error) {
+bool fromMsg(const dtif::TrunkDescriptor& msg, const DescriptorParams& params, Descriptor* d,
+             Pose* T_O_S, std::string* error) {
   Descriptor out;
   out.robot = msg.robot;
   out.submap_id = msg.submap_id;
   out.stamp = msg.header.stamp.toSec();
-  if (msg.trunks.size() > std::numeric_limits<uint16_t>::max()) {
-    return fail(error, "too many trunks for uint16 face indices");
-  }
   out.trunks.reserve(msg.trunks.size());
-  for (size_t i = 0; i < msg.trunks.size(); ++i) {
-    const dtif::Trunk& t = msg.trunks[i];
-    if (!finite(t.x) || !finite(t.y) || !finite(t.z) || !finite(t.r) || t.r < 0.0f) {
-      return fail(error, "trunk " + std::to_string(i) + " is not finite or has a negative radius");
-    }
+  for (const dtif::Trunk& t : msg.trunks) {
     out.trunks.push_back(TrunkLandmark{t.x, t.y, t.z, t.r, t.base_seen != 0});
   }
   if (msg.faces.size() % 3 != 0) return fail(error, "faces is not a list of triples");
-  const size_t n = out.trunks.size();
-  out.triangles.reserve(msg.faces.size() / 3);
-  for (size_t f = 0; f < msg.faces.size(); f += 3) {
-    const int a = msg.faces[f], b = msg.faces[f + 1], c = msg.faces[f + 2];
-    if (static_cast<size_t>(a) >= n || static_cast<size_t>(b) >= n || static_cast<size_t>(c) >= n) {
-      return fail(error, "face " + std::to_string(f / 3) + " indexes a missing trunk");
-    }
-    if (a == b || b == c || a == c) {
-      return fail(error, "face " + std::to_string(f / 3) + " repeats a vertex");
-    }
-    out.triangles.push_back(makeCanonicalTriangle(out.trunks, a, b, c));
-  }
-  // buildDescriptor's order: ascending longest edge (the matcher's length index relies on it).
-  std::stable_sort(out.triangles.begin(), out.triangles.end(),
-                   [](const Triangle& x, const Triangle& y) { return x.len[0] < y.len[0]; });
-  for (float v : msg.edge_hist) {
-    if (!std::isfinite(v) || v < 0.0f) return fail(error, "edge histogram is not finite");
-  }
-  for (float v : msg.radius_hist) {
-    if (!std::isfinite(v) || v < 0.0f) return fail(error, "radius histogram is not finite");
+  out.triangles.resize(msg.faces.size() / 3);
+  for (size_t f = 0; f < out.triangles.size(); ++f) {
+    for (int k = 0; k < 3; ++k) out.triangles[f].v[k] = msg.faces[3 * f + k];
   }
   out.edge_hist = msg.edge_hist;
   out.radius_hist = msg.radius_hist;
   out.valid = msg.valid;
   out.invalid_reason = msg.invalid_reason;
-  if (!std::isfinite(msg.footprint_cell_m) || msg.footprint_cell_m < 0.0f) {
-    return fail(error, "footprint_cell_m is not finite or negative");
-  }
-  if (msg.footprint_cell_m > 0.0f) {
+  if (msg.footprint_cell_m != 0.0f) {  // 0: none; a bad one is kept for the check to name
     out.footprint.cell_m = msg.footprint_cell_m;
     out.footprint.x0 = msg.footprint_x0;
     out.footprint.y0 = msg.footprint_y0;
     out.footprint.width = msg.footprint_width;
     out.footprint.height = msg.footprint_height;
     out.footprint.bits = msg.footprint_bits;
-    if (!out.footprint.wellFormed()) {
-      return fail(error, "footprint bitmap does not match its width x height");
-    }
   }
-  try {
-    out.ground_map = decodeGroundMap(msg.ground_map.data(), msg.ground_map.size());
-  } catch (const std::exception& e) {
-    return fail(error, std::string("ground_map: ") + e.what());
-  }
+  std::string problem =
+      decodeReceivedGroundMap(msg.ground_map.data(), msg.ground_map.size(), &out.ground_map);
+  // The same checks, order and downgrade as decodeDescriptor.
+  if (problem.empty()) problem = acceptReceivedDescriptor(&out, params);
+  if (!problem.empty()) return fail(error, problem);
   Pose T = Pose::Identity();
   std::string pose_error;
   if (!fromMsg(msg.odom_pose, &T, &pose_error)) return fail(error, "odom_pose: " + pose_error);

@@ -17,11 +17,11 @@
 #include <mutex>
 #include <optional>
 #include <pluginlib/class_list_macros.hpp>
-#include <queue>
-#include <set>
 #include <thread>
 
 #include "dtif/core/database/loop_detector.h"
+#include "dtif/core/database/robot_links.h"
+#include "dtif/core/descriptor/validation.h"
 #include "dtif/io/dataset.h"
 #include "dtif/ros/conversions.h"
 #include "dtif/ros/markers.h"
@@ -33,7 +33,7 @@ namespace dtif {
 
 /// Thread-safety: descriptor callbacks only enqueue (queue_mutex_). One worker thread queries
 /// and inserts; it and the service callbacks serialise on db_mutex_ (the LoopDetector is not
-/// thread-safe). The TF timer reads the link table under db_mutex_. Worker joined on destruction.
+/// thread-safe). The TF timer reads links_ under db_mutex_. Worker joined on destruction.
 class LoopClosureNodelet : public nodelet::Nodelet {
  public:
   ~LoopClosureNodelet() override {
@@ -56,41 +56,12 @@ class LoopClosureNodelet : public nodelet::Nodelet {
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
-    LoopDetectorParams det;
-    try {
-      ros_glue::ParamReader reader(pnh);
-      reader.readSection("", &node_);
-      reader.readSection("matcher", &det.matcher);
-      reader.readSection("pose", &det.pose);
-      reader.readSection("verification", &det.verification);
-      reader.readSection("database", &det.database);
-      reader.checkNoUnknownKeys();
-      std::string problems = det.validate();
-      if (node_.robots.empty()) problems += "robots: list at least one robot\n";
-      if (node_.queue_size < 1) problems += "queue_size must be >= 1\n";
-      if (!(node_.tf_rate_hz >= 0.0)) problems += "tf_rate_hz must be >= 0\n";
-      if (!(node_.marker_period_s >= 0.0)) problems += "marker_period_s must be >= 0\n";
-      if (!problems.empty()) throw ParamError(pnh.getNamespace() + ": " + problems);
-    } catch (const ParamError& e) {
-      NODELET_FATAL("%s", e.what());
-      throw;
-    }
-    detector_ = std::make_unique<LoopDetector>(det);
-    if (!node_.loop_log.empty()) {
-      loop_log_.open(node_.loop_log, std::ios::trunc);
-      if (!loop_log_) {
-        NODELET_FATAL("loop_log: cannot open '%s' for writing", node_.loop_log.c_str());
-        throw ParamError("loop_log: cannot open " + node_.loop_log);
-      }
-      loop_log_ << loopLogHeader() << std::endl;
-    }
-    if (!node_.database_file.empty()) {
-      std::ifstream probe(node_.database_file);
-      if (probe.good()) {
-        std::string message;
-        loadDatabase(node_.database_file, &message);
-        NODELET_INFO("%s", message.c_str());
-      }
+    detector_ = std::make_unique<LoopDetector>(readParams(pnh));
+    openLoopLog();
+    if (!node_.database_file.empty() && std::ifstream(node_.database_file).good()) {
+      std::string message;
+      loadDatabase(node_.database_file, &message);
+      NODELET_INFO("%s", message.c_str());
     }
 
     loop_pub_ = nh.advertise<dtif::LoopClosure>("loop_closures", 50);
@@ -115,6 +86,41 @@ class LoopClosureNodelet : public nodelet::Nodelet {
                              [this](const ros::WallTimerEvent&) { republishMarkers(); });
     }
     worker_ = std::thread(&LoopClosureNodelet::work, this);
+  }
+
+  // node_ and the detector's params from ~ (strict: unknown keys and bad values are fatal).
+  LoopDetectorParams readParams(ros::NodeHandle& pnh) {
+    LoopDetectorParams det;
+    try {
+      ros_glue::ParamReader reader(pnh);
+      reader.readSection("", &node_);
+      reader.readSection("matcher", &det.matcher);
+      reader.readSection("pose", &det.pose);
+      reader.readSection("verification", &det.verification);
+      reader.readSection("database", &det.database);
+      reader.checkNoUnknownKeys();
+      std::string problems = det.validate();
+      if (node_.robots.empty()) problems += "robots: list at least one robot\n";
+      if (node_.queue_size < 1) problems += "queue_size must be >= 1\n";
+      if (!(node_.tf_rate_hz >= 0.0)) problems += "tf_rate_hz must be >= 0\n";
+      if (!(node_.marker_period_s >= 0.0)) problems += "marker_period_s must be >= 0\n";
+      if (!problems.empty()) throw ParamError(pnh.getNamespace() + ": " + problems);
+    } catch (const ParamError& e) {
+      NODELET_FATAL("%s", e.what());
+      throw;
+    }
+    return det;
+  }
+
+  // ~loop_log, when set: truncated, header first; failing to open it is fatal.
+  void openLoopLog() {
+    if (node_.loop_log.empty()) return;
+    loop_log_.open(node_.loop_log, std::ios::trunc);
+    if (!loop_log_) {
+      NODELET_FATAL("loop_log: cannot open '%s' for writing", node_.loop_log.c_str());
+      throw ParamError("loop_log: cannot open " + node_.loop_log);
+    }
+    loop_log_ << loopLogHeader() << std::endl;
   }
 
   // The latest loop's markers again (timer thread): its query frame may have been linked to the
@@ -156,92 +162,113 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     }
   }
 
-  void process(const dtif::TrunkDescriptor& msg) {
-    auto d = std::make_shared<Descriptor>();
-    Meta meta;
-    std::string error;
-    if (!ros_glue::fromMsg(msg, d.get(), &meta.T_O_S, &error)) {
-      NODELET_WARN_THROTTLE(5.0, "descriptor %s/%ld: %s: dropped", msg.robot.c_str(),
-                            static_cast<long>(msg.submap_id), error.c_str());
-      return;
-    }
-    meta.odom_frame = msg.header.frame_id;
-    if (!d->valid) {
-      NODELET_DEBUG("descriptor %s/%ld is invalid (%s): not queried, not inserted",
-                    d->robot.c_str(), static_cast<long>(d->submap_id), d->invalid_reason.c_str());
-      return;
-    }
-    if (d->trunks.size() < 3 || d->triangles.empty()) {
-      NODELET_WARN_THROTTLE(5.0, "descriptor %s/%ld has %zu trunks and %zu faces: dropped",
-                            d->robot.c_str(), static_cast<long>(d->submap_id), d->trunks.size(),
-                            d->triangles.size());
-      return;
-    }
+  // What one query found (filled under db_mutex_, used after it).
+  struct QueryResult {
     std::optional<Loop> lc;
     double t_loop_ms = 0.0;
     std::shared_ptr<const Descriptor> candidate;
     std::optional<Meta> candidate_meta;
-    {
-      std::lock_guard<std::mutex> lock(db_mutex_);
-      const Key key(d->robot, d->submap_id);
-      if (index_.count(key)) {
-        NODELET_WARN_THROTTLE(5.0, "descriptor %s/%ld already in the database: dropped",
-                              d->robot.c_str(), static_cast<long>(d->submap_id));
-        return;
-      }
-      const auto t0 = std::chrono::steady_clock::now();
-      try {
-        lc = detector_->query(*d);
-        t_loop_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
-                        .count();
-      } catch (const std::exception& e) {
-        NODELET_ERROR_THROTTLE(5.0, "query of %s/%ld failed: %s", d->robot.c_str(),
-                               static_cast<long>(d->submap_id), e.what());
-      }
-      if (lc) {
-        auto it = index_.find(Key(lc->candidate_robot, lc->candidate_id));
-        if (it != index_.end()) candidate = it->second;
-        auto m = meta_.find(Key(lc->candidate_robot, lc->candidate_id));
-        if (m != meta_.end()) candidate_meta = m->second;
-      }
-      if (detector_->insert(d)) {
-        index_[key] = d;
-        meta_[key] = meta;
-      }
-      if (lc && candidate_meta && lc->candidate_robot != lc->query_robot &&
-          !candidate_meta->odom_frame.empty() && !meta.odom_frame.empty() &&
-          candidate_meta->odom_frame != meta.odom_frame) {
-        // T_Oc_Oq = T_Oc_Sc * T_c_q * inverse(T_Oq_Sq): the latest accepted estimate wins.
-        const Pose T_Oc_Oq = candidate_meta->T_O_S * lc->T_c_q * meta.T_O_S.inverse();
-        links_[{candidate_meta->odom_frame, meta.odom_frame}] = T_Oc_Oq;
-        links_.erase({meta.odom_frame, candidate_meta->odom_frame});
-        robot_frames_.insert(candidate_meta->odom_frame);
-        robot_frames_.insert(meta.odom_frame);
-      }
-    }
-    if (!lc) {
-      logQuery(msg, *d, std::nullopt, nullptr, t_loop_ms);
+  };
+
+  // Worker thread: convert, query, insert, then publish what was found.
+  void process(const dtif::TrunkDescriptor& msg) {
+    auto d = std::make_shared<Descriptor>();
+    Meta meta;
+    if (!convert(msg, d.get(), &meta)) return;
+    QueryResult q;
+    if (!queryAndInsert(d, meta, &q)) return;
+    if (!q.lc) {
+      logQuery(msg, *d, std::nullopt, nullptr, q.t_loop_ms);
       return;
     }
-    boost::shared_ptr<dtif::LoopClosure> out(new dtif::LoopClosure(ros_glue::toMsg(*lc)));
-    out->header.stamp = msg.header.stamp;
-    out->header.frame_id = candidate_meta ? candidate_meta->odom_frame : std::string();
-    loop_pub_.publish(boost::shared_ptr<const dtif::LoopClosure>(out));
-    logQuery(msg, *d, lc, candidate.get(), t_loop_ms);
-    NODELET_INFO("loop %s/%ld -> %s/%ld: %d inliers, score %.2f", lc->query_robot.c_str(),
-                 static_cast<long>(lc->query_id), lc->candidate_robot.c_str(),
-                 static_cast<long>(lc->candidate_id), lc->inliers, lc->score);
-    if (candidate) {
-      // Stamp 0: rviz uses the latest transform between odometry frames (as for trunks).
-      visualization_msgs::MarkerArray markers =
-          ros_glue::loopMarkers(*d, *candidate, *lc, meta.T_O_S, meta.odom_frame, ros::Time());
-      if (marker_pub_.getNumSubscribers() > 0) {
-        marker_pub_.publish(boost::shared_ptr<const visualization_msgs::MarkerArray>(
-            new visualization_msgs::MarkerArray(markers)));
-      }
-      latest_loop_markers_.add(std::move(markers));
-    }
+    publishLoop(msg, *d, meta, q);
     if (node_.publish_tf && node_.tf_rate_hz <= 0.0) publishTf();
+  }
+
+  // The message as a retrievable descriptor, or false (logged) when it is malformed or invalid.
+  bool convert(const dtif::TrunkDescriptor& msg, Descriptor* d, Meta* meta) {
+    std::string error;
+    if (!ros_glue::fromMsg(msg, receiver_params_, d, &meta->T_O_S, &error)) {
+      NODELET_WARN_THROTTLE(5.0, "descriptor %s/%ld: %s: dropped", msg.robot.c_str(),
+                            static_cast<long>(msg.submap_id), error.c_str());
+      return false;
+    }
+    meta->odom_frame = msg.header.frame_id;
+    if (!d->valid) {
+      NODELET_DEBUG("descriptor %s/%ld is invalid (%s): not queried, not inserted",
+                    d->robot.c_str(), static_cast<long>(d->submap_id), d->invalid_reason.c_str());
+      return false;
+    }
+    return true;
+  }
+
+  // Queries the database, then inserts d and links the odometry frames of an inter-robot loop.
+  // False (logged) when d is already in the database.
+  bool queryAndInsert(const std::shared_ptr<const Descriptor>& d, const Meta& meta,
+                      QueryResult* q) {
+    std::lock_guard<std::mutex> lock(db_mutex_);
+    const Key key(d->robot, d->submap_id);
+    if (index_.count(key)) {
+      NODELET_WARN_THROTTLE(5.0, "descriptor %s/%ld already in the database: dropped",
+                            d->robot.c_str(), static_cast<long>(d->submap_id));
+      return false;
+    }
+    const auto t0 = std::chrono::steady_clock::now();
+    try {
+      q->lc = detector_->query(*d);
+      q->t_loop_ms =
+          std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    } catch (const std::exception& e) {
+      NODELET_ERROR_THROTTLE(5.0, "query of %s/%ld failed: %s", d->robot.c_str(),
+                             static_cast<long>(d->submap_id), e.what());
+    }
+    if (q->lc) {
+      const Key c(q->lc->candidate_robot, q->lc->candidate_id);
+      auto it = index_.find(c);
+      if (it != index_.end()) q->candidate = it->second;
+      auto m = meta_.find(c);
+      if (m != meta_.end()) q->candidate_meta = m->second;
+    }
+    if (detector_->insert(d)) {
+      index_[key] = d;
+      meta_[key] = meta;
+    }
+    if (q->lc && q->candidate_meta) linkOdometryFrames(*q->lc, *q->candidate_meta, meta);
+    return true;
+  }
+
+  // An inter-robot loop between two known, different odometry frames links them (db_mutex_).
+  void linkOdometryFrames(const Loop& lc, const Meta& candidate, const Meta& query) {
+    if (lc.candidate_robot == lc.query_robot || candidate.odom_frame.empty() ||
+        query.odom_frame.empty() || candidate.odom_frame == query.odom_frame) {
+      return;
+    }
+    // T_Oc_Oq = T_Oc_Sc * T_c_q * inverse(T_Oq_Sq): the latest accepted estimate wins.
+    const Pose T_Oc_Oq = candidate.T_O_S * lc.T_c_q * query.T_O_S.inverse();
+    links_.add(candidate.odom_frame, query.odom_frame, T_Oc_Oq);
+  }
+
+  // The loop message, its log row and its markers (worker thread).
+  void publishLoop(const dtif::TrunkDescriptor& msg, const Descriptor& d, const Meta& meta,
+                   const QueryResult& q) {
+    const Loop& lc = *q.lc;
+    boost::shared_ptr<dtif::LoopClosure> out(new dtif::LoopClosure(ros_glue::toMsg(lc)));
+    out->header.stamp = msg.header.stamp;
+    out->header.frame_id = q.candidate_meta ? q.candidate_meta->odom_frame : std::string();
+    loop_pub_.publish(boost::shared_ptr<const dtif::LoopClosure>(out));
+    logQuery(msg, d, lc, q.candidate.get(), q.t_loop_ms);
+    NODELET_INFO("loop %s/%ld -> %s/%ld: %d inliers, score %.2f", lc.query_robot.c_str(),
+                 static_cast<long>(lc.query_id), lc.candidate_robot.c_str(),
+                 static_cast<long>(lc.candidate_id), lc.inliers, lc.score);
+    if (!q.candidate) return;
+    // Stamp 0: rviz uses the latest transform between odometry frames (as for trunks).
+    visualization_msgs::MarkerArray markers =
+        ros_glue::loopMarkers(d, *q.candidate, lc, meta.T_O_S, meta.odom_frame, ros::Time());
+    if (marker_pub_.getNumSubscribers() > 0) {
+      marker_pub_.publish(boost::shared_ptr<const visualization_msgs::MarkerArray>(
+          new visualization_msgs::MarkerArray(markers)));
+    }
+    latest_loop_markers_.add(std::move(markers));
   }
 
   // One row of ~loop_log (worker thread only).
@@ -269,41 +296,24 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     if (!loop_log_) NODELET_ERROR_THROTTLE(30.0, "loop_log: write failed");
   }
 
-  // Publishes a spanning tree of the link graph: each connected group of odometry frames hangs
-  // from its frame that sorts first (TF needs one parent per frame).
+  // Publishes RobotLinks' spanning tree of the odometry frames (timer or worker thread).
   void publishTf() {
-    std::vector<geometry_msgs::TransformStamped> tfs;
+    std::vector<RobotLinks::Edge> tree;
     {
       std::lock_guard<std::mutex> lock(db_mutex_);
-      if (links_.empty()) return;
-      std::map<std::string, std::vector<std::pair<std::string, Pose>>> adj;  // T_a_b
-      for (const auto& l : links_) {
-        adj[l.first.first].emplace_back(l.first.second, l.second);
-        adj[l.first.second].emplace_back(l.first.first, l.second.inverse());
-      }
-      std::set<std::string> seen;
-      const ros::Time now = ros::Time::now();
-      for (const std::string& root : robot_frames_) {
-        if (seen.count(root)) continue;
-        seen.insert(root);
-        std::queue<std::string> todo;
-        todo.push(root);
-        while (!todo.empty()) {
-          const std::string a = todo.front();
-          todo.pop();
-          for (const auto& e : adj[a]) {
-            if (seen.count(e.first)) continue;
-            seen.insert(e.first);
-            todo.push(e.first);
-            geometry_msgs::TransformStamped t;
-            t.header.stamp = now;
-            t.header.frame_id = a;
-            t.child_frame_id = e.first;
-            t.transform = ros_glue::toTransformMsg(e.second);
-            tfs.push_back(t);
-          }
-        }
-      }
+      tree = links_.spanningTree();
+    }
+    if (tree.empty()) return;
+    std::vector<geometry_msgs::TransformStamped> tfs;
+    tfs.reserve(tree.size());
+    const ros::Time now = ros::Time::now();
+    for (const RobotLinks::Edge& e : tree) {
+      geometry_msgs::TransformStamped t;
+      t.header.stamp = now;
+      t.header.frame_id = e.parent;
+      t.child_frame_id = e.child;
+      t.transform = ros_glue::toTransformMsg(e.T_parent_child);
+      tfs.push_back(t);
     }
     if (!tf_broadcaster_) tf_broadcaster_ = std::make_unique<tf2_ros::TransformBroadcaster>();
     tf_broadcaster_->sendTransform(tfs);
@@ -369,12 +379,15 @@ class LoopClosureNodelet : public nodelet::Nodelet {
 
   ros_glue::LoopClosureNodeParams node_;
 
-  std::mutex db_mutex_;  // detector_, index_, meta_, links_, robot_frames_
+  // This nodelet builds no descriptors: each keeps the validity its sender gave it, down to
+  // what the matcher can use.
+  const DescriptorParams receiver_params_ = loosestDescriptorParams();
+
+  std::mutex db_mutex_;  // detector_, index_, meta_, links_
   std::unique_ptr<LoopDetector> detector_;
   std::map<Key, std::shared_ptr<const Descriptor>> index_;
   std::map<Key, Meta> meta_;
-  std::map<std::pair<std::string, std::string>, Pose> links_;  // (a, b) -> T_a_b
-  std::set<std::string> robot_frames_;
+  RobotLinks links_;  // odometry frames linked by inter-robot loops
 
   std::mutex queue_mutex_;  // queue_, stop_
   std::condition_variable cv_;

@@ -2,7 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <functional>
 #include <limits>
 #include <numeric>
 #include <random>
@@ -10,6 +13,7 @@
 
 #include "core/ground_test_utils.h"
 #include "core/match_test_utils.h"
+#include "dtif/core/descriptor/validation.h"
 
 namespace dtif {
 namespace {
@@ -228,6 +232,202 @@ TEST(Descriptor, DecodeRejectsMalformedBytes) {
   bad = good;
   bad.push_back(0);
   EXPECT_THROW(decodeDescriptor(bad, DescriptorParams{}), std::runtime_error);
+}
+
+// ---- validation.h: the checks every received descriptor passes (wire bytes, ROS messages) ----
+
+constexpr float kNaNf = std::numeric_limits<float>::quiet_NaN();
+
+Descriptor validStand(unsigned seed) {
+  std::mt19937 rng(seed);
+  Descriptor d = buildDescriptor(test::randomStand(rng, 30, 30, 600), DescriptorParams{});
+  d.robot = "alpha";
+  d.submap_id = 3;
+  return d;
+}
+
+/// The FNV-1a of the wire format (core/byte_io.h), so a test can patch a payload and reseal it.
+void reseal(std::vector<uint8_t>* bytes) {
+  uint32_t h = 2166136261u;
+  for (size_t i = 16; i < bytes->size(); ++i) {
+    h ^= (*bytes)[i];
+    h *= 16777619u;
+  }
+  std::memcpy(bytes->data() + 12, &h, 4);
+}
+
+/// decodeDescriptor's exception text, or "" when it accepts the bytes.
+std::string decodeError(const std::vector<uint8_t>& bytes) {
+  try {
+    decodeDescriptor(bytes, DescriptorParams{});
+  } catch (const std::runtime_error& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(DescriptorValidation, CheckNamesEachProblem) {
+  const Descriptor good = validStand(5);
+  ASSERT_TRUE(good.valid);
+  ASSERT_GT(good.triangles.size(), 5u);
+  EXPECT_EQ(checkDescriptor(good), "");
+  EXPECT_EQ(checkDescriptor(Descriptor{}), "");  // empty and invalid, yet well formed
+  struct Case {
+    std::string want;
+    std::function<void(Descriptor&)> corrupt;
+  };
+  const std::vector<Case> cases = {
+      {"more than 65535 trunks (faces index uint16)",
+       [](Descriptor& d) { d.trunks.resize(65536, d.trunks[0]); }},
+      {"trunk 3 is not finite or has a negative radius",
+       [](Descriptor& d) { d.trunks[3].r = kNaNf; }},
+      {"trunk 1 is not finite or has a negative radius",
+       [](Descriptor& d) { d.trunks[1].z = std::numeric_limits<double>::infinity(); }},
+      {"trunk 2 is not finite or has a negative radius",
+       [](Descriptor& d) { d.trunks[2].r = -0.1; }},
+      {"face 4 indexes a missing trunk",
+       [](Descriptor& d) { d.triangles[4].v[1] = static_cast<int>(d.trunks.size()); }},
+      {"face 0 indexes a missing trunk", [](Descriptor& d) { d.triangles[0].v[2] = -1; }},
+      {"face 2 repeats a vertex", [](Descriptor& d) { d.triangles[2].v[2] = d.triangles[2].v[0]; }},
+      {"edge histogram has more than 255 bins",
+       [](Descriptor& d) { d.edge_hist.assign(256, 1.0f / 256); }},
+      {"edge histogram is not finite or negative", [](Descriptor& d) { d.edge_hist[1] = kNaNf; }},
+      {"radius histogram is not finite or negative",
+       [](Descriptor& d) { d.radius_hist[0] = -0.5f; }},
+      {"edge histogram has no counts",
+       [](Descriptor& d) { std::fill(d.edge_hist.begin(), d.edge_hist.end(), 0.0f); }},
+      {"footprint is not well formed (cell size, sides or bitmap size)",
+       [](Descriptor& d) {
+         d.footprint = makeFootprint({{0, 0}, {3, 4}}, 1.0);
+         d.footprint.bits.pop_back();
+       }},
+      {"footprint is not well formed (cell size, sides or bitmap size)",
+       [](Descriptor& d) {
+         d.footprint = makeFootprint({{0, 0}, {3, 4}}, 1.0);
+         d.footprint.cell_m = -1.0;
+       }},
+      {"ground map is not well formed (cell size, sides or cell count)",
+       [](Descriptor& d) {
+         d.ground_map.cell_m = 0.5;
+         d.ground_map.width = d.ground_map.height = 2;
+         d.ground_map.z.assign(3, 0);
+       }},
+  };
+  for (const Case& c : cases) {
+    Descriptor bad = good;
+    c.corrupt(bad);
+    EXPECT_EQ(checkDescriptor(bad), c.want);
+    // acceptReceivedDescriptor refuses with the same words and leaves the descriptor alone.
+    Descriptor copy = bad;
+    EXPECT_EQ(acceptReceivedDescriptor(&copy, DescriptorParams{}), c.want);
+    EXPECT_EQ(copy.trunks.size(), bad.trunks.size());
+    EXPECT_EQ(copy.triangles.size(), bad.triangles.size());
+  }
+}
+
+TEST(DescriptorValidation, DecodeThrowsTheCheckWords) {
+  const Descriptor good = validStand(5);
+  ASSERT_TRUE(good.valid);
+  // What the wire format can carry: encode the bad descriptor, decode must say what the check
+  // says about it.
+  const std::vector<std::function<void(Descriptor&)>> corruptions = {
+      [](Descriptor& d) { d.trunks[3].r = kNaNf; },
+      [](Descriptor& d) { d.trunks[1].x = kNaNf; },
+      [](Descriptor& d) { d.trunks[2].r = -0.1; },
+      [](Descriptor& d) { d.triangles[4].v[1] = static_cast<int>(d.trunks.size()); },
+      [](Descriptor& d) { d.triangles[2].v[2] = d.triangles[2].v[0]; },
+      [](Descriptor& d) { std::fill(d.radius_hist.begin(), d.radius_hist.end(), 0.0f); },
+  };
+  for (size_t i = 0; i < corruptions.size(); ++i) {
+    Descriptor bad = good;
+    corruptions[i](bad);
+    const std::string want = checkDescriptor(bad);
+    ASSERT_NE(want, "") << "case " << i;
+    EXPECT_EQ(decodeError(encodeDescriptor(bad)), want) << "case " << i;
+  }
+  // A footprint with a negative cell size: the encoder never writes one, so patch the bytes.
+  Descriptor framed = good;
+  framed.footprint = makeFootprint({{0, 0}, {3, 4}}, 1.0);
+  std::vector<uint8_t> bytes = encodeDescriptor(framed);
+  ASSERT_EQ(decodeError(bytes), "");
+  // Payload tail: f32 cell, i32 x0, y0, u16 w, h, the bits, u32 ground map bytes (0).
+  const size_t cell_at = bytes.size() - 4 - framed.footprint.bits.size() - 12 - 4;
+  const float minus_one = -1.0f;
+  std::memcpy(bytes.data() + cell_at, &minus_one, 4);
+  reseal(&bytes);
+  framed.footprint.cell_m = -1.0;
+  EXPECT_EQ(decodeError(bytes), checkDescriptor(framed));
+  EXPECT_NE(decodeError(bytes).find("footprint"), std::string::npos);
+  // A ground map that does not decode: the same "ground map: " words as ros_glue::fromMsg.
+  Descriptor grounded = good;
+  std::mt19937 grng(8);
+  grounded.ground_map = test::mapOf(test::hillyGround(grng, Eigen::Vector2d(0, 0), 10.0, false),
+                                    Pose::Identity(), 0.5, 0.05);
+  bytes = encodeDescriptor(grounded);
+  const std::vector<uint8_t> ground = encodeGroundMap(grounded.ground_map);
+  std::memset(bytes.data() + bytes.size() - ground.size(), 0, 4);  // its cell size: 0
+  reseal(&bytes);
+  std::vector<uint8_t> bad_ground = ground;
+  std::memset(bad_ground.data(), 0, 4);
+  GroundMap unused;
+  const std::string want = decodeReceivedGroundMap(bad_ground.data(), bad_ground.size(), &unused);
+  EXPECT_EQ(want.rfind("ground map: ", 0), 0u) << want;
+  EXPECT_EQ(decodeError(bytes), want);
+}
+
+TEST(DescriptorValidation, ReceiverParamsMarkSmallDescriptorsInvalid) {
+  const Descriptor good = validStand(5);
+  ASSERT_TRUE(good.valid);
+  const std::vector<uint8_t> bytes = encodeDescriptor(good);
+  const int n = static_cast<int>(good.trunks.size());
+  const int m = static_cast<int>(good.triangles.size());
+  DescriptorParams strict;
+  strict.min_trunks = n + 1;
+  Descriptor d = decodeDescriptor(bytes, strict);
+  EXPECT_FALSE(d.valid);
+  EXPECT_EQ(d.invalid_reason, "too few trunks or triangles for the receiver's descriptor params (" +
+                                  std::to_string(n) + " trunks, " + std::to_string(m) +
+                                  " triangles; min_trunks " + std::to_string(n + 1) +
+                                  ", min_triangles 2)");
+  EXPECT_EQ(d.trunks.size(), good.trunks.size());  // kept, only not retrievable
+  strict = DescriptorParams{};
+  strict.min_triangles = m + 1;
+  EXPECT_FALSE(decodeDescriptor(bytes, strict).valid);
+  strict.min_triangles = m;
+  EXPECT_TRUE(decodeDescriptor(bytes, strict).valid);
+  // The loosest params keep the sender's validity, down to the matcher's 3 trunks and 1 face.
+  EXPECT_TRUE(decodeDescriptor(bytes, loosestDescriptorParams()).valid);
+  Descriptor two = good;
+  two.trunks.resize(2);
+  two.triangles.clear();
+  d = decodeDescriptor(encodeDescriptor(two), loosestDescriptorParams());
+  EXPECT_FALSE(d.valid);
+  EXPECT_NE(d.invalid_reason.find("too few trunks"), std::string::npos) << d.invalid_reason;
+  // An invalid descriptor keeps its sender's reason.
+  Descriptor small = buildDescriptor({{0, 0, 0, .1}, {1, 0, 0, .1}}, DescriptorParams{});
+  ASSERT_FALSE(small.valid);
+  d = decodeDescriptor(encodeDescriptor(small), DescriptorParams{});
+  EXPECT_FALSE(d.valid);
+  EXPECT_EQ(d.invalid_reason, small.invalid_reason);
+}
+
+TEST(DescriptorValidation, AcceptRebuildsFacesInBuildOrder) {
+  const Descriptor good = validStand(6);
+  ASSERT_TRUE(good.valid);
+  // Faces arrive as bare vertex triples, in any order and any vertex rotation.
+  Descriptor received = good;
+  std::reverse(received.triangles.begin(), received.triangles.end());
+  for (Triangle& t : received.triangles) {
+    t = Triangle{{t.v[1], t.v[2], t.v[0]}, {}, {}};
+  }
+  ASSERT_EQ(acceptReceivedDescriptor(&received, DescriptorParams{}), "");
+  EXPECT_TRUE(received.valid);
+  ASSERT_EQ(received.triangles.size(), good.triangles.size());
+  for (size_t i = 0; i < good.triangles.size(); ++i) {
+    EXPECT_EQ(received.triangles[i].v, good.triangles[i].v) << "face " << i;
+    EXPECT_EQ(received.triangles[i].len, good.triangles[i].len) << "face " << i;
+    EXPECT_EQ(received.triangles[i].r, good.triangles[i].r) << "face " << i;
+  }
 }
 
 TEST(Descriptor, ParamsValidate) {

@@ -5,11 +5,14 @@
 #include <pcl/point_types.h>
 #include <pcl_conversions/pcl_conversions.h>
 
+#include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <random>
 
 #include "dtif/core/descriptor/descriptor.h"
+#include "dtif/core/descriptor/validation.h"
 #include "test_utils.h"
 
 namespace dtif {
@@ -72,7 +75,7 @@ TEST(DescriptorConversion, RoundTripRebuildsTriangles) {
   Descriptor back;
   Pose T_back;
   std::string error;
-  ASSERT_TRUE(fromMsg(m, &back, &T_back, &error)) << error;
+  ASSERT_TRUE(fromMsg(m, DescriptorParams(), &back, &T_back, &error)) << error;
   EXPECT_EQ(back.robot, "alpha");
   EXPECT_EQ(back.submap_id, 42);
   EXPECT_NEAR(back.stamp, 1234.5, 1e-6);
@@ -106,7 +109,7 @@ TEST(DescriptorConversion, RoundTripRebuildsTriangles) {
   // A bitmap that does not fit its size is rejected, not read past its end.
   dtif::TrunkDescriptor bad = m;
   bad.footprint_bits.pop_back();
-  EXPECT_FALSE(fromMsg(bad, &back, &T_back, &error));
+  EXPECT_FALSE(fromMsg(bad, DescriptorParams(), &back, &T_back, &error));
   EXPECT_NE(error.find("footprint"), std::string::npos) << error;
 }
 
@@ -119,35 +122,132 @@ TEST(DescriptorConversion, RejectsBadMessages) {
 
   dtif::TrunkDescriptor m = good;
   m.faces.back() = static_cast<uint16_t>(m.trunks.size());  // index past the end
-  EXPECT_FALSE(fromMsg(m, &out, nullptr, &error));
+  EXPECT_FALSE(fromMsg(m, DescriptorParams(), &out, nullptr, &error));
   EXPECT_NE(error.find("missing trunk"), std::string::npos) << error;
 
   m = good;
   m.faces.pop_back();  // not triples
-  EXPECT_FALSE(fromMsg(m, &out, nullptr, &error));
+  EXPECT_FALSE(fromMsg(m, DescriptorParams(), &out, nullptr, &error));
 
   m = good;
   m.faces[1] = m.faces[0];  // repeated vertex
-  EXPECT_FALSE(fromMsg(m, &out, nullptr, &error));
+  EXPECT_FALSE(fromMsg(m, DescriptorParams(), &out, nullptr, &error));
 
   m = good;
   m.trunks[0].x = std::numeric_limits<float>::quiet_NaN();
-  EXPECT_FALSE(fromMsg(m, &out, nullptr, &error));
+  EXPECT_FALSE(fromMsg(m, DescriptorParams(), &out, nullptr, &error));
 
   m = good;
   m.edge_hist.push_back(std::numeric_limits<float>::infinity());
-  EXPECT_FALSE(fromMsg(m, &out, nullptr, &error));
+  EXPECT_FALSE(fromMsg(m, DescriptorParams(), &out, nullptr, &error));
 
   m = good;
   m.odom_pose.orientation.w = kNaN;
-  EXPECT_FALSE(fromMsg(m, &out, nullptr, &error));
+  EXPECT_FALSE(fromMsg(m, DescriptorParams(), &out, nullptr, &error));
   EXPECT_NE(error.find("odom_pose"), std::string::npos) << error;
 
   m = dtif::TrunkDescriptor();  // empty: converts, stays invalid
   m.odom_pose.orientation.w = 1.0;
-  ASSERT_TRUE(fromMsg(m, &out, nullptr, &error)) << error;
+  ASSERT_TRUE(fromMsg(m, DescriptorParams(), &out, nullptr, &error)) << error;
   EXPECT_TRUE(out.trunks.empty());
   EXPECT_FALSE(out.valid);
+}
+
+// fromMsg and decodeDescriptor end in the same acceptReceivedDescriptor: what one rejects the
+// other rejects, in the same words, and both rebuild the same faces.
+std::string decodeError(const Descriptor& d) {
+  try {
+    decodeDescriptor(encodeDescriptor(d), DescriptorParams());
+  } catch (const std::runtime_error& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(DescriptorConversion, RejectsWhatDecodeRejectsInTheSameWords) {
+  const Descriptor good = buildDescriptor(forest(12, 4), DescriptorParams());
+  ASSERT_TRUE(good.valid);
+  ASSERT_GT(good.triangles.size(), 4u);
+  constexpr float kNaNf = std::numeric_limits<float>::quiet_NaN();
+  const std::vector<std::function<void(Descriptor&)>> corruptions = {
+      [](Descriptor& d) { d.trunks[3].r = kNaNf; },
+      [](Descriptor& d) { d.trunks[1].x = kNaNf; },
+      [](Descriptor& d) { d.trunks[2].r = -0.1; },
+      [](Descriptor& d) { d.triangles[4].v[1] = static_cast<int>(d.trunks.size()); },
+      [](Descriptor& d) { d.triangles[2].v[2] = d.triangles[2].v[0]; },
+      [](Descriptor& d) { std::fill(d.edge_hist.begin(), d.edge_hist.end(), 0.0f); },
+  };
+  for (size_t i = 0; i < corruptions.size(); ++i) {
+    Descriptor bad = good;
+    corruptions[i](bad);
+    const std::string want = checkDescriptor(bad);
+    ASSERT_NE(want, "") << "case " << i;
+    EXPECT_EQ(decodeError(bad), want) << "case " << i;
+    Descriptor out;
+    std::string error;
+    EXPECT_FALSE(
+        fromMsg(toMsg(bad, Pose::Identity(), "o"), DescriptorParams(), &out, nullptr, &error));
+    EXPECT_EQ(error, want) << "case " << i;
+  }
+  // What only a message can carry: its words are checkDescriptor's too.
+  dtif::TrunkDescriptor m = toMsg(good, Pose::Identity(), "o");
+  m.footprint_cell_m = -1.0f;
+  Descriptor bad = good;
+  bad.footprint.cell_m = -1.0;
+  Descriptor out;
+  std::string error;
+  EXPECT_FALSE(fromMsg(m, DescriptorParams(), &out, nullptr, &error));
+  EXPECT_EQ(error, checkDescriptor(bad));
+  m = toMsg(good, Pose::Identity(), "o");
+  m.radius_hist.assign(256, 1.0f / 256);
+  bad = good;
+  bad.radius_hist = m.radius_hist;
+  EXPECT_FALSE(fromMsg(m, DescriptorParams(), &out, nullptr, &error));
+  EXPECT_EQ(error, checkDescriptor(bad));
+  m = toMsg(good, Pose::Identity(), "o");
+  m.ground_map = {1, 2, 3};
+  EXPECT_FALSE(fromMsg(m, DescriptorParams(), &out, nullptr, &error));
+  GroundMap unused;
+  EXPECT_EQ(error, decodeReceivedGroundMap(m.ground_map.data(), m.ground_map.size(), &unused));
+}
+
+TEST(DescriptorConversion, ReceiverParamsAndFacesAsDecodeHasThem) {
+  Descriptor good = buildDescriptor(forest(12, 4), DescriptorParams());
+  ASSERT_TRUE(good.valid);
+  const int n = static_cast<int>(good.trunks.size());
+  DescriptorParams strict;
+  strict.min_trunks = n + 1;
+  const dtif::TrunkDescriptor m = toMsg(good, Pose::Identity(), "o");
+  Descriptor from_msg;
+  std::string error;
+  ASSERT_TRUE(fromMsg(m, strict, &from_msg, nullptr, &error)) << error;  // not an error
+  const Descriptor decoded = decodeDescriptor(encodeDescriptor(good), strict);
+  EXPECT_FALSE(from_msg.valid);
+  EXPECT_FALSE(decoded.valid);
+  EXPECT_EQ(from_msg.invalid_reason, decoded.invalid_reason);
+  EXPECT_NE(from_msg.invalid_reason.find("too few trunks"), std::string::npos);
+  // The loosest params keep the sender's word; a lying sender (2 trunks "valid") is caught.
+  ASSERT_TRUE(fromMsg(m, loosestDescriptorParams(), &from_msg, nullptr, &error)) << error;
+  EXPECT_TRUE(from_msg.valid);
+  dtif::TrunkDescriptor two = m;
+  two.trunks.resize(2);
+  two.faces.clear();
+  ASSERT_TRUE(fromMsg(two, loosestDescriptorParams(), &from_msg, nullptr, &error)) << error;
+  EXPECT_FALSE(from_msg.valid);
+  // Faces in a shuffled order come back in buildDescriptor's order, as decode gives them.
+  dtif::TrunkDescriptor shuffled = m;
+  for (size_t f = 0; f + 3 < shuffled.faces.size(); f += 6) {
+    std::swap_ranges(shuffled.faces.begin() + f, shuffled.faces.begin() + f + 3,
+                     shuffled.faces.begin() + f + 3);
+  }
+  ASSERT_NE(shuffled.faces, m.faces);
+  ASSERT_TRUE(fromMsg(shuffled, DescriptorParams(), &from_msg, nullptr, &error)) << error;
+  const Descriptor plain = decodeDescriptor(encodeDescriptor(good), DescriptorParams());
+  ASSERT_EQ(from_msg.triangles.size(), plain.triangles.size());
+  for (size_t i = 0; i < plain.triangles.size(); ++i) {
+    EXPECT_EQ(from_msg.triangles[i].v, plain.triangles[i].v) << "face " << i;
+    EXPECT_EQ(from_msg.triangles[i].v, good.triangles[i].v) << "face " << i;
+  }
 }
 
 TEST(LoopClosureConversion, RoundTrip) {

@@ -29,12 +29,15 @@ geometry_msgs::Transform toTransformMsg(const Pose& T);
 /// is the robot's odometry frame, given by the caller.
 dtif::TrunkDescriptor toMsg(const Descriptor& d, const Pose& T_O_S, const std::string& odom_frame);
 
-/// Rebuilds the core descriptor: triangles are re-encoded with makeCanonicalTriangle from the
-/// trunks and face triples and sorted as buildDescriptor sorts them. Fails (with a reason) on
-/// non-finite trunks or histograms, out-of-range or repeated face indices, a bad pose, or
-/// more trunks than uint16 faces can index. T_O_S may be null.
-bool fromMsg(const dtif::TrunkDescriptor& msg, Descriptor* d, Pose* T_O_S,
-             std::string* error = nullptr);
+/// Rebuilds the core descriptor with decodeDescriptor's rules (acceptReceivedDescriptor in
+/// core/descriptor/validation.h): triangles re-encoded from the trunks and face triples in
+/// buildDescriptor's order, a descriptor valid for its sender but too small for the receiver's
+/// `params` marked invalid. Fails (with checkDescriptor's reason) on non-finite trunks or
+/// histograms, out-of-range or repeated face indices, a malformed footprint or ground map, more
+/// trunks than uint16 faces can index, faces that are not triples or a bad pose. T_O_S may be
+/// null.
+bool fromMsg(const dtif::TrunkDescriptor& msg, const DescriptorParams& params, Descriptor* d,
+             Pose* T_O_S, std::string* error = nullptr);
 
 /// Loop <-> dtif/LoopClosure. header is left to the caller. all_pairs is not carried.
 dtif::LoopClosure toMsg(const Loop& lc);

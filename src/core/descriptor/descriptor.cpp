@@ -16,6 +16,7 @@
 #include <utility>
 
 #include "core/byte_io.h"
+#include "dtif/core/descriptor/validation.h"
 #include "dtif/core/extraction/trunk_extractor.h"
 
 namespace dtif {
@@ -33,11 +34,6 @@ constexpr double kDuplicateRadiusM = 0.01;
 
 double dist2d(const TrunkLandmark& a, const TrunkLandmark& b) {
   return std::hypot(a.x - b.x, a.y - b.y);
-}
-
-bool finiteTrunk(const TrunkLandmark& t) {
-  return std::isfinite(t.x) && std::isfinite(t.y) && std::isfinite(t.z) && std::isfinite(t.r) &&
-         t.r >= 0.0;
 }
 
 /// Drops non-finite trunks and merges duplicates (centres within kDuplicateRadiusM): the first
@@ -118,14 +114,6 @@ std::vector<float> normalisedHistogram(const std::vector<double>& values, int bi
   return h;
 }
 
-bool triangleLess(const Triangle& a, const Triangle& b) {
-  // len[0] ascending is the matching index; the rest only makes the order total.
-  if (a.len[0] != b.len[0]) return a.len[0] < b.len[0];
-  if (a.len[1] != b.len[1]) return a.len[1] < b.len[1];
-  if (a.len[2] != b.len[2]) return a.len[2] < b.len[2];
-  return a.v < b.v;
-}
-
 /// Unique edges of the retained faces, for h^e.
 std::vector<double> uniqueEdgeLengths(const Trunks& trunks, const std::vector<Triangle>& tris) {
   std::vector<std::pair<int, int>> edges;
@@ -181,6 +169,14 @@ std::string DescriptorParams::validate() const {
   }
   if (!(radius_hist_max_m > 0.0)) err << "radius_hist_max_m must be > 0; ";
   return err.str();
+}
+
+bool triangleLess(const Triangle& a, const Triangle& b) {
+  // len[0] ascending is the matching index; the rest only makes the order total.
+  if (a.len[0] != b.len[0]) return a.len[0] < b.len[0];
+  if (a.len[1] != b.len[1]) return a.len[1] < b.len[1];
+  if (a.len[2] != b.len[2]) return a.len[2] < b.len[2];
+  return a.v < b.v;
 }
 
 Triangle makeCanonicalTriangle(const Trunks& trunks, int a, int b, int c) {
@@ -355,94 +351,113 @@ std::vector<uint8_t> encodeDescriptor(const Descriptor& d) {
   return out.bytes;
 }
 
-Descriptor decodeDescriptor(const std::vector<uint8_t>& bytes, const DescriptorParams& params) {
+namespace {
+
+/// Checks the header (magic, version, payload size, checksum); returns the payload's reader.
+Reader openPayload(const std::vector<uint8_t>& bytes, uint16_t* flags) {
   Reader head(bytes.data(), bytes.size());
   if (head.get<uint32_t>() != kMagic) throw std::runtime_error("not a dtif descriptor (magic)");
   const uint16_t version = head.get<uint16_t>();
   if (version != kVersion) {
     throw std::runtime_error("unsupported descriptor version " + std::to_string(version));
   }
-  const uint16_t flags = head.get<uint16_t>();
+  *flags = head.get<uint16_t>();
   const uint32_t size = head.get<uint32_t>();
   const uint32_t sum = head.get<uint32_t>();
   if (head.remaining() != size) throw std::runtime_error("descriptor payload size mismatch");
   const uint8_t* payload = bytes.data() + (bytes.size() - size);
   if (fnv1a(payload, size) != sum) throw std::runtime_error("descriptor checksum mismatch");
+  return Reader(payload, size);
+}
 
-  Reader r(payload, size);
+/// The float64 origin, the trunks as float32 offsets from it, then their base_seen bits.
+void readTrunks(Reader& r, Trunks* trunks) {
+  const double ox = r.get<double>(), oy = r.get<double>(), oz = r.get<double>();
+  trunks->resize(r.get<uint16_t>());
+  for (TrunkLandmark& t : *trunks) {
+    t.x = ox + r.get<float>();
+    t.y = oy + r.get<float>();
+    t.z = oz + r.get<float>();
+    t.r = r.get<float>();
+  }
+  for (size_t i = 0; i < trunks->size(); i += 8) {
+    const uint8_t bits = r.get<uint8_t>();
+    for (size_t b = 0; b < 8 && i + b < trunks->size(); ++b)
+      (*trunks)[i + b].base_seen = (bits >> b) & 1u;
+  }
+}
+
+/// Vertex triples only: acceptReceivedDescriptor checks them and rebuilds the faces.
+void readFaces(Reader& r, std::vector<Triangle>* faces) {
+  const uint32_t nf = r.get<uint32_t>();
+  if (static_cast<uint64_t>(nf) * 6 > r.remaining()) {
+    throw std::runtime_error("descriptor face count exceeds the payload");
+  }
+  faces->resize(nf);
+  for (Triangle& t : *faces) {
+    for (int& x : t.v) x = r.get<uint16_t>();
+  }
+}
+
+/// Quantised bins as read (value / 255); normaliseHistogram undoes the quantisation later.
+void readHistogram(Reader& r, std::vector<float>* h) {
+  h->resize(r.get<uint8_t>());
+  for (float& x : *h) x = r.get<uint8_t>() / 255.0f;
+}
+
+void normaliseHistogram(std::vector<float>* h) {
+  double total = 0.0;
+  for (float x : *h) total += x;
+  for (float& x : *h) x = static_cast<float>(x / total);  // undo the quantisation drift
+}
+
+/// A cell size of 0 is no footprint; any other (even a bad one, which checkDescriptor
+/// rejects) is followed by the bitmap's origin, size and bits.
+void readFootprint(Reader& r, Footprint* f) {
+  const float cell = r.get<float>();
+  if (cell == 0.0f) return;
+  f->cell_m = cell;
+  f->x0 = r.get<int32_t>();
+  f->y0 = r.get<int32_t>();
+  f->width = r.get<uint16_t>();
+  f->height = r.get<uint16_t>();
+  const size_t nbytes = (static_cast<size_t>(f->width) * f->height + 7) / 8;
+  if (nbytes > r.remaining()) throw std::runtime_error("descriptor footprint exceeds the payload");
+  f->bits.resize(nbytes);
+  for (uint8_t& b : f->bits) b = r.get<uint8_t>();
+}
+
+void readGroundMap(Reader& r, GroundMap* map) {
+  const uint32_t ground_bytes = r.get<uint32_t>();
+  if (ground_bytes > r.remaining()) {
+    throw std::runtime_error("descriptor ground map exceeds the payload");
+  }
+  const std::string problem = decodeReceivedGroundMap(r.take(ground_bytes), ground_bytes, map);
+  if (!problem.empty()) throw std::runtime_error(problem);
+}
+
+}  // namespace
+
+Descriptor decodeDescriptor(const std::vector<uint8_t>& bytes, const DescriptorParams& params) {
+  uint16_t flags = 0;
+  Reader r = openPayload(bytes, &flags);
   Descriptor d;
   d.robot = r.getString();
   d.submap_id = r.get<int64_t>();
   d.stamp = r.get<double>();
   d.invalid_reason = r.getString();
-  const double ox = r.get<double>(), oy = r.get<double>(), oz = r.get<double>();
-  const uint16_t n = r.get<uint16_t>();
-  d.trunks.resize(n);
-  for (TrunkLandmark& t : d.trunks) {
-    t.x = ox + r.get<float>();
-    t.y = oy + r.get<float>();
-    t.z = oz + r.get<float>();
-    t.r = r.get<float>();
-    if (!finiteTrunk(t)) throw std::runtime_error("descriptor has a non-finite trunk");
-  }
-  for (size_t i = 0; i < d.trunks.size(); i += 8) {
-    const uint8_t bits = r.get<uint8_t>();
-    for (size_t b = 0; b < 8 && i + b < d.trunks.size(); ++b)
-      d.trunks[i + b].base_seen = (bits >> b) & 1u;
-  }
-  const uint32_t nf = r.get<uint32_t>();
-  if (static_cast<uint64_t>(nf) * 6 > r.remaining()) {
-    throw std::runtime_error("descriptor face count exceeds the payload");
-  }
-  d.triangles.reserve(nf);
-  for (uint32_t i = 0; i < nf; ++i) {
-    std::array<int, 3> v;
-    for (int& x : v) x = r.get<uint16_t>();
-    if (v[0] >= n || v[1] >= n || v[2] >= n || v[0] == v[1] || v[1] == v[2] || v[0] == v[2]) {
-      throw std::runtime_error("descriptor face has a bad vertex index");
-    }
-    d.triangles.push_back(makeCanonicalTriangle(d.trunks, v[0], v[1], v[2]));
-  }
-  std::sort(d.triangles.begin(), d.triangles.end(), triangleLess);
-  for (auto* h : {&d.edge_hist, &d.radius_hist}) {
-    const uint8_t bins = r.get<uint8_t>();
-    h->resize(bins);
-    double total = 0.0;
-    for (float& x : *h) {
-      x = r.get<uint8_t>() / 255.0f;
-      total += x;
-    }
-    if (bins > 0 && total <= 0.0) throw std::runtime_error("descriptor histogram is empty");
-    for (float& x : *h) x = static_cast<float>(x / total);  // undo the quantisation drift
-  }
-  const float cell = r.get<float>();
-  if (!(cell >= 0.0f) || !std::isfinite(cell)) throw std::runtime_error("bad footprint cell");
-  if (cell > 0.0f) {
-    Footprint& f = d.footprint;
-    f.cell_m = cell;
-    f.x0 = r.get<int32_t>();
-    f.y0 = r.get<int32_t>();
-    f.width = r.get<uint16_t>();
-    f.height = r.get<uint16_t>();
-    const size_t nbytes = (static_cast<size_t>(f.width) * f.height + 7) / 8;
-    if (f.width == 0 || f.height == 0 || nbytes > r.remaining()) {
-      throw std::runtime_error("descriptor footprint exceeds the payload");
-    }
-    f.bits.resize(nbytes);
-    for (uint8_t& b : f.bits) b = r.get<uint8_t>();
-  }
-  const uint32_t ground_bytes = r.get<uint32_t>();
-  if (ground_bytes > r.remaining())
-    throw std::runtime_error("descriptor ground map exceeds the payload");
-  d.ground_map = decodeGroundMap(r.take(ground_bytes), ground_bytes);
+  readTrunks(r, &d.trunks);
+  readFaces(r, &d.triangles);
+  readHistogram(r, &d.edge_hist);
+  readHistogram(r, &d.radius_hist);
+  readFootprint(r, &d.footprint);
+  readGroundMap(r, &d.ground_map);
   if (r.remaining() != 0) throw std::runtime_error("descriptor has trailing bytes");
   d.valid = (flags & 1) != 0;
-  // A descriptor valid under the sender's params but too small for ours is not retrievable.
-  if (d.valid && (static_cast<int>(d.trunks.size()) < params.min_trunks ||
-                  static_cast<int>(d.triangles.size()) < params.min_triangles)) {
-    d.valid = false;
-    d.invalid_reason = "too few trunks or triangles for the receiver's descriptor params";
-  }
+  const std::string problem = acceptReceivedDescriptor(&d, params);
+  if (!problem.empty()) throw std::runtime_error(problem);
+  normaliseHistogram(&d.edge_hist);
+  normaliseHistogram(&d.radius_hist);
   return d;
 }
 

@@ -74,6 +74,10 @@ struct Descriptor {
 /// Encodes one face canonically from trunk centres (Eq. 3.2) and radii (Eq. 3.3).
 Triangle makeCanonicalTriangle(const Trunks& trunks, int a, int b, int c);
 
+/// buildDescriptor's face order: len[0] ascending (the matcher's length index), then len[1],
+/// len[2] and v, so that the order is total and does not depend on the input order.
+bool triangleLess(const Triangle& a, const Triangle& b);
+
 /// Builds the descriptor of a trunk set. Pure; thread-safe. Too few trunks, collinear or
 /// duplicate trunks give an invalid descriptor with a reason, never an exception.
 Descriptor buildDescriptor(const Trunks& trunks, const DescriptorParams& params);
@@ -85,7 +89,9 @@ Descriptor describeSubmap(const TrunkExtractionResult& extraction, const Descrip
 /// Compact wire encoding (what crosses the radio link): trunks as float32, faces as uint16
 /// indices, histograms as uint8 quantised. decode(encode(d)) reproduces d up to float32.
 std::vector<uint8_t> encodeDescriptor(const Descriptor& d);
-/// Throws std::runtime_error on malformed input.
+/// Throws std::runtime_error on malformed input: a bad header, checksum or layout, or what
+/// acceptReceivedDescriptor (validation.h) rejects, with its words. A descriptor valid for its
+/// sender but too small for `params` comes back invalid.
 Descriptor decodeDescriptor(const std::vector<uint8_t>& bytes, const DescriptorParams& params);
 
 }  // namespace dtif
