@@ -1,8 +1,18 @@
-// Simulator frames -> rosbag (see sim_bag.h).
+// Simulator frames -> rosbag (see sim_bag.h), with rosbag_storage and the generated messages.
 #include "dtif/bag/sim_bag.h"
 
+#include <nav_msgs/Odometry.h>
+#include <rosbag/bag.h>
+#include <sensor_msgs/PointCloud2.h>
+#include <tf2_msgs/TFMessage.h>
+
+#include <Eigen/Geometry>
+#include <boost/make_shared.hpp>
 #include <chrono>
 #include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <map>
 #include <unordered_map>
 
 namespace dtif::sim {
@@ -41,7 +51,9 @@ std::string BagParams::validate() const {
     e += "cloud_delay_s must be in [0, 1]\n";
   }
   if (node.empty() || node.find('/') != std::string::npos) e += "node must be a plain name\n";
-  return e + writer.validate();
+  if (chunk_bytes == 0 || chunk_bytes > (1u << 30)) e += "chunk_bytes must be in (0, 1 GiB]\n";
+  if (compression != "none" && compression != "lz4") e += "compression must be none or lz4\n";
+  return e;
 }
 
 std::string odomFrame(const std::string& robot) { return robot + "/odom"; }
@@ -109,70 +121,210 @@ void thinEvenly(uint32_t max_points, std::vector<Eigen::Vector3f>* points,
   if (with_intensity) intensity->resize(max_points);
 }
 
-BagFrameSink::BagFrameSink(const std::string& path, const BagParams& params) : params_(params) {
-  const std::string problems = params.validate();
-  if (!problems.empty()) throw bag::RosbagError(path + ": invalid bag parameters:\n" + problems);
-  writer_ = std::make_unique<bag::RosbagWriter>(path, params.writer);
-}
-
-BagFrameSink::~BagFrameSink() = default;
-
 void cloudRegistered(const Frame& frame, const BagParams& params,
                      std::vector<Eigen::Vector3f>* points, std::vector<float>* intensity) {
   voxelFilter(frame.points, frame.intensity, params.voxel_m, points, intensity);
   thinEvenly(params.max_points, points, intensity);
 }
 
+// ---------------------------------------------------------------------------------------------
+
+namespace {
+
+// The connection header rosbag record stores: the publisher's, as received. One per robot and
+// topic, so each robot's /tf is a connection of its own, in time order.
+template <class Msg>
+boost::shared_ptr<ros::M_string> connectionHeader(const std::string& topic,
+                                                  const std::string& callerid) {
+  auto h = boost::make_shared<ros::M_string>();
+  (*h)["callerid"] = callerid;
+  (*h)["latching"] = "0";
+  (*h)["md5sum"] = ros::message_traits::MD5Sum<Msg>::value();
+  (*h)["message_definition"] = ros::message_traits::Definition<Msg>::value();
+  (*h)["topic"] = topic;
+  (*h)["type"] = ros::message_traits::DataType<Msg>::value();
+  return h;
+}
+
+// geometry_msgs/Pose and geometry_msgs/Transform carry the same numbers.
+template <class Vector, class Quaternion>
+void setPose(const Pose& T, Vector* t, Quaternion* q) {
+  const Eigen::Quaterniond e(T.rotation());
+  t->x = T.translation().x();
+  t->y = T.translation().y();
+  t->z = T.translation().z();
+  q->x = e.x();
+  q->y = e.y();
+  q->z = e.z();
+  q->w = e.w();
+}
+
+// Unorganised (height 1), fields x, y, z, intensity (float32, offsets 0, 4, 8, 12; point_step
+// 16), little-endian, is_dense; intensity zero unless there is one per point.
+void fillPointCloud2(const std::vector<Eigen::Vector3f>& points,
+                     const std::vector<float>& intensity, sensor_msgs::PointCloud2* msg) {
+  static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "is_bigendian is written false");
+  constexpr uint32_t kPointStep = 16;
+  const auto n = static_cast<uint32_t>(points.size());
+  const bool with_intensity = intensity.size() == points.size();
+  msg->height = 1;
+  msg->width = n;
+  const char* names[] = {"x", "y", "z", "intensity"};
+  msg->fields.resize(4);
+  for (uint32_t i = 0; i < 4; ++i) {
+    msg->fields[i].name = names[i];
+    msg->fields[i].offset = 4 * i;
+    msg->fields[i].datatype = sensor_msgs::PointField::FLOAT32;
+    msg->fields[i].count = 1;
+  }
+  msg->is_bigendian = false;
+  msg->point_step = kPointStep;
+  msg->row_step = kPointStep * n;
+  msg->data.resize(size_t{kPointStep} * n);
+  for (uint32_t i = 0; i < n; ++i) {
+    const float v[4] = {points[i].x(), points[i].y(), points[i].z(),
+                        with_intensity ? intensity[i] : 0.0f};
+    std::memcpy(&msg->data[size_t{kPointStep} * i], v, sizeof(v));
+  }
+  msg->is_dense = true;
+}
+
+}  // namespace
+
+struct BagFrameSink::Writer {
+  struct Robot {  // its topics' connection headers and sequence numbers
+    boost::shared_ptr<ros::M_string> odometry, tf, cloud;
+    uint32_t odometry_seq = 0, cloud_seq = 0;
+  };
+
+  std::string path, tmp_path;
+  rosbag::Bag bag;
+  bool open = false;  // until close()
+  std::map<std::string, Robot> robots;
+
+  ~Writer() {
+    if (!open) return;
+    try {  // abandoned (not closed): finish the file only to remove it
+      bag.close();
+    } catch (const std::exception&) {
+    }
+    std::error_code ec;
+    std::filesystem::remove(tmp_path, ec);
+  }
+
+  // t [s] as ros::Time (as ros::Time::fromSec); throws RosbagError naming the file outside it.
+  ros::Time time(double t) const {
+    if (!std::isfinite(t) || t < 0.0 || t >= 4294967295.0) {
+      throw bag::RosbagError(tmp_path + ": time " + std::to_string(t) +
+                             " s is outside the range of ros::Time");
+    }
+    return ros::Time().fromSec(t);
+  }
+
+  Robot& robot(const std::string& name, const std::string& node) {
+    const auto [it, added] = robots.try_emplace(name);
+    if (added) {
+      const std::string ns = "/" + name, callerid = ns + "/" + node;
+      it->second.odometry = connectionHeader<nav_msgs::Odometry>(ns + "/Odometry", callerid);
+      it->second.tf = connectionHeader<tf2_msgs::TFMessage>("/tf", callerid);
+      it->second.cloud =
+          connectionHeader<sensor_msgs::PointCloud2>(ns + "/cloud_registered", callerid);
+    }
+    return it->second;
+  }
+
+  template <class Msg>
+  void write(const boost::shared_ptr<ros::M_string>& connection, ros::Time t, const Msg& msg) {
+    try {
+      bag.write(connection->at("topic"), t, msg, connection);
+    } catch (const rosbag::BagException& e) {
+      throw bag::RosbagError(tmp_path + ": cannot write: " + e.what());
+    }
+  }
+};
+
+BagFrameSink::BagFrameSink(const std::string& path, const BagParams& params)
+    : params_(params), writer_(std::make_unique<Writer>()) {
+  const std::string problems = params.validate();
+  if (!problems.empty()) throw bag::RosbagError(path + ": invalid bag parameters:\n" + problems);
+  writer_->path = path;
+  writer_->tmp_path = path + ".tmp";
+  try {
+    writer_->bag.open(writer_->tmp_path, rosbag::bagmode::Write);
+  } catch (const rosbag::BagException& e) {
+    throw bag::RosbagError(writer_->tmp_path + ": cannot create: " + e.what());
+  }
+  writer_->open = true;
+  writer_->bag.setChunkThreshold(params.chunk_bytes);
+  writer_->bag.setCompression(params.compression == "lz4" ? rosbag::compression::LZ4
+                                                          : rosbag::compression::Uncompressed);
+}
+
+BagFrameSink::~BagFrameSink() = default;
+
 void BagFrameSink::onFrame(const Frame& frame) {
   Timer timer(&stats_.write_seconds);
-  const std::string ns = "/" + frame.robot;
-  const bag::Time stamp = bag::Time::fromSec(frame.stamp);
-  const std::string odom_frame = odomFrame(frame.robot);
-  const std::string callerid = ns + "/" + params_.node;
+  Writer& w = *writer_;
+  if (!w.open) throw bag::RosbagError(w.path + ": write after close");
+  Writer::Robot& robot = w.robot(frame.robot, params_.node);
+  const ros::Time stamp = w.time(frame.stamp);
+  const ros::Time cloud_time = w.time(frame.stamp + params_.cloud_delay_s);
 
-  // FAST-LIO2 publishes Odometry first, then cloud_registered (laserMapping.cpp).
-  bag::Odometry odom;
-  odom.header.seq = seq_[ns + "/Odometry"]++;
+  // FAST-LIO2 publishes Odometry first, then cloud_registered (laserMapping.cpp); twist and
+  // covariances stay zero, as FAST-LIO2 leaves them.
+  nav_msgs::Odometry odom;
+  odom.header.seq = robot.odometry_seq++;
   odom.header.stamp = stamp;
-  odom.header.frame_id = odom_frame;
+  odom.header.frame_id = odomFrame(frame.robot);
   odom.child_frame_id = bodyFrame(frame.robot);
-  odom.T_frame_child = frame.T_O_B;
-  std::string data;
-  bag::serializeOdometry(odom, &data);
-  writer_->write(ns + "/Odometry", bag::MessageType::kOdometry, stamp, data, callerid);
+  setPose(frame.T_O_B, &odom.pose.pose.position, &odom.pose.pose.orientation);
+  w.write(robot.odometry, stamp, odom);
 
-  bag::TransformStamped tf;
-  tf.header = odom.header;
-  tf.header.seq = 0;  // tf2_ros::TransformBroadcaster leaves it 0
-  tf.child_frame_id = odom.child_frame_id;
-  tf.T_frame_child = frame.T_O_B;
-  data.clear();
-  bag::serializeTfMessage({tf}, &data);
-  writer_->write("/tf", bag::MessageType::kTfMessage, stamp, data, callerid);
+  tf2_msgs::TFMessage tf;
+  tf.transforms.resize(1);
+  geometry_msgs::TransformStamped& t = tf.transforms[0];
+  t.header = odom.header;
+  t.header.seq = 0;  // tf2_ros::TransformBroadcaster leaves it 0
+  t.child_frame_id = odom.child_frame_id;
+  setPose(frame.T_O_B, &t.transform.translation, &t.transform.rotation);
+  w.write(robot.tf, stamp, tf);
 
   std::vector<Eigen::Vector3f> points;
   std::vector<float> intensity;
   cloudRegistered(frame, params_, &points, &intensity);
-  bag::Header h;
-  h.seq = seq_[ns + "/cloud_registered"]++;
-  h.stamp = stamp;
-  h.frame_id = odom_frame;
-  data.clear();
-  bag::serializePointCloud2(h, points, intensity, &data);
-  writer_->write(ns + "/cloud_registered", bag::MessageType::kPointCloud2,
-                 bag::Time::fromSec(frame.stamp + params_.cloud_delay_s), data, callerid);
+  sensor_msgs::PointCloud2 cloud;
+  cloud.header.seq = robot.cloud_seq++;
+  cloud.header.stamp = stamp;
+  cloud.header.frame_id = odom.header.frame_id;
+  fillPointCloud2(points, intensity, &cloud);
+  w.write(robot.cloud, cloud_time, cloud);
 
   ++stats_.frames;
+  stats_.messages += 3;
   stats_.points_in += frame.points.size();
   stats_.points_out += points.size();
-  stats_.messages = writer_->messages();
-  stats_.bytes = writer_->bytesWritten();
+  stats_.bytes = w.bag.getSize();
 }
 
 void BagFrameSink::close() {
   Timer timer(&stats_.write_seconds);
-  writer_->close();
-  stats_.bytes = writer_->bytesWritten();
+  Writer& w = *writer_;
+  if (!w.open) throw bag::RosbagError(w.path + ": already closed");
+  w.open = false;
+  std::error_code ec;
+  try {
+    w.bag.close();
+  } catch (const rosbag::BagException& e) {
+    std::filesystem::remove(w.tmp_path, ec);
+    throw bag::RosbagError(w.tmp_path + ": cannot write: " + e.what());
+  }
+  stats_.bytes = std::filesystem::file_size(w.tmp_path, ec);
+  std::filesystem::rename(w.tmp_path, w.path, ec);
+  if (ec) {
+    const std::string what = ec.message();
+    std::filesystem::remove(w.tmp_path, ec);
+    throw bag::RosbagError(w.path + ": cannot rename " + w.tmp_path + " to it: " + what);
+  }
 }
 
 }  // namespace dtif::sim

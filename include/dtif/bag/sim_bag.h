@@ -5,16 +5,26 @@
 //   /<robot>/Odometry          nav_msgs/Odometry, <robot>/odom <- <robot>/base_link, T_O_B
 //   /tf                        tf2_msgs/TFMessage, the same transform
 // published by /<robot>/dtif_simulate (BagParams::node).
-// All stamped with Frame::stamp.
+// All stamped with Frame::stamp. Written with rosbag_storage's rosbag::Bag and the generated
+// message types; this header stays free of ROS headers (the tool includes it).
 #pragma once
 
 #include <cstdint>
-#include <map>
 #include <memory>
+#include <stdexcept>
 #include <string>
 
-#include "dtif/bag/rosbag_writer.h"
 #include "dtif/sim/simulator.h"
+
+namespace dtif::bag {
+
+/// Any failure to write the bag; the message names the file.
+class RosbagError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+}  // namespace dtif::bag
 
 namespace dtif::sim {
 
@@ -34,7 +44,12 @@ struct BagParams {
   /// Publisher of a robot's messages in the connection headers: /<robot>/<node> (each robot's
   /// FAST-LIO2 runs in its namespace; one /tf connection per robot, each in time order).
   std::string node = "dtif_simulate";
-  bag::RosbagWriterParams writer;
+  /// A chunk is written to disk once its data exceeds this size (rosbag record: 768 KiB)
+  /// [bytes].
+  uint32_t chunk_bytes = 1 << 20;
+  /// Compression of the chunks: "none" (the default: fastest to write and to replay) or "lz4"
+  /// (rosbag record --lz4; rosbag play decompresses it).
+  std::string compression = "none";
   /// Empty when valid, else the problems, one per line.
   std::string validate() const;
 };
@@ -73,17 +88,23 @@ class BagFrameSink : public FrameSink {
 
   /// Throws bag::RosbagError naming the file when it cannot be created or params are invalid.
   BagFrameSink(const std::string& path, const BagParams& params = {});
+  /// Without close(), removes the temporary file.
   ~BagFrameSink() override;
+  BagFrameSink(const BagFrameSink&) = delete;
+  BagFrameSink& operator=(const BagFrameSink&) = delete;
 
+  /// Throws bag::RosbagError naming the file on a write error, a stamp outside ros::Time or
+  /// after close().
   void onFrame(const Frame& frame) override;
-  /// Finishes the bag; throws bag::RosbagError naming the file on any I/O error.
+  /// Finishes the bag; throws bag::RosbagError naming the file on any I/O error or when already
+  /// closed.
   void close();
   const Stats& stats() const { return stats_; }
 
  private:
+  struct Writer;  // rosbag::Bag and the connections, kept out of this header
   BagParams params_;
-  std::unique_ptr<bag::RosbagWriter> writer_;
-  std::map<std::string, uint32_t> seq_;  // per topic
+  std::unique_ptr<Writer> writer_;
   Stats stats_;
 };
 
