@@ -8,6 +8,7 @@
 
 #include "core/byte_io.h"
 #include "dtif/core/database/loop_detector.h"
+#include "dtif/core/descriptor/validation.h"
 
 namespace dtif {
 namespace {
@@ -75,9 +76,7 @@ void LoopDetector::load(const std::string& path) {
   try {
     const uint64_t n = r.get<uint64_t>();
     // The loosest params: keep each descriptor's saved validity.
-    DescriptorParams loose;
-    loose.min_trunks = 3;
-    loose.min_triangles = 1;
+    const DescriptorParams loose = loosestDescriptorParams();
     for (uint64_t i = 0; i < n; ++i) {
       const uint32_t sz = r.get<uint32_t>();
       if (r.remaining() < sz) throw std::runtime_error("entry truncated");
