@@ -22,6 +22,7 @@
 #include "dtif/core/database/loop_detector.h"
 #include "dtif/core/database/robot_links.h"
 #include "dtif/core/descriptor/validation.h"
+#include "dtif/core/timing.h"
 #include "dtif/io/dataset.h"
 #include "dtif/ros/conversions.h"
 #include "dtif/ros/markers.h"
@@ -216,8 +217,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     const auto t0 = std::chrono::steady_clock::now();
     try {
       q->lc = detector_->query(*d);
-      q->t_loop_ms =
-          std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+      q->t_loop_ms = msSince(t0);
     } catch (const std::exception& e) {
       NODELET_ERROR_THROTTLE(5.0, "query of %s/%ld failed: %s", d->robot.c_str(),
                              static_cast<long>(d->submap_id), e.what());

@@ -23,6 +23,7 @@
 #include "dtif/core/descriptor/describe.h"
 #include "dtif/core/descriptor/descriptor.h"
 #include "dtif/core/extraction/trunk_extractor.h"
+#include "dtif/core/timing.h"
 #include "dtif/ros/conversions.h"
 #include "dtif/ros/markers.h"
 #include "dtif/ros/msgs.h"
@@ -253,8 +254,7 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
     if (voxel_grid_) ros_glue::voxelFilterSubmap(voxel_grid_.get(), s.cloud.get());
     const Descriptor d = describeCloud(*s.cloud, {node_.robot, s.id, s.stamp}, extractor_params_,
                                        descriptor_params_);
-    const double ms =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    const double ms = msSince(t0);
     NODELET_DEBUG("submap %ld: %zu points, %zu trunks, %zu faces, %.1f ms%s%s",
                   static_cast<long>(s.id), s.cloud->size(), d.trunks.size(), d.triangles.size(), ms,
                   d.valid ? "" : ", invalid: ", d.invalid_reason.c_str());
