@@ -224,5 +224,33 @@ TEST(CliTest, EvalAppliesConfigFilesInOrder) {
   fs::remove_all(dir);
 }
 
+/// bench's options reach the command: --back-ends replaces the default list, the --no-* flags
+/// switch their parts off.
+TEST(CliTest, BenchRunsTheBackEndsGiven) {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::temp_directory_path() / "dtif_cli_test_bench";
+  fs::remove_all(dir);
+  writeTinyDataset(dir / "tiny" / "dataset");
+  const ToolRun r =
+      runTool("bench " + (dir / "tiny" / "dataset").string() + " --out " + (dir / "out").string() +
+              " --back-ends svd_ransac,fgr --no-front-ends --no-pr "
+              "--no-scan-context --no-scaling");
+  ASSERT_EQ(r.status, 0) << r.out;
+  const std::string summary = readText(dir / "out" / "summary.csv");
+  std::vector<std::string> rows;
+  std::stringstream ss(summary);
+  for (std::string line; std::getline(ss, line);) {
+    if (line.rfind("tiny,", 0) == 0) rows.push_back(line);
+  }
+  // Each back end: its solver's pose, then with dtif's refinement.
+  ASSERT_EQ(rows.size(), 4u) << summary;
+  for (size_t i = 0; i < rows.size(); ++i) {
+    const std::string prefix = i < 2 ? "tiny,back_end,\"SVD-RANSAC" : "tiny,back_end,\"FGR";
+    EXPECT_EQ(rows[i].rfind(prefix, 0), 0u) << summary;
+  }
+  EXPECT_FALSE(fs::exists(dir / "out" / "scaling.csv"));
+  fs::remove_all(dir);
+}
+
 }  // namespace
 }  // namespace dtif
