@@ -5,6 +5,7 @@
 #  2. replays the bag through the ROS nodelets (roslaunch dtif demo_bag.launch, headless, all
 #     nodelets in one manager) and prints the loop closures they found against the dataset's
 #     ground truth (dtif score: eval's metrics), side by side with eval's, and their lag.
+# Exits non-zero when a step fails or when the nodelets or dtif eval close no loop.
 # Usage: scripts/demo.sh [scene.yaml] (default: config/scenes/mixed.yaml)
 # Environment: DTIF_DEMO_RATE (bag replay rate, default 2), DTIF_DEMO_BAG_ARGS (more options of
 # dtif simulate, e.g. "--bag-max-points 4000" for a smaller bag of thinned clouds; by default the
@@ -94,4 +95,13 @@ echo
 echo "=== ROS nodelets on ${NAME}.bag, scored against ground truth (dtif score) ==="
 "${DTIF_BIN}" score "${OUT}/dataset" --loops "${LOG}" --out "${OUT}/ros/score" --eval "${OUT}/eval"
 echo
+# A demo that closes no loop is a failed demo (.ci/run runs it): exit non-zero.
+accepted() { /usr/bin/python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["accepted"])' "$1"; }
+ONLINE_LOOPS="$(accepted "${OUT}/ros/score/summary.json")"
+EVAL_LOOPS="$(accepted "${OUT}/eval/summary.json")"
+echo "dtif demo: loops: nodelets ${ONLINE_LOOPS}, dtif eval ${EVAL_LOOPS}"
+if [ "${ONLINE_LOOPS}" -eq 0 ] || [ "${EVAL_LOOPS}" -eq 0 ]; then
+  echo "dtif demo: FAILED: no loop closure (nodelets ${ONLINE_LOOPS}, dtif eval ${EVAL_LOOPS})" >&2
+  exit 1
+fi
 echo "dtif demo: done in $(( $(date +%s) - START_S )) s of wall time"

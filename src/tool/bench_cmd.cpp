@@ -15,20 +15,9 @@
 
 #include "commands.h"
 #include "dtif/baselines/bench.h"
-#include "options.h"
 
 namespace dtif::tool {
 namespace {
-
-std::vector<std::string> splitList(const std::string& s) {
-  std::vector<std::string> out;
-  std::stringstream ss(s);
-  std::string item;
-  while (std::getline(ss, item, ',')) {
-    if (!item.empty()) out.push_back(item);
-  }
-  return out;
-}
 
 /// A dataset folder `<scene>/dataset` is named after <scene>, any other after itself.
 std::string sceneName(const std::string& dir) {
@@ -76,25 +65,16 @@ void summaryCsvRow(std::ostream& os, const std::string& scene, const std::string
 
 }  // namespace
 
-int runBench(const Args& args) {
-  const Options o = parseOptions(args, {"out", "config", "back-ends", "scaling-sizes"},
-                                 {"no-front-ends", "no-scaling", "no-pr", "no-scan-context"});
-  if (o.positional.empty()) throw UsageError{"expected one or more dataset folders"};
-  const auto out = o.get("out");
-  if (!out) throw UsageError{"--out <dir> is required"};
-  const DtifParams params = loadParams(o);
+int runBench(const BenchArgs& a) {
+  const DtifParams params = loadParams(a.configs);
   baselines::BenchOptions opt;
-  if (auto b = o.get("back-ends")) opt.back_ends = splitList(*b);
-  opt.front_ends = !o.has("no-front-ends");
-  opt.pr_curve = !o.has("no-pr");
-  opt.place_recognition = !o.has("no-scan-context");
-  std::vector<size_t> sizes{10, 20, 50, 100, 200, 500, 1000, 2000};
-  if (auto s = o.get("scaling-sizes")) {
-    sizes.clear();
-    for (const auto& v : splitList(*s)) sizes.push_back(std::stoul(v));
-  }
+  opt.back_ends = a.back_ends;
+  opt.front_ends = !a.no_front_ends;
+  opt.pr_curve = !a.no_pr;
+  opt.place_recognition = !a.no_scan_context;
+  const std::vector<size_t>& sizes = a.scaling_sizes;
 
-  const std::filesystem::path dir(*out);
+  const std::filesystem::path dir(a.out);
   std::filesystem::create_directories(dir);
   std::ofstream summary(dir / "summary.csv"), pr(dir / "pr.csv"), subs(dir / "submaps.csv"),
       place(dir / "place_recognition.csv");
@@ -125,7 +105,7 @@ int runBench(const Args& args) {
 
   std::vector<baselines::SceneBench> scenes;
   std::vector<std::shared_ptr<const Descriptor>> pool;
-  for (const std::string& path : o.positional) {
+  for (const std::string& path : a.datasets) {
     const Dataset ds = readDataset(path);
     const std::string scene = sceneName(path);
     baselines::SceneBench sb =
@@ -231,7 +211,7 @@ int runBench(const Args& args) {
     md << "\n";
   }
 
-  if (!o.has("no-scaling") && !pool.empty()) {
+  if (!a.no_scaling && !pool.empty()) {
     std::cerr << "dtif bench: query time vs database size\n";
     std::vector<std::shared_ptr<const Descriptor>> queries;
     const size_t step = std::max<size_t>(1, pool.size() / 24);
@@ -255,7 +235,7 @@ int runBench(const Args& args) {
   }
   std::ofstream(dir / "tables.md") << md.str();
   std::cout << md.str();
-  if (!summary || !pr || !subs || !place) throw DatasetError(*out + ": write failed");
+  if (!summary || !pr || !subs || !place) throw DatasetError(a.out + ": write failed");
   return 0;
 }
 

@@ -9,7 +9,6 @@
 
 #include "commands.h"
 #include "dtif/eval/evaluation.h"
-#include "options.h"
 
 namespace dtif::tool {
 
@@ -30,16 +29,12 @@ void writeEvalFiles(const std::string& out, const EvalResult& res, const std::st
   if (!t || !p) throw DatasetError(out + ": write failed");
 }
 
-int runEval(const Args& args) {
-  const Options o = parseOptions(args, {"out", "config", "method"}, {"unit-weights", "quiet"});
-  if (o.positional.size() != 1) throw UsageError{"expected one dataset folder"};
-  const auto out = o.get("out");
-  if (!out) throw UsageError{"--out <dir> is required"};
-  DtifParams params = loadParams(o);
-  if (o.has("unit-weights")) params.loop.pose.unit_weights = true;
+int runEval(const EvalArgs& a) {
+  DtifParams params = loadParams(a.configs);
+  if (a.unit_weights) params.loop.pose.unit_weights = true;
 
-  const Dataset ds = readDataset(o.positional[0]);
-  const bool quiet = o.has("quiet");
+  const Dataset ds = readDataset(a.dataset);
+  const bool quiet = a.quiet;
   const EvalResult res = runEvaluation(ds, params, EvalParams{}, [&](size_t i, size_t n) {
     if (!quiet && (i % 10 == 0 || i == n)) {
       std::cerr << "\rdtif eval: " << i << "/" << n << " submaps" << std::flush;
@@ -48,11 +43,12 @@ int runEval(const Args& args) {
   });
 
   // Results are written only once the whole run succeeded: no partial output.
-  const std::string method =
-      o.get("method").value_or(params.loop.pose.unit_weights ? "dtif (unit weights)" : "dtif");
+  const std::string method = !a.method.empty()               ? a.method
+                             : params.loop.pose.unit_weights ? "dtif (unit weights)"
+                                                             : "dtif";
   const std::string table = formatTable(res.summary, method);
-  writeEvalFiles(*out, res, table, params);
-  const std::filesystem::path dir(*out);
+  writeEvalFiles(a.out, res, table, params);
+  const std::filesystem::path dir(a.out);
   writeMissesCsv((dir / "misses.csv").string(), res.misses);
   std::cout << "dataset " << ds.root << ": " << res.summary.submaps << " submaps\n" << table;
   if (!res.detection.empty()) {

@@ -6,15 +6,12 @@
 #include "dtif/core/descriptor/descriptor.h"
 #include "dtif/core/extraction/trunk_extractor.h"
 #include "dtif/io/dataset.h"
-#include "options.h"
 
 namespace dtif::tool {
 
-int runExtract(const Args& args) {
-  const Options o = parseOptions(args, {"out", "config"}, {});
-  if (o.positional.size() != 1) throw UsageError{"expected one cloud.pcd"};
-  const DtifParams params = loadParams(o);
-  const std::string& path = o.positional[0];
+int runExtract(const ExtractArgs& a) {
+  const DtifParams params = loadParams(a.configs);
+  const std::string& path = a.cloud;
   const Cloud::Ptr cloud = loadPcd(path);
 
   const auto t0 = std::chrono::steady_clock::now();
@@ -36,9 +33,9 @@ int runExtract(const Args& args) {
             << encodeDescriptor(d).size() << " bytes\n"
             << "  time: extraction " << Ms(t1 - t0).count() << " ms, descriptor "
             << Ms(t2 - t1).count() << " ms\n";
-  if (const auto out = o.get("out")) {
-    writeTrunkCsv(*out, ext.trunks);
-    std::cout << "  wrote " << *out << "\n";
+  if (!a.out.empty()) {
+    writeTrunkCsv(a.out, ext.trunks);
+    std::cout << "  wrote " << a.out << "\n";
   }
   return 0;
 }

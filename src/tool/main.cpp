@@ -1,56 +1,65 @@
 // dtif: the offline command-line tool (simulate, extract, register, eval, score, bench).
-#include <cstring>
+// Exit status: 0 success (and --help, --version), 1 runtime error (`dtif <cmd>: <file>:
+// <problem>`), 2 bad usage (one line saying what is wrong, then where to find the usage).
+#include <CLI/CLI.hpp>
 #include <exception>
 #include <iostream>
+#include <string>
 
 #include "commands.h"
+#include "options.h"
 
 namespace {
 
-constexpr const char* kUsage =
-    "usage: dtif <command> [options]\n"
-    "  simulate <scene.yaml> --out <dataset_dir> [--seed N] [--png <file>] [--threads N]\n"
-    "           [--bag <file.bag> [--bag-voxel <m>] [--bag-max-points N]]\n"
-    "           --bag: also a rosbag (/<robot>/cloud_registered, /<robot>/Odometry, /tf) for\n"
-    "           roslaunch dtif demo_bag.launch, every return by default (about 3 MB/s per\n"
-    "           robot for a 200k points/s scene); each cloud can be voxel-filtered (--bag-voxel\n"
-    "           <m>) and thinned evenly to at most N points (--bag-max-points N); 0: off\n"
-    "  extract  <cloud.pcd> [--out <trunks.csv>] [--config <params.yaml>]\n"
-    "  register <query> <candidate> [--config <params.yaml>]  (PCD submaps or x,y,z,r CSVs)\n"
-    "  eval     <dataset_dir> --out <dir> [--config <params.yaml>] [--unit-weights]\n"
-    "  score    <dataset_dir> --loops <loop_log.csv> --out <dir> [--config <params.yaml>]\n"
-    "           [--eval <eval_out_dir>]: scores the loop log of the ROS nodelets on this\n"
-    "           dataset's bag against its ground truth (eval's metrics), lists the loops, "
-    "compares\n"
-    "           them with a dtif eval run and reports the lag of the results\n"
-    "  bench    <dataset_dir>... --out <dir> [--config <params.yaml>] [--back-ends a,b,...]\n"
-    "           [--no-front-ends] [--no-pr] [--no-scan-context] [--no-scaling]\n"
-    "           [--scaling-sizes 10,20,...]\n"
-    "           dtif vs the paper's baselines (back ends: dtif, dtif_unit, quatro,\n"
-    "           svd_ransac, fgr; front end: FPFH; place recognition: scan context);\n"
-    "           summary.csv, tables.md, pr.csv, place_recognition.csv, ...\n";
+/// The subcommand the command line named ("" when none was recognised).
+std::string commandOf(const CLI::App& app) {
+  const auto subs = app.get_subcommands();
+  return subs.empty() ? std::string() : subs.front()->get_name();
+}
+
+/// Help and version go to stdout (exit 0); anything else is a one-line usage error (exit 2).
+int reportParseError(const CLI::App& app, const CLI::ParseError& e, int argc, char** argv) {
+  if (e.get_exit_code() == static_cast<int>(CLI::ExitCodes::Success)) return app.exit(e);
+  const std::string cmd = commandOf(app);
+  if (cmd.empty() && argc >= 2) {
+    // Only --help and --version come before the command: anything else names what is wrong.
+    std::cerr << "dtif: unknown " << (argv[1][0] == '-' ? "option" : "command") << " '" << argv[1]
+              << "'\n";
+  } else {
+    std::cerr << "dtif" << (cmd.empty() ? "" : " " + cmd) << ": " << e.what() << "\n";
+  }
+  std::cerr << "Run 'dtif" << (cmd.empty() ? "" : " " + cmd) << " --help' for the usage.\n";
+  return 2;
+}
+
+int runCommand(const std::string& cmd, const dtif::tool::CommandLine& cl) {
+  if (cmd == "simulate") return dtif::tool::runSimulate(cl.simulate);
+  if (cmd == "extract") return dtif::tool::runExtract(cl.extract);
+  if (cmd == "register") return dtif::tool::runRegister(cl.reg);
+  if (cmd == "eval") return dtif::tool::runEval(cl.eval);
+  if (cmd == "score") return dtif::tool::runScore(cl.score);
+  return dtif::tool::runBench(cl.bench);
+}
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc < 2 || !std::strcmp(argv[1], "-h") || !std::strcmp(argv[1], "--help")) {
-    std::cout << kUsage;
-    return argc < 2 ? 2 : 0;
-  }
-  const std::string cmd = argv[1];
-  const dtif::tool::Args args(argv + 2, argv + argc);
+  CLI::App app(
+      "dtif: forest LiDAR loop closure from tree-trunk Delaunay descriptors, offline tool.\n"
+      "Run 'dtif <command> --help' for the options of a command.",
+      "dtif");
+  app.set_version_flag("--version", std::string("dtif ") + DTIF_VERSION,
+                       "print the version (package.xml) and exit");
+  dtif::tool::CommandLine cl;
+  dtif::tool::addCommands(&app, &cl);
   try {
-    if (cmd == "simulate") return dtif::tool::runSimulate(args);
-    if (cmd == "extract") return dtif::tool::runExtract(args);
-    if (cmd == "register") return dtif::tool::runRegister(args);
-    if (cmd == "eval") return dtif::tool::runEval(args);
-    if (cmd == "score") return dtif::tool::runScore(args);
-    if (cmd == "bench") return dtif::tool::runBench(args);
-    std::cerr << "dtif: unknown command '" << cmd << "'\n" << kUsage;
-    return 2;
-  } catch (const dtif::tool::UsageError& e) {
-    std::cerr << "dtif " << cmd << ": " << e.message << "\n" << kUsage;
-    return 2;
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return reportParseError(app, e, argc, argv);
+  }
+  const std::string cmd = commandOf(app);
+  try {
+    return runCommand(cmd, cl);
   } catch (const std::exception& e) {
     std::cerr << "dtif " << cmd << ": " << e.what() << "\n";
     return 1;

@@ -1,35 +1,93 @@
-// Minimal command-line parsing shared by the subcommands: positionals, `--key value`, flags.
+// The options of each `dtif` subcommand, as parsed from the command line (options.cpp, CLI11);
+// the commands (commands.h) see only these structs.
 #pragma once
 
-#include <map>
-#include <optional>
-#include <set>
+#include <cstdint>
 #include <string>
 #include <vector>
 
-#include "commands.h"
+#include "dtif/bag/sim_bag.h"
 #include "dtif/io/config.h"
+
+namespace CLI {
+class App;
+}
 
 namespace dtif::tool {
 
-struct Options {
-  std::vector<std::string> positional;
-  std::map<std::string, std::vector<std::string>> values;  ///< --key value (repeatable)
-  std::set<std::string> flags;                             ///< --flag
-
-  std::optional<std::string> get(const std::string& key) const {
-    const auto it = values.find(key);
-    if (it == values.end() || it->second.empty()) return std::nullopt;
-    return it->second.back();
-  }
-  bool has(const std::string& flag) const { return flags.count(flag) > 0; }
+/// dtif simulate <scene.yaml> --out <dataset_dir> ...
+struct SimulateArgs {
+  std::string scene;          ///< scene YAML (config/scenes/*.yaml)
+  std::string out;            ///< dataset folder (created when missing)
+  uint64_t seed = 1;          ///< random seed of the simulation
+  std::string png;            ///< top view of the scene ("": none)
+  int threads = 0;            ///< simulation threads (0: all cores)
+  std::string bag;            ///< rosbag of the raw frames ("": none)
+  sim::BagParams bag_params;  ///< what the bag holds (--bag-voxel, --bag-max-points)
+  bool quiet = false;         ///< no summary on stdout
 };
 
-/// Parses args; value_keys take one value, flag_keys none. Anything else is a UsageError.
-Options parseOptions(const Args& args, const std::set<std::string>& value_keys,
-                     const std::set<std::string>& flag_keys);
+/// dtif extract <cloud.pcd> [--out trunks.csv] [--config params.yaml]...
+struct ExtractArgs {
+  std::string cloud;                 ///< PCD submap
+  std::string out;                   ///< trunk map CSV to write ("": none)
+  std::vector<std::string> configs;  ///< parameter files, applied in order
+};
+
+/// dtif register <query> <candidate> [--config params.yaml]...
+struct RegisterArgs {
+  std::string query;                 ///< PCD submap or x,y,z,r CSV
+  std::string candidate;             ///< PCD submap or x,y,z,r CSV
+  std::vector<std::string> configs;  ///< parameter files, applied in order
+};
+
+/// dtif eval <dataset_dir> --out <dir> ...
+struct EvalArgs {
+  std::string dataset;               ///< dataset folder (DATASET.md)
+  std::string out;                   ///< output folder (created when missing)
+  std::vector<std::string> configs;  ///< parameter files, applied in order
+  bool unit_weights = false;         ///< pose estimation with unit weights
+  bool quiet = false;                ///< no progress on stderr
+  std::string method;                ///< method name in table.md ("": from the parameters)
+};
+
+/// dtif score <dataset_dir> --loops <loop_log.csv> --out <dir> ...
+struct ScoreArgs {
+  std::string dataset;               ///< dataset folder the nodelets ran on (its bag)
+  std::string loops;                 ///< the LoopClosureNodelet's ~loop_log
+  std::string out;                   ///< output folder (created when missing)
+  std::vector<std::string> configs;  ///< parameter files, applied in order
+  std::string eval;                  ///< output folder of a dtif eval run to compare ("": none)
+};
+
+/// dtif bench <dataset_dir>... --out <dir> ...
+struct BenchArgs {
+  std::vector<std::string> datasets;   ///< dataset folders, one scene each
+  std::string out;                     ///< output folder (created when missing)
+  std::vector<std::string> configs;    ///< parameter files, applied in order
+  std::vector<std::string> back_ends;  ///< back ends to run (options.cpp: all by default)
+  bool no_front_ends = false;          ///< skip the FPFH front end comparison
+  bool no_pr = false;                  ///< skip the precision-recall curves
+  bool no_scan_context = false;        ///< skip place recognition (scan context)
+  bool no_scaling = false;             ///< skip query time vs database size
+  std::vector<size_t> scaling_sizes{10, 20, 50, 100, 200, 500, 1000, 2000};  ///< database sizes
+};
+
+/// The options of every subcommand; the one the command line names is filled in.
+struct CommandLine {
+  SimulateArgs simulate;
+  ExtractArgs extract;
+  RegisterArgs reg;
+  EvalArgs eval;
+  ScoreArgs score;
+  BenchArgs bench;
+};
+
+/// Adds the subcommands (simulate, extract, register, eval, score, bench) to dtif, each option
+/// bound to its field of *cl, and requires exactly one of them.
+void addCommands(CLI::App* dtif, CommandLine* cl);
 
 /// Default parameters overridden by every `--config` file given, in order.
-DtifParams loadParams(const Options& opts);
+DtifParams loadParams(const std::vector<std::string>& configs);
 
 }  // namespace dtif::tool

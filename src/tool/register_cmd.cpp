@@ -10,7 +10,6 @@
 #include "dtif/core/descriptor/descriptor.h"
 #include "dtif/core/extraction/trunk_extractor.h"
 #include "dtif/io/dataset.h"
-#include "options.h"
 
 namespace dtif::tool {
 
@@ -33,28 +32,26 @@ Descriptor loadDescriptor(const std::string& path, const DtifParams& params) {
 
 }  // namespace
 
-int runRegister(const Args& args) {
-  const Options o = parseOptions(args, {"config"}, {});
-  if (o.positional.size() != 2) throw UsageError{"expected <query> <candidate>"};
-  const DtifParams params = loadParams(o);
+int runRegister(const RegisterArgs& a) {
+  const DtifParams params = loadParams(a.configs);
   using Ms = std::chrono::duration<double, std::milli>;
 
   const auto t0 = std::chrono::steady_clock::now();
-  auto q = std::make_shared<Descriptor>(loadDescriptor(o.positional[0], params));
-  auto c = std::make_shared<Descriptor>(loadDescriptor(o.positional[1], params));
+  auto q = std::make_shared<Descriptor>(loadDescriptor(a.query, params));
+  auto c = std::make_shared<Descriptor>(loadDescriptor(a.candidate, params));
   const double desc_ms = Ms(std::chrono::steady_clock::now() - t0).count();
   q->robot = "query";
   c->robot = "candidate";
   q->submap_id = 0;
   c->submap_id = 1;
 
-  std::cout << "query:     " << o.positional[0] << ": " << q->trunks.size() << " trunks, "
+  std::cout << "query:     " << a.query << ": " << q->trunks.size() << " trunks, "
             << q->triangles.size() << " faces\n"
-            << "candidate: " << o.positional[1] << ": " << c->trunks.size() << " trunks, "
+            << "candidate: " << a.candidate << ": " << c->trunks.size() << " trunks, "
             << c->triangles.size() << " faces\n";
   for (const auto* d : {q.get(), c.get()}) {
     if (!d->valid) {
-      std::cerr << "dtif register: " << (d == q.get() ? o.positional[0] : o.positional[1])
+      std::cerr << "dtif register: " << (d == q.get() ? a.query : a.candidate)
                 << ": descriptor excluded from retrieval: " << d->invalid_reason << "\n";
       return 1;
     }

@@ -11,7 +11,6 @@
 #include <sstream>
 
 #include "commands.h"
-#include "options.h"
 
 namespace dtif::tool {
 namespace {
@@ -42,27 +41,22 @@ std::string fmtStats(const Stats& s) {
 
 }  // namespace
 
-int runScore(const Args& args) {
-  const Options o = parseOptions(args, {"loops", "out", "config", "eval"}, {});
-  if (o.positional.size() != 1) throw UsageError{"expected one dataset folder"};
-  const auto loops = o.get("loops");
-  const auto out = o.get("out");
-  if (!loops || !out) throw UsageError{"--loops <loop_log.csv> and --out <dir> are required"};
-  const DtifParams params = loadParams(o);
-  const Dataset ds = readDataset(o.positional[0]);
-  const std::vector<LoopLogRow> log = readLoopLog(*loops);
+int runScore(const ScoreArgs& a) {
+  const DtifParams params = loadParams(a.configs);
+  const Dataset ds = readDataset(a.dataset);
+  const std::vector<LoopLogRow> log = readLoopLog(a.loops);
   std::vector<std::string> unmatched;
   const EvalResult res =
       scoreLoopLog(ds, log, params.loop.database.exclude_recent_s, EvalParams{}, &unmatched);
   const std::string table = formatTable(res.summary, "dtif (ROS nodelets)");
-  writeEvalFiles(*out, res, table, params);
+  writeEvalFiles(a.out, res, table, params);
 
   std::map<int64_t, int64_t> offline;
-  if (const auto e = o.get("eval")) offline = readAcceptedLoops(*e + "/results.csv");
+  if (!a.eval.empty()) offline = readAcceptedLoops(a.eval + "/results.csv");
   std::map<int64_t, std::string> name;  // dataset id -> robot
   for (const SubmapRecord& r : ds.submaps) name[r.id] = r.robot;
 
-  std::cout << "online loop closures (" << *loops << ") against ground truth of " << ds.root
+  std::cout << "online loop closures (" << a.loops << ") against ground truth of " << ds.root
             << ":\n";
   size_t same = 0;
   for (const EvalRow& r : res.rows) {
@@ -74,7 +68,7 @@ int runScore(const Args& args) {
                   static_cast<long>(*r.candidate), r.err->rot_deg, r.err->trans_m, r.overlap,
                   r.true_positive ? "true positive" : "FALSE POSITIVE");
     std::cout << buf;
-    if (o.get("eval")) {
+    if (!a.eval.empty()) {
       const auto it = offline.find(r.query);
       if (it == offline.end()) {
         std::cout << "; eval: no loop";
@@ -90,7 +84,7 @@ int runScore(const Args& args) {
   for (const std::string& u : unmatched) std::cout << "  not in the dataset: " << u << "\n";
   std::cout << "(submap ids of the dataset; the nodelets number each robot's submaps apart)\n"
             << table;
-  if (o.get("eval")) {
+  if (!a.eval.empty()) {
     std::map<int64_t, const EvalRow*> online;
     for (const EvalRow& r : res.rows) online[r.query] = &r;
     std::ostringstream missed;
