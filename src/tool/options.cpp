@@ -76,6 +76,12 @@ void addSimulate(CLI::App* dtif, SimulateArgs* a) {
       ->check(CLI::Range(0, 10000000))
       ->capture_default_str()
       ->needs(bag);
+  cmd->add_option("--bag-compression", a->bag_params.compression,
+                  "chunk compression of the bag: none, or lz4 (smaller, rosbag play reads it)")
+      ->type_name("none|lz4")
+      ->check(CLI::IsMember({"none", "lz4"}))
+      ->capture_default_str()
+      ->needs(bag);
   cmd->add_flag("--quiet", a->quiet, "no summary on stdout");
 }
 

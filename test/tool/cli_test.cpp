@@ -56,7 +56,7 @@ std::string packageVersion() {
 const std::map<std::string, std::vector<std::string>> kCommandOptions{
     {"simulate",
      {"scene", "--out", "--seed", "--png", "--threads", "--bag", "--bag-voxel", "--bag-max-points",
-      "--quiet"}},
+      "--bag-compression", "--quiet"}},
     {"extract", {"cloud", "--out", "--config"}},
     {"register", {"query", "candidate", "--config"}},
     {"eval", {"dataset", "--out", "--config", "--unit-weights", "--quiet", "--method"}},
@@ -133,6 +133,8 @@ TEST(CliTest, NumbersAreValidated) {
   expectUsageError(sim + "--bag-voxel 0.1", "--bag");
   expectUsageError(sim + "--bag b.bag --bag-max-points 10000001", "--bag-max-points");
   expectUsageError(sim + "--bag-max-points 100", "--bag");
+  expectUsageError(sim + "--bag b.bag --bag-compression zip", "--bag-compression");
+  expectUsageError(sim + "--bag-compression lz4", "--bag");
   expectUsageError("bench d --out o --scaling-sizes 10,x", "--scaling-sizes");
   expectUsageError("bench d --out o --back-ends dtif,nope", "nope");
 }
