@@ -1,10 +1,8 @@
 // dtif extract <cloud.pcd> [--out trunks.csv] [--config params.yaml]
-#include <chrono>
 #include <iostream>
 
 #include "commands.h"
-#include "dtif/core/descriptor/descriptor.h"
-#include "dtif/core/extraction/trunk_extractor.h"
+#include "dtif/core/descriptor/describe.h"
 #include "dtif/io/dataset.h"
 
 namespace dtif::tool {
@@ -14,12 +12,10 @@ int runExtract(const ExtractArgs& a) {
   const std::string& path = a.cloud;
   const Cloud::Ptr cloud = loadPcd(path);
 
-  const auto t0 = std::chrono::steady_clock::now();
-  const TrunkExtractionResult ext = extractTrunks(*cloud, params.trunk_extraction);
-  const auto t1 = std::chrono::steady_clock::now();
-  const Descriptor d = describeSubmap(ext, params.descriptor);
-  const auto t2 = std::chrono::steady_clock::now();
-  using Ms = std::chrono::duration<double, std::milli>;
+  DescribeTimings ms;
+  TrunkExtractionResult ext;
+  const Descriptor d =
+      describeCloud(*cloud, SubmapKey{}, params.trunk_extraction, params.descriptor, &ms, &ext);
 
   std::cout << path << ": " << ext.stats.finite_points << " finite points of "
             << ext.stats.input_points << "\n"
@@ -31,8 +27,8 @@ int runExtract(const ExtractArgs& a) {
             << "  descriptor: "
             << (d.valid ? "valid" : "excluded from retrieval: " + d.invalid_reason) << ", "
             << encodeDescriptor(d).size() << " bytes\n"
-            << "  time: extraction " << Ms(t1 - t0).count() << " ms, descriptor "
-            << Ms(t2 - t1).count() << " ms\n";
+            << "  time: extraction " << ms.extract_ms << " ms, descriptor "
+            << ms.total_ms - ms.extract_ms << " ms\n";
   if (!a.out.empty()) {
     writeTrunkCsv(a.out, ext.trunks);
     std::cout << "  wrote " << a.out << "\n";

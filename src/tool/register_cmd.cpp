@@ -7,8 +7,8 @@
 
 #include "commands.h"
 #include "dtif/core/database/loop_detector.h"
-#include "dtif/core/descriptor/descriptor.h"
-#include "dtif/core/extraction/trunk_extractor.h"
+#include "dtif/core/descriptor/describe.h"
+#include "dtif/core/timing.h"
 #include "dtif/io/dataset.h"
 
 namespace dtif::tool {
@@ -21,29 +21,29 @@ bool endsWith(const std::string& s, const std::string& suffix) {
 }
 
 /// A PCD submap gets its trunks and footprint extracted; a trunk map CSV has no footprint.
-Descriptor loadDescriptor(const std::string& path, const DtifParams& params) {
-  if (endsWith(path, ".csv")) return buildDescriptor(readTrunkCsv(path), params.descriptor);
+Descriptor loadDescriptor(const std::string& path, const SubmapKey& key, const DtifParams& params) {
   if (endsWith(path, ".pcd")) {
-    return describeSubmap(extractTrunks(*loadPcd(path), params.trunk_extraction),
-                          params.descriptor);
+    return describeCloud(*loadPcd(path), key, params.trunk_extraction, params.descriptor);
   }
-  throw DatasetError(path + ": unknown input type (expected a .pcd submap or an x,y,z,r .csv)");
+  if (!endsWith(path, ".csv")) {
+    throw DatasetError(path + ": unknown input type (expected a .pcd submap or an x,y,z,r .csv)");
+  }
+  Descriptor d = buildDescriptor(readTrunkCsv(path), params.descriptor);
+  d.robot = key.robot;
+  d.submap_id = key.submap_id;
+  d.stamp = key.stamp;
+  return d;
 }
 
 }  // namespace
 
 int runRegister(const RegisterArgs& a) {
   const DtifParams params = loadParams(a.configs);
-  using Ms = std::chrono::duration<double, std::milli>;
 
   const auto t0 = std::chrono::steady_clock::now();
-  auto q = std::make_shared<Descriptor>(loadDescriptor(a.query, params));
-  auto c = std::make_shared<Descriptor>(loadDescriptor(a.candidate, params));
-  const double desc_ms = Ms(std::chrono::steady_clock::now() - t0).count();
-  q->robot = "query";
-  c->robot = "candidate";
-  q->submap_id = 0;
-  c->submap_id = 1;
+  auto q = std::make_shared<Descriptor>(loadDescriptor(a.query, {"query", 0, 0.0}, params));
+  auto c = std::make_shared<Descriptor>(loadDescriptor(a.candidate, {"candidate", 1, 0.0}, params));
+  const double desc_ms = msSince(t0);
 
   std::cout << "query:     " << a.query << ": " << q->trunks.size() << " trunks, "
             << q->triangles.size() << " faces\n"
@@ -62,7 +62,7 @@ int runRegister(const RegisterArgs& a) {
   QueryStats qs;
   const auto t1 = std::chrono::steady_clock::now();
   const auto loop = detector.query(*q, &qs);
-  const double loop_ms = Ms(std::chrono::steady_clock::now() - t1).count();
+  const double loop_ms = msSince(t1);
   std::cout << std::fixed << std::setprecision(3) << "time: descriptors " << desc_ms << " ms, loop "
             << loop_ms << " ms (solver " << qs.solver_ms << " ms)\n";
   // The pair once more through matchPair, for the verification's details and reason.
