@@ -344,6 +344,16 @@ TEST(ExtractionStages, ValidateRejectsBadTuningKnobs) {
               p->footprint_max_samples = -1;
             }).find("footprint_max_samples"),
             std::string::npos);
+  EXPECT_NE(error([](TrunkExtractorParams* p) {
+              p->ground_plane_c_up_m = 0.0;
+            }).find("ground_plane_c_up_m"),
+            std::string::npos);
+  EXPECT_NE(error([](TrunkExtractorParams* p) {
+              p->base_plane_c_down_m = -1.0;
+            }).find("base_plane_c_down_m"),
+            std::string::npos);
+  EXPECT_NE(error([](TrunkExtractorParams* p) { p->lean_shell_m = -0.1; }).find("lean_shell_m"),
+            std::string::npos);
   // An invalid set extracts nothing.
   TrunkExtractorParams bad;
   bad.ground_max_step = -1.0;

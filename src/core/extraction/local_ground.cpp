@@ -256,9 +256,9 @@ void fitLocalGroundPlanes(const GroundCells& cells, const TrunkExtractorParams& 
         continue;
       }
       // Downweight cells above the plane: what is left of vegetation fills cells from above.
-      grid->plane[c] = fitGroundPlane(win.x.data(), win.y.data(), win.z.data(), win.w.data(),
-                                      win.x.size(), 0.0, 0.0,
-                                      /*c_up=*/0.3, /*c_down=*/1.0, /*iterations=*/5);
+      grid->plane[c] =
+          fitGroundPlane(win.x.data(), win.y.data(), win.z.data(), win.w.data(), win.x.size(), 0.0,
+                         0.0, p.ground_plane_c_up_m, p.ground_plane_c_down_m, /*iterations=*/5);
     }
   }
 }

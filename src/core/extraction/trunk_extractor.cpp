@@ -58,6 +58,8 @@ void checkGroundAndColumns(const TrunkExtractorParams& p, Checks* c) {
   c->unit("ground_min_open_fraction", p.ground_min_open_fraction);
   c->positive("ground_max_step", p.ground_max_step);
   c->require(p.ground_min_cells >= 1, "ground_min_cells must be >= 1");
+  c->positive("ground_plane_c_up_m", p.ground_plane_c_up_m);
+  c->positive("ground_plane_c_down_m", p.ground_plane_c_down_m);
   c->require(p.slab_min_h_m >= 0.0, "slab_min_h_m must be >= 0");
   c->require(p.slab_max_h_m > p.slab_min_h_m, "slab_max_h_m must exceed slab_min_h_m");
   c->positive("column_cell_m", p.column_cell_m);
@@ -86,6 +88,7 @@ void checkCircleFit(const TrunkExtractorParams& p, Checks* c) {
   c->unit("min_shell_ratio", p.min_shell_ratio);
   c->require(p.min_arc_deg >= 0.0 && p.min_arc_deg <= 360.0, "min_arc_deg must be in [0, 360]");
   c->require(p.max_lean_deg > 0.0 && p.max_lean_deg < 90.0, "max_lean_deg must be in (0, 90)");
+  c->require(p.lean_shell_m >= 0.0, "lean_shell_m must be >= 0");
 }
 
 void checkBaseAndOutputs(const TrunkExtractorParams& p, Checks* c) {
@@ -98,6 +101,8 @@ void checkBaseAndOutputs(const TrunkExtractorParams& p, Checks* c) {
   c->require(p.min_base_points >= 3, "min_base_points must be >= 3");
   c->positive("base_below_m", p.base_below_m);
   c->require(p.max_base_below_points >= 0, "max_base_below_points must be >= 0");
+  c->positive("base_plane_c_up_m", p.base_plane_c_up_m);
+  c->positive("base_plane_c_down_m", p.base_plane_c_down_m);
   c->require(p.stem_shell_m >= 0.0, "stem_shell_m must be >= 0");
   c->positive("base_max_gap_m", p.base_max_gap_m);
   c->require(p.max_fits_per_candidate >= 1, "max_fits_per_candidate must be >= 1");
@@ -201,7 +206,7 @@ bool stemLeans(const std::vector<Eigen::Vector2d>& band, const std::vector<float
   std::vector<Eigen::Vector2d> lo, hi;
   double h_lo = 0.0, h_hi = 0.0;
   for (size_t m = 0; m < band.size(); ++m) {
-    if (planarDist(band[m].x() - fit.cx, band[m].y() - fit.cy) > fit.r + 0.15) continue;
+    if (planarDist(band[m].x() - fit.cx, band[m].y() - fit.cy) > fit.r + p.lean_shell_m) continue;
     const double h = h_band[m];
     if (h < h_mid)
       lo.push_back(band[m]), h_lo += h;
@@ -234,9 +239,10 @@ StemBase stemBase(const LocalPoints& pts, const std::vector<float>& h, const Gro
   bool ground_below = false;
   if (base.ring_seen) {
     const std::vector<double> w(b.bx.size(), 1.0);
-    // Tighter than the grid: litter and grass sit on the ground surface, noise is cm.
-    const GroundPlane pl = fitGroundPlane(b.bx.data(), b.by.data(), b.bz.data(), w.data(),
-                                          b.bx.size(), cx, cy, /*c_up=*/0.12, /*c_down=*/0.25, 6);
+    // Tighter than the grid's: litter and grass sit on the ground surface, noise is cm.
+    const GroundPlane pl =
+        fitGroundPlane(b.bx.data(), b.by.data(), b.bz.data(), w.data(), b.bx.size(), cx, cy,
+                       p.base_plane_c_up_m, p.base_plane_c_down_m, /*iterations=*/6);
     base.z = pl.a;
     // Ground is the lowest surface: returns well below the fitted plane around the stem
     // mean the plane lies on a shrub or log and the real base is lower. In the dense_slope

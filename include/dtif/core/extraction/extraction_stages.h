@@ -103,7 +103,8 @@ void dropRaisedGroundCells(const GroundGrid& grid, const TrunkExtractorParams& p
 
 /// A robust plane per occupied cell through the ground cells of the ground_window_m window;
 /// with fewer than ground_min_cells there, a three times wider window, and the cell counts as
-/// not seen. No ground cell anywhere near: a flat plane at the cell's lowest point.
+/// not seen (Tukey constants ground_plane_c_up_m / _down_m). No ground cell anywhere near: a
+/// flat plane at the cell's lowest point.
 void fitLocalGroundPlanes(const GroundCells& cells, const TrunkExtractorParams& p,
                           GroundGrid* grid);
 
@@ -186,7 +187,7 @@ bool fitCentreFixedRadius(const std::vector<Eigen::Vector2d>& xy, double r, doub
 
 /// Leaning clutter (fallen or hung-up stems; paper: "outlier removal"): centres of the lower
 /// and upper half of the fit band, radius held at the fit's, from the band points (local, with
-/// heights h_band) within fit.r + 0.15 m of the circle only, tilt more than max_lean_deg.
+/// heights h_band) within fit.r + lean_shell_m of the centre only, tilt more than max_lean_deg.
 /// false when either half has too few points to tell.
 bool stemLeans(const std::vector<Eigen::Vector2d>& band, const std::vector<float>& h_band,
                const CircleFit& fit, const TrunkExtractorParams& p);
@@ -199,11 +200,12 @@ struct StemBase {
                            ///< shrub or log (TrunkLandmark::base_seen)
 };
 
-/// Stem base z_m: robust plane through the ground points (|h| <= base_max_dh_m) of the ring
-/// [r + base_ring_inner_m, r + base_ring_outer_m] around the stem, at the centre; the grid
-/// ground when the ring holds too few. Seen when the grid cell's ground was seen, the ring held
-/// enough ground, at most max_base_below_points ring points lie base_below_m below the plane,
-/// and the stem's lowest point (within stem_shell_m of the circle) is within base_max_gap_m.
+/// Stem base z_m: robust plane (Tukey constants base_plane_c_up_m / _down_m) through the ground
+/// points (|h| <= base_max_dh_m) of the ring [r + base_ring_inner_m, r + base_ring_outer_m]
+/// around the stem, at the centre; the grid ground when the ring holds too few. Seen when the
+/// grid cell's ground was seen, the ring held enough ground, at most max_base_below_points ring
+/// points lie base_below_m below the plane, and the stem's lowest point (within stem_shell_m of
+/// the circle) is within base_max_gap_m.
 StemBase stemBase(const LocalPoints& pts, const std::vector<float>& h, const GroundGrid& grid,
                   double cx, double cy, double r, const TrunkExtractorParams& p);
 

@@ -33,34 +33,40 @@ struct TrunkExtractorParams {
   double ground_min_open_fraction = 0.75;  ///< open sub-columns a ground cell needs (the lower
                                            ///< field-of-view cut through stems leaves scattered
                                            ///< open ones; seen ground fills the cell) [0..1]
-  double ground_max_step = 1.0;    ///< steepest ground step between neighbouring cells, per metre
-                                   ///< of ground cell (25 deg slopes plus roughness) [m/m]
-  int ground_min_cells = 3;        ///< ground cells a window needs for its plane; fewer: a three
-                                   ///< times wider window, and the ground counts as not seen
-                                   ///< [cells]
-  double slab_min_h_m = 0.4;       ///< lowest height of the trunk slab [m]
-  double slab_max_h_m = 3.0;       ///< highest height of the trunk slab [m]
-  double column_cell_m = 0.15;     ///< horizontal size of a voxel column [m]
-  double layer_h_m = 0.2;          ///< vertical size of a voxel inside a column [m]
-  int min_column_points = 6;       ///< points a column needs in the slab
-  double min_continuity = 0.5;     ///< fraction of slab layers a column must occupy [0..1]
-  double cluster_gap_m = 0.25;     ///< columns closer than this merge into one candidate [m]
-  double fit_min_h_m = 0.9;        ///< lower edge of the circle-fit band [m]
-  double fit_max_h_m = 1.7;        ///< upper edge of the circle-fit band [m]
-  int min_fit_points = 12;         ///< points needed in the fit band
-  double min_radius_m = 0.04;      ///< smallest accepted trunk radius [m]
-  double max_radius_m = 0.6;       ///< largest accepted trunk radius [m]
-  int ransac_iterations = 150;     ///< circle RANSAC iterations (fixed seed)
-  int ransac_min_iterations = 25;  ///< before the adaptive stop may end RANSAC [iterations]
-  int ransac_score_points = 400;   ///< hypotheses are scored on this many points at most,
-                                   ///< evenly strided [points]
-  double ransac_inlier_m = 0.03;   ///< circle RANSAC inlier distance [m]
-  double min_inlier_ratio = 0.85;  ///< inliers / (inliers + points inside the circle) [0..1]
-  double min_shell_ratio = 0.75;   ///< inliers / points within 3 ransac_inlier_m [0..1]
-  double min_arc_deg = 80.0;       ///< angular coverage of inliers around the centre [deg]
-  double max_lean_deg = 15.0;      ///< largest stem lean across the fit band [deg]
-  double base_ring_inner_m = 0.2;  ///< ground ring around the stem, gap to the bark [m]
-  double base_ring_outer_m = 1.5;  ///< ground ring around the stem, outer radius [m]
+  double ground_max_step = 1.0;      ///< steepest ground step between neighbouring cells, per metre
+                                     ///< of ground cell (25 deg slopes plus roughness) [m/m]
+  int ground_min_cells = 3;          ///< ground cells a window needs for its plane; fewer: a three
+                                     ///< times wider window, and the ground counts as not seen
+                                     ///< [cells]
+  double ground_plane_c_up_m = 0.3;  ///< Tukey constant of the window plane for cells above
+                                     ///< it (what is left of vegetation fills cells from
+                                     ///< above) [m]
+  double ground_plane_c_down_m = 1.0;   ///< Tukey constant for cells below it [m]
+  double slab_min_h_m = 0.4;            ///< lowest height of the trunk slab [m]
+  double slab_max_h_m = 3.0;            ///< highest height of the trunk slab [m]
+  double column_cell_m = 0.15;          ///< horizontal size of a voxel column [m]
+  double layer_h_m = 0.2;               ///< vertical size of a voxel inside a column [m]
+  int min_column_points = 6;            ///< points a column needs in the slab
+  double min_continuity = 0.5;          ///< fraction of slab layers a column must occupy [0..1]
+  double cluster_gap_m = 0.25;          ///< columns closer than this merge into one candidate [m]
+  double fit_min_h_m = 0.9;             ///< lower edge of the circle-fit band [m]
+  double fit_max_h_m = 1.7;             ///< upper edge of the circle-fit band [m]
+  int min_fit_points = 12;              ///< points needed in the fit band
+  double min_radius_m = 0.04;           ///< smallest accepted trunk radius [m]
+  double max_radius_m = 0.6;            ///< largest accepted trunk radius [m]
+  int ransac_iterations = 150;          ///< circle RANSAC iterations (fixed seed)
+  int ransac_min_iterations = 25;       ///< before the adaptive stop may end RANSAC [iterations]
+  int ransac_score_points = 400;        ///< hypotheses are scored on this many points at most,
+                                        ///< evenly strided [points]
+  double ransac_inlier_m = 0.03;        ///< circle RANSAC inlier distance [m]
+  double min_inlier_ratio = 0.85;       ///< inliers / (inliers + points inside the circle) [0..1]
+  double min_shell_ratio = 0.75;        ///< inliers / points within 3 ransac_inlier_m [0..1]
+  double min_arc_deg = 80.0;            ///< angular coverage of inliers around the centre [deg]
+  double max_lean_deg = 15.0;           ///< largest stem lean across the fit band [deg]
+  double lean_shell_m = 0.15;           ///< the lean check uses band points within this outside the
+                                        ///< circle only, so a close neighbour cannot pull it [m]
+  double base_ring_inner_m = 0.2;       ///< ground ring around the stem, gap to the bark [m]
+  double base_ring_outer_m = 1.5;       ///< ground ring around the stem, outer radius [m]
   double min_trunk_separation_m = 0.3;  ///< closer trunks are duplicates; the larger fit wins [m]
   double max_fit_rms_m = 0.02;          ///< largest RMS of the inliers about the circle [m]
   double base_max_dh_m = 0.4;           ///< ring points farther from the local ground are not
@@ -70,6 +76,10 @@ struct TrunkExtractorParams {
                                         ///< ground than the base [m]
   int max_base_below_points = 2;        ///< more such points: the base is not seen (it sits on a
                                         ///< shrub or log)
+  double base_plane_c_up_m = 0.12;      ///< Tukey constant of the base plane for ring points
+                                        ///< above it: tighter than the grid, litter and grass sit
+                                        ///< on the ground surface [m]
+  double base_plane_c_down_m = 0.25;    ///< Tukey constant for ring points below it [m]
   double stem_shell_m = 0.08;           ///< stem points: within this of the fitted circle [m]
   double base_max_gap_m = 0.5;     ///< a seen base: the stem's lowest point within this of it [m]
   int max_fits_per_candidate = 3;  ///< circles tried per candidate (trunks merged by
@@ -104,6 +114,8 @@ struct TrunkExtractorParams {
     v("ground_min_open_fraction", ground_min_open_fraction);
     v("ground_max_step", ground_max_step);
     v("ground_min_cells", ground_min_cells);
+    v("ground_plane_c_up_m", ground_plane_c_up_m);
+    v("ground_plane_c_down_m", ground_plane_c_down_m);
     v("slab_min_h_m", slab_min_h_m);
     v("slab_max_h_m", slab_max_h_m);
     v("column_cell_m", column_cell_m);
@@ -124,6 +136,7 @@ struct TrunkExtractorParams {
     v("min_shell_ratio", min_shell_ratio);
     v("min_arc_deg", min_arc_deg);
     v("max_lean_deg", max_lean_deg);
+    v("lean_shell_m", lean_shell_m);
     v("base_ring_inner_m", base_ring_inner_m);
     v("base_ring_outer_m", base_ring_outer_m);
     v("min_trunk_separation_m", min_trunk_separation_m);
@@ -132,6 +145,8 @@ struct TrunkExtractorParams {
     v("min_base_points", min_base_points);
     v("base_below_m", base_below_m);
     v("max_base_below_points", max_base_below_points);
+    v("base_plane_c_up_m", base_plane_c_up_m);
+    v("base_plane_c_down_m", base_plane_c_down_m);
     v("stem_shell_m", stem_shell_m);
     v("base_max_gap_m", base_max_gap_m);
     v("max_fits_per_candidate", max_fits_per_candidate);
