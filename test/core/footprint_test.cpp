@@ -85,5 +85,31 @@ TEST(Footprint, WideExtentsAreCoarsenedToStayWithinTheBudget) {
                          static_cast<int64_t>(std::floor(-1.0 / g.cell_m))));
 }
 
+TEST(Footprint, TrunkHeightCellsOfAStemOnFlatGround) {
+  // Flat ground over 12 m x 12 m and a 0.2 m stem at (5.5, 6.5) up to 5 m: only the stem's
+  // cells hold points 0.3-3 m above the local ground.
+  Cloud cloud;
+  for (int i = 0; i < 120; ++i)
+    for (int j = 0; j < 120; ++j) cloud.push_back(pcl::PointXYZ(0.1f * i, 0.1f * j, 0.0f));
+  for (int k = 0; k < 50; ++k)
+    for (int a = 0; a < 24; ++a) {
+      const double th = a * M_PI / 12.0;
+      cloud.push_back(pcl::PointXYZ(static_cast<float>(5.5 + 0.2 * std::cos(th)),
+                                    static_cast<float>(6.5 + 0.2 * std::sin(th)), 0.1f * k));
+    }
+  const Cells cells = trunkHeightCells(cloud, Pose::Identity(), 1.0);
+  EXPECT_EQ(cells, Cells({{5, 6}}));
+  // In a frame F shifted by (10, -20): the same cell, moved.
+  EXPECT_EQ(trunkHeightCells(cloud, shifted(10.0, -20.0), 1.0), Cells({{15, -14}}));
+  // Subsampled ground percentiles see the same ground here.
+  EXPECT_EQ(trunkHeightCells(cloud, Pose::Identity(), 1.0, 1000), cells);
+  // A stray point 100 km away switches the tiles to the sparse index: same cells (the stray
+  // point is its own ground).
+  cloud.push_back(pcl::PointXYZ(1e5f, 1e5f, 7.0f));
+  EXPECT_EQ(trunkHeightCells(cloud, Pose::Identity(), 1.0), cells);
+  EXPECT_TRUE(trunkHeightCells(cloud, Pose::Identity(), 0.0).empty());
+  EXPECT_TRUE(trunkHeightCells(Cloud(), Pose::Identity(), 1.0).empty());
+}
+
 }  // namespace
 }  // namespace dtif

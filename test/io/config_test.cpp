@@ -4,6 +4,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 
 #include "dtif_test/test_config.h"
 
@@ -100,6 +101,23 @@ TEST(Config, ShippedYamlsLoadAndMatchDefaults) {
     ++files;
   }
   EXPECT_GE(files, 3);
+}
+
+// The shipped trunk_extraction.yaml names every extraction parameter, the tuning knobs of
+// the ground, circle fit and stem base included, so each is documented where it is set.
+TEST(Config, ShippedTrunkExtractionYamlNamesEveryField) {
+  std::ifstream in(fs::path(DTIF_CONFIG_DIR) / "trunk_extraction.yaml");
+  ASSERT_TRUE(in.good());
+  std::stringstream text;
+  text << in.rdbuf();
+  TrunkExtractorParams p;
+  int fields = 0;
+  auto named = [&](const char* key, auto&) {
+    ++fields;
+    EXPECT_NE(text.str().find("\n  " + std::string(key) + ":"), std::string::npos) << key;
+  };
+  p.visit(named);
+  EXPECT_EQ(fields, 54);
 }
 
 }  // namespace

@@ -20,65 +20,85 @@ constexpr double kMaxAboveM = 3.0;
 
 int64_t packCell(int64_t ix, int64_t iy) { return (ix << 32) ^ (iy & 0xffffffffLL); }
 
-}  // namespace
+bool finite(const pcl::PointXYZ& p) {
+  return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
+}
 
-std::vector<std::pair<int64_t, int64_t>> trunkHeightCells(const Cloud& cloud_S, const Pose& T_F_S,
-                                                          double cell_m,
-                                                          size_t max_ground_samples) {
-  std::vector<std::pair<int64_t, int64_t>> out;
-  auto tileOf = [](float v) { return static_cast<int64_t>(std::floor(v / kTileM)); };
-  int64_t tx0 = std::numeric_limits<int64_t>::max(), ty0 = tx0;
-  int64_t tx1 = std::numeric_limits<int64_t>::min(), ty1 = tx1;
-  size_t n = 0;
-  for (const auto& p : cloud_S) {
-    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) continue;
-    ++n;
-    tx0 = std::min(tx0, tileOf(p.x)), tx1 = std::max(tx1, tileOf(p.x));
-    ty0 = std::min(ty0, tileOf(p.y)), ty1 = std::max(ty1, tileOf(p.y));
-  }
-  if (n == 0 || !(cell_m > 0.0)) return out;
-  // Tiles by a dense index over the cloud's extent; a cloud spread over kilometres (stray
-  // points) falls back to a hash map, so the result never depends on the extent.
-  const double tw = static_cast<double>(tx1 - tx0) + 1.0, th = static_cast<double>(ty1 - ty0) + 1.0;
-  const bool dense = tw * th <= 4e6;
-  std::unordered_map<int64_t, int> sparse;
-  auto tileIndex = [&](int64_t tx, int64_t ty, bool insert) -> int {
-    if (dense) {
-      if (tx < tx0 || tx > tx1 || ty < ty0 || ty > ty1) return -1;
-      return static_cast<int>((ty - ty0) * static_cast<int64_t>(tw) + (tx - tx0));
+int64_t tileOf(float v) { return static_cast<int64_t>(std::floor(v / kTileM)); }
+
+// The local-ground tiles of a cloud, by a dense index over its extent; a cloud spread over
+// kilometres (stray points) falls back to a hash map, so the result never depends on the
+// extent.
+class Tiles {
+ public:
+  // Extent of the finite points; false when there is none.
+  bool init(const Cloud& cloud, size_t* n) {
+    *n = 0;
+    for (const auto& p : cloud) {
+      if (!finite(p)) continue;
+      ++*n;
+      tx0_ = std::min(tx0_, tileOf(p.x)), tx1_ = std::max(tx1_, tileOf(p.x));
+      ty0_ = std::min(ty0_, tileOf(p.y)), ty1_ = std::max(ty1_, tileOf(p.y));
     }
-    const auto it = sparse.find(packCell(tx, ty));
-    if (it != sparse.end()) return it->second;
+    if (*n == 0) return false;
+    tw_ = static_cast<double>(tx1_ - tx0_) + 1.0, th_ = static_cast<double>(ty1_ - ty0_) + 1.0;
+    dense_ = tw_ * th_ <= 4e6;
+    return true;
+  }
+  // Tiles the dense index holds (0 when sparse: indices are made on insertion).
+  size_t denseSize() const { return dense_ ? static_cast<size_t>(tw_ * th_) : 0; }
+  // Index of tile (tx, ty); -1 when outside or (sparse, !insert) unknown.
+  int index(int64_t tx, int64_t ty, bool insert) {
+    if (dense_) {
+      if (tx < tx0_ || tx > tx1_ || ty < ty0_ || ty > ty1_) return -1;
+      return static_cast<int>((ty - ty0_) * static_cast<int64_t>(tw_) + (tx - tx0_));
+    }
+    const auto it = sparse_.find(packCell(tx, ty));
+    if (it != sparse_.end()) return it->second;
     if (!insert) return -1;
-    const int id = static_cast<int>(sparse.size());
-    sparse.emplace(packCell(tx, ty), id);
+    const int id = static_cast<int>(sparse_.size());
+    sparse_.emplace(packCell(tx, ty), id);
     return id;
-  };
-  // Local ground per 2 m tile (in S): 5th percentile of z inside the 6 m window around it.
-  std::vector<std::vector<float>> tile_z(dense ? static_cast<size_t>(tw * th) : 0);
-  const size_t stride = max_ground_samples > 0 ? std::max<size_t>(1, n / max_ground_samples) : 1;
-  std::vector<std::pair<int64_t, int64_t>> tiles;  // coordinates of each index (sparse case)
+  }
+  // Tile of index id; sparse indices need their coordinates in `made` (in insertion order).
+  std::pair<int64_t, int64_t> coords(size_t id,
+                                     const std::vector<std::pair<int64_t, int64_t>>& made) const {
+    if (!dense_) return made[id];
+    return {tx0_ + static_cast<int64_t>(id % static_cast<size_t>(tw_)),
+            ty0_ + static_cast<int64_t>(id / static_cast<size_t>(tw_))};
+  }
+
+ private:
+  int64_t tx0_ = std::numeric_limits<int64_t>::max(), ty0_ = tx0_;
+  int64_t tx1_ = std::numeric_limits<int64_t>::min(), ty1_ = tx1_;
+  double tw_ = 0.0, th_ = 0.0;
+  bool dense_ = false;
+  std::unordered_map<int64_t, int> sparse_;
+};
+
+// Local ground per tile (in S): 5th percentile of z inside the window around it, on every
+// stride-th finite point. NaN where the window holds no sample.
+std::vector<float> tileGround(const Cloud& cloud, size_t stride, Tiles* tiles) {
+  std::vector<std::vector<float>> tile_z(tiles->denseSize());
+  std::vector<std::pair<int64_t, int64_t>> made;  // coordinates of each index (sparse case)
   size_t k = 0;
-  for (const auto& p : cloud_S) {
-    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) continue;
+  for (const auto& p : cloud) {
+    if (!finite(p)) continue;
     if (k++ % stride != 0) continue;
-    const int id = tileIndex(tileOf(p.x), tileOf(p.y), true);
+    const int id = tiles->index(tileOf(p.x), tileOf(p.y), true);
     if (static_cast<size_t>(id) >= tile_z.size()) {
       tile_z.resize(id + 1);
-      tiles.emplace_back(tileOf(p.x), tileOf(p.y));
+      made.emplace_back(tileOf(p.x), tileOf(p.y));
     }
     tile_z[id].push_back(p.z);
   }
   std::vector<float> ground(tile_z.size(), std::numeric_limits<float>::quiet_NaN()), window;
   for (size_t id = 0; id < tile_z.size(); ++id) {
-    const int64_t tx =
-        dense ? tx0 + static_cast<int64_t>(id % static_cast<size_t>(tw)) : tiles[id].first;
-    const int64_t ty =
-        dense ? ty0 + static_cast<int64_t>(id / static_cast<size_t>(tw)) : tiles[id].second;
+    const auto [tx, ty] = tiles->coords(id, made);
     window.clear();
     for (int64_t dx = -kWindowTiles; dx <= kWindowTiles; ++dx) {
       for (int64_t dy = -kWindowTiles; dy <= kWindowTiles; ++dy) {
-        const int o = tileIndex(tx + dx, ty + dy, false);
+        const int o = tiles->index(tx + dx, ty + dy, false);
         if (o >= 0) window.insert(window.end(), tile_z[o].begin(), tile_z[o].end());
       }
     }
@@ -87,10 +107,24 @@ std::vector<std::pair<int64_t, int64_t>> trunkHeightCells(const Cloud& cloud_S, 
     std::nth_element(window.begin(), window.begin() + q, window.end());
     ground[id] = window[q];
   }
+  return ground;
+}
+
+}  // namespace
+
+std::vector<std::pair<int64_t, int64_t>> trunkHeightCells(const Cloud& cloud_S, const Pose& T_F_S,
+                                                          double cell_m,
+                                                          size_t max_ground_samples) {
+  std::vector<std::pair<int64_t, int64_t>> out;
+  Tiles tiles;
+  size_t n = 0;
+  if (!tiles.init(cloud_S, &n) || !(cell_m > 0.0)) return out;
+  const size_t stride = max_ground_samples > 0 ? std::max<size_t>(1, n / max_ground_samples) : 1;
+  const std::vector<float> ground = tileGround(cloud_S, stride, &tiles);
   const Eigen::Isometry3f T = T_F_S.cast<float>();
   for (const auto& p : cloud_S) {
-    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) continue;
-    const int id = tileIndex(tileOf(p.x), tileOf(p.y), false);
+    if (!finite(p)) continue;
+    const int id = tiles.index(tileOf(p.x), tileOf(p.y), false);
     // No samples in the window (only when subsampling): no ground to measure from.
     if (id < 0 || !std::isfinite(ground[id])) continue;
     const float h = p.z - ground[id];

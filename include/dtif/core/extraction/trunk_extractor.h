@@ -16,9 +16,32 @@ namespace dtif {
 
 /// Parameters of trunk extraction. Heights are above the local ground unless stated.
 struct TrunkExtractorParams {
-  double ground_cell_m = 1.0;           ///< cell of the local ground grid [m]
-  double ground_window_m = 5.0;         ///< window of the ground percentile around a cell [m]
-  double ground_percentile = 0.05;      ///< low percentile of z taken as ground [0..1]
+  double ground_cell_m = 1.0;       ///< cell of the local ground grid [m]
+  double ground_window_m = 5.0;     ///< window of the ground percentile around a cell [m]
+  double ground_percentile = 0.05;  ///< low percentile of z taken as ground [0..1]
+  double max_ground_cells = 4e6;    ///< larger extents (far outliers) coarsen the ground grid
+                                    ///< until it has this many cells [cells]
+  /// A point counts as ground only in an "open" sub-column of its ground cell: one with nothing
+  /// between ground_open_gap_m and ground_open_top_m above its lowest point (a stem, a shrub or
+  /// a log fills that space; the MID-360 sees no lower than -7 deg, so the lowest points of a
+  /// cell are often the lowest hits on a stem). Cell value: a low percentile of those points.
+  double ground_sub_cell_m = 0.25;         ///< sub-column size [m]
+  double ground_band_m = 0.3;              ///< ground points: this far above the sub-column's
+                                           ///< lowest point at most [m]
+  double ground_open_gap_m = 0.3;          ///< open sub-column: empty from this height... [m]
+  double ground_open_top_m = 1.5;          ///< ...up to this height above its lowest point [m]
+  double ground_min_open_fraction = 0.75;  ///< open sub-columns a ground cell needs (the lower
+                                           ///< field-of-view cut through stems leaves scattered
+                                           ///< open ones; seen ground fills the cell) [0..1]
+  double ground_max_step = 1.0;      ///< steepest ground step between neighbouring cells, per metre
+                                     ///< of ground cell (25 deg slopes plus roughness) [m/m]
+  int ground_min_cells = 3;          ///< ground cells a window needs for its plane; fewer: a three
+                                     ///< times wider window, and the ground counts as not seen
+                                     ///< [cells]
+  double ground_plane_c_up_m = 0.3;  ///< Tukey constant of the window plane for cells above
+                                     ///< it (what is left of vegetation fills cells from
+                                     ///< above) [m]
+  double ground_plane_c_down_m = 1.0;   ///< Tukey constant for cells below it [m]
   double slab_min_h_m = 0.4;            ///< lowest height of the trunk slab [m]
   double slab_max_h_m = 3.0;            ///< highest height of the trunk slab [m]
   double column_cell_m = 0.15;          ///< horizontal size of a voxel column [m]
@@ -32,11 +55,16 @@ struct TrunkExtractorParams {
   double min_radius_m = 0.04;           ///< smallest accepted trunk radius [m]
   double max_radius_m = 0.6;            ///< largest accepted trunk radius [m]
   int ransac_iterations = 150;          ///< circle RANSAC iterations (fixed seed)
+  int ransac_min_iterations = 25;       ///< before the adaptive stop may end RANSAC [iterations]
+  int ransac_score_points = 400;        ///< hypotheses are scored on this many points at most,
+                                        ///< evenly strided [points]
   double ransac_inlier_m = 0.03;        ///< circle RANSAC inlier distance [m]
   double min_inlier_ratio = 0.85;       ///< inliers / (inliers + points inside the circle) [0..1]
   double min_shell_ratio = 0.75;        ///< inliers / points within 3 ransac_inlier_m [0..1]
   double min_arc_deg = 80.0;            ///< angular coverage of inliers around the centre [deg]
   double max_lean_deg = 15.0;           ///< largest stem lean across the fit band [deg]
+  double lean_shell_m = 0.15;           ///< the lean check uses band points within this outside the
+                                        ///< circle only, so a close neighbour cannot pull it [m]
   double base_ring_inner_m = 0.2;       ///< ground ring around the stem, gap to the bark [m]
   double base_ring_outer_m = 1.5;       ///< ground ring around the stem, outer radius [m]
   double min_trunk_separation_m = 0.3;  ///< closer trunks are duplicates; the larger fit wins [m]
@@ -48,10 +76,18 @@ struct TrunkExtractorParams {
                                         ///< ground than the base [m]
   int max_base_below_points = 2;        ///< more such points: the base is not seen (it sits on a
                                         ///< shrub or log)
-  int max_fits_per_candidate = 3;       ///< circles tried per candidate (trunks merged by
-                                        ///< close spacing or undergrowth)
-  double footprint_cell_m = 1.0;        ///< cell of the submap's footprint (occupied cells of
-                                        ///< points 0.3-3 m above ground, DATASET.md); 0: none [m]
+  double base_plane_c_up_m = 0.12;      ///< Tukey constant of the base plane for ring points
+                                        ///< above it: tighter than the grid, litter and grass sit
+                                        ///< on the ground surface [m]
+  double base_plane_c_down_m = 0.25;    ///< Tukey constant for ring points below it [m]
+  double stem_shell_m = 0.08;           ///< stem points: within this of the fitted circle [m]
+  double base_max_gap_m = 0.5;     ///< a seen base: the stem's lowest point within this of it [m]
+  int max_fits_per_candidate = 3;  ///< circles tried per candidate (trunks merged by
+                                   ///< close spacing or undergrowth)
+  double footprint_cell_m = 1.0;   ///< cell of the submap's footprint (occupied cells of
+                                   ///< points 0.3-3 m above ground, DATASET.md); 0: none [m]
+  int footprint_max_samples = 200000;  ///< points the footprint's ground percentiles use (an
+                                       ///< even subsample; it is timed); 0: all [points]
   /// Ground map (lowest point per cell) for the elevation of loops that no pair of seen stem
   /// bases fixes: built when fewer than ground_map_below_seen of the trunks have a seen base
   /// (0: never, above 1: always). It costs descriptor bytes: the dense_slope scene's mean
@@ -70,6 +106,16 @@ struct TrunkExtractorParams {
     v("ground_cell_m", ground_cell_m);
     v("ground_window_m", ground_window_m);
     v("ground_percentile", ground_percentile);
+    v("max_ground_cells", max_ground_cells);
+    v("ground_sub_cell_m", ground_sub_cell_m);
+    v("ground_band_m", ground_band_m);
+    v("ground_open_gap_m", ground_open_gap_m);
+    v("ground_open_top_m", ground_open_top_m);
+    v("ground_min_open_fraction", ground_min_open_fraction);
+    v("ground_max_step", ground_max_step);
+    v("ground_min_cells", ground_min_cells);
+    v("ground_plane_c_up_m", ground_plane_c_up_m);
+    v("ground_plane_c_down_m", ground_plane_c_down_m);
     v("slab_min_h_m", slab_min_h_m);
     v("slab_max_h_m", slab_max_h_m);
     v("column_cell_m", column_cell_m);
@@ -83,11 +129,14 @@ struct TrunkExtractorParams {
     v("min_radius_m", min_radius_m);
     v("max_radius_m", max_radius_m);
     v("ransac_iterations", ransac_iterations);
+    v("ransac_min_iterations", ransac_min_iterations);
+    v("ransac_score_points", ransac_score_points);
     v("ransac_inlier_m", ransac_inlier_m);
     v("min_inlier_ratio", min_inlier_ratio);
     v("min_shell_ratio", min_shell_ratio);
     v("min_arc_deg", min_arc_deg);
     v("max_lean_deg", max_lean_deg);
+    v("lean_shell_m", lean_shell_m);
     v("base_ring_inner_m", base_ring_inner_m);
     v("base_ring_outer_m", base_ring_outer_m);
     v("min_trunk_separation_m", min_trunk_separation_m);
@@ -96,8 +145,13 @@ struct TrunkExtractorParams {
     v("min_base_points", min_base_points);
     v("base_below_m", base_below_m);
     v("max_base_below_points", max_base_below_points);
+    v("base_plane_c_up_m", base_plane_c_up_m);
+    v("base_plane_c_down_m", base_plane_c_down_m);
+    v("stem_shell_m", stem_shell_m);
+    v("base_max_gap_m", base_max_gap_m);
     v("max_fits_per_candidate", max_fits_per_candidate);
     v("footprint_cell_m", footprint_cell_m);
+    v("footprint_max_samples", footprint_max_samples);
     v("ground_map_cell_m", ground_map_cell_m);
     v("ground_map_z_step_m", ground_map_z_step_m);
     v("ground_map_below_seen", ground_map_below_seen);
@@ -130,6 +184,12 @@ struct TrunkExtractionResult {
 /// Settings of the robust circle fit.
 struct CircleFitParams {
   int iterations = 150;        ///< RANSAC iterations
+  int min_iterations = 25;     ///< before the adaptive stop (99 % confidence of one all-inlier
+                               ///< sample) may end the search, so an early lucky sample on a
+                               ///< branch does not [iterations]
+  int score_points = 400;      ///< hypotheses are scored on at most this many points, evenly
+                               ///< strided: enough to rank circles, bounded cost on dense
+                               ///< slices [points]
   double inlier_m = 0.03;      ///< inlier distance to the circle [m]
   double min_radius_m = 0.04;  ///< smallest radius a hypothesis may have [m]
   double max_radius_m = 0.6;   ///< largest radius a hypothesis may have [m]

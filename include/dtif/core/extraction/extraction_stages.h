@@ -1,0 +1,239 @@
+// The stages of trunk extraction (paper Sec. 3.B), each usable and testable on its own.
+// extractTrunks (trunk_extractor.h) runs them in this order:
+//   toLocalPoints -> estimateLocalGround -> heightsAboveGround -> (trunkFootprint)
+//   -> slabColumns -> clusterColumns -> fitCandidate per candidate (fitCircleRobust,
+//   stemLeans, stemBase) -> keepDistinctTrunks -> groundMapIfFewBasesSeen.
+//
+// Frames: the input cloud is gravity-aligned in the submap frame S. "Local" coordinates are S
+// minus LocalPoints' origin, so float storage keeps cm precision with UTM-sized coordinates.
+// Heights are above the local ground; every length is in metres.
+#pragma once
+
+#include <Eigen/Core>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "dtif/core/cloud.h"
+#include "dtif/core/extraction/footprint.h"
+#include "dtif/core/extraction/ground_map.h"
+#include "dtif/core/extraction/trunk_extractor.h"
+#include "dtif/core/types.h"
+
+namespace dtif {
+
+/// Horizontal distance of an offset: std::hypot is exact but slow, and the local coordinates
+/// here are small and well scaled [m].
+inline double planarDist(double dx, double dy) { return std::sqrt(dx * dx + dy * dy); }
+
+// --- Points ---------------------------------------------------------------------------------
+
+/// The finite points of a cloud, relative to a local origin.
+struct LocalPoints {
+  double ox = 0.0, oy = 0.0, oz = 0.0;  ///< origin in S: floor of the first kept point [m]
+  std::vector<float> x, y, z;           ///< local coordinates (S minus origin) [m]
+  size_t size() const { return x.size(); }
+};
+
+/// Keeps the finite points with coordinates below 1e8 m (larger ones would overflow the cell
+/// indices; they are no survey points), relative to the floor of the first kept point.
+LocalPoints toLocalPoints(const Cloud& cloud);
+
+// --- Local ground ---------------------------------------------------------------------------
+
+/// Plane z = a + b dx + c dy about the point (x0, y0) it was fitted about.
+struct GroundPlane {
+  double a = 0.0, b = 0.0, c = 0.0;  ///< height at (x0, y0) [m], slopes along x and y [m/m]
+  /// Height at an offset (dx, dy) from the point the plane was fitted about [m].
+  double at(double dx, double dy) const { return a + b * dx + c * dy; }
+};
+
+/// Robust plane through the weighted points (x, y, z, w0) about (x0, y0) by IRLS. Asymmetric
+/// Tukey weights: residuals above the plane use c_up, below c_down [m] (points far above are
+/// clutter, points slightly below are ground noise). Slopes are mildly ridge-regularised so a
+/// collinear support (a narrow path) stays defined. `iterations` reweightings after the first
+/// solve; a degenerate system leaves the last good plane (initially 0).
+GroundPlane fitGroundPlane(const double* x, const double* y, const double* z, const double* w0,
+                           size_t n, double x0, double y0, double c_up, double c_down,
+                           int iterations);
+
+/// Local ground as a dense horizontal grid over the points' extent, in local coordinates.
+struct GroundGrid {
+  float minx = 0.0f, miny = 0.0f;    ///< local corner of cell (0, 0) [m]
+  double cell_m = 0.0;               ///< ground_cell_m, larger when the extent would need more than
+                                     ///< max_ground_cells cells (far outliers) [m]
+  int nx = 0, ny = 0;                ///< columns and rows
+  std::vector<uint32_t> start;       ///< points of cell c: order[start[c]] .. order[start[c+1]-1]
+  std::vector<uint32_t> order;       ///< point indices sorted by cell
+  std::vector<uint32_t> point_cell;  ///< cell of each point (row-major: gy * nx + gx)
+  std::vector<GroundPlane> plane;    ///< per cell, about the cell centre, local z [m]
+  std::vector<char> seen;  ///< the cell's window held enough ground cells: ground observed
+
+  size_t cells() const { return static_cast<size_t>(nx) * static_cast<size_t>(ny); }
+  /// Cell holding the local point (x, y), clamped to the grid.
+  void cellOf(double x, double y, int* gx, int* gy) const;
+  /// Height of the local ground under the local point (x, y): its cell's plane [m].
+  double groundAt(double x, double y) const;
+};
+
+/// Ground evidence per grid cell, before the planes.
+struct GroundCells {
+  std::vector<float> low;       ///< low percentile of the cell's open ground points; NaN: none [m]
+  std::vector<uint32_t> count;  ///< ground points of the cell; 0: no ground cell
+  std::vector<char> any;        ///< the cell holds any point
+  std::vector<float> min;       ///< lowest point of the cell; +inf when empty [m]
+};
+
+/// The grid's geometry and the counting sort of the points by cell (planes not yet fitted).
+/// Needs at least one point.
+GroundGrid binGroundGrid(const LocalPoints& pts, const TrunkExtractorParams& p);
+
+/// Ground points per cell: the points of "open" sub-columns (ground_sub_cell_m), those with
+/// nothing between ground_open_gap_m and ground_open_top_m above their lowest point, within
+/// ground_band_m of it. A cell is a ground cell when at least ground_min_open_fraction of its
+/// sub-columns are open and 3 points qualify; its value is their ground_percentile.
+GroundCells openGroundCells(const LocalPoints& pts, const GroundGrid& grid,
+                            const TrunkExtractorParams& p);
+
+/// Ground lies below everything: a ground cell higher than ground_max_step * cell_m above the
+/// lowest point of a neighbouring cell (a branch or log top above unseen ground) is dropped.
+void dropRaisedGroundCells(const GroundGrid& grid, const TrunkExtractorParams& p,
+                           GroundCells* cells);
+
+/// A robust plane per occupied cell through the ground cells of the ground_window_m window;
+/// with fewer than ground_min_cells there, a three times wider window, and the cell counts as
+/// not seen (Tukey constants ground_plane_c_up_m / _down_m). No ground cell anywhere near: a
+/// flat plane at the cell's lowest point.
+void fitLocalGroundPlanes(const GroundCells& cells, const TrunkExtractorParams& p,
+                          GroundGrid* grid);
+
+/// The local ground (Zhang et al.; no ground segmentation): the four steps above.
+GroundGrid estimateLocalGround(const LocalPoints& pts, const TrunkExtractorParams& p);
+
+/// Height of every point above its cell's ground plane [m].
+std::vector<float> heightsAboveGround(const LocalPoints& pts, const GroundGrid& grid);
+
+/// DATASET.md's overlap cells of the cloud in S as a footprint of footprint_cell_m cells, the
+/// ground percentiles on at most footprint_max_samples points. Empty when footprint_cell_m is 0.
+Footprint trunkFootprint(const Cloud& cloud, const TrunkExtractorParams& p);
+
+// --- Voxel columns and candidates -----------------------------------------------------------
+
+/// Minimal open-addressing hash map from a 64-bit cell key to a dense index.
+class CellHash {
+ public:
+  explicit CellHash(size_t expected = 0);
+  /// Returns the index for key, inserting next_index when absent.
+  int findOrInsert(uint64_t key, int next_index, bool* inserted);
+  /// Index for key, -1 when absent.
+  int find(uint64_t key) const;
+
+ private:
+  static constexpr uint64_t kEmpty = ~uint64_t{0};
+  static size_t hash(uint64_t k);
+  std::vector<uint64_t> keys_;
+  std::vector<int> vals_;
+  size_t mask_ = 0;
+};
+
+/// Key of the cell (ix, iy), both within +-2^31.
+inline uint64_t cellKey(int64_t ix, int64_t iy) {
+  return (static_cast<uint64_t>(ix + (int64_t{1} << 31)) << 32) |
+         static_cast<uint64_t>(iy + (int64_t{1} << 31));
+}
+
+/// Voxel columns (column_cell_m wide, layer_h_m layers) of the points in the trunk slab
+/// [slab_min_h_m, slab_max_h_m) above the ground.
+struct VoxelColumns {
+  std::vector<uint32_t> slab;   ///< indices of the slab points
+  std::vector<int> slab_col;    ///< column of each slab point
+  std::vector<int64_t> ix, iy;  ///< column cell (floor of local x, y / column_cell_m)
+  std::vector<uint32_t> count;  ///< slab points per column
+  std::vector<uint64_t> mask;   ///< bit l: layer l of the slab holds a point
+  std::vector<char> pass;       ///< dense (min_column_points) and continuous (min_continuity)
+  size_t passing = 0;           ///< columns that pass
+  CellHash index;               ///< cellKey(ix, iy) -> column
+
+  size_t size() const { return ix.size(); }
+};
+
+/// The slab's voxel columns and which of them pass density and vertical continuity (paper:
+/// "high-density voxel columns with sufficient vertical continuity"). No slab point: no column.
+VoxelColumns slabColumns(const LocalPoints& pts, const std::vector<float>& h,
+                         const TrunkExtractorParams& p);
+
+/// Slab points grouped by trunk candidate.
+struct TrunkCandidates {
+  int count = 0;                 ///< candidates
+  std::vector<uint32_t> start;   ///< candidate l: points[start[l]] .. points[start[l+1]-1]
+  std::vector<uint32_t> points;  ///< point indices, by candidate
+};
+
+/// Passing columns within cluster_gap_m of each other are one candidate (connected
+/// components); failing columns touching a candidate join it, so bark columns at the edge of a
+/// stem still feed the circle fit. Candidates are numbered by their first column.
+TrunkCandidates clusterColumns(const VoxelColumns& cols, const TrunkExtractorParams& p);
+
+// --- Per candidate: circle, lean, stem base --------------------------------------------------
+
+/// The circle-fit settings of the extractor's parameters (seed left at its default).
+CircleFitParams circleFitParams(const TrunkExtractorParams& p);
+
+/// Robust centre of a circle of known radius r (Tukey-weighted Gauss-Newton, Tukey constant
+/// c_tukey [m], from the start centre *c); false when fewer than min_support points support it.
+bool fitCentreFixedRadius(const std::vector<Eigen::Vector2d>& xy, double r, double c_tukey,
+                          Eigen::Vector2d* c, size_t min_support);
+
+/// Leaning clutter (fallen or hung-up stems; paper: "outlier removal"): centres of the lower
+/// and upper half of the fit band, radius held at the fit's, from the band points (local, with
+/// heights h_band) within fit.r + lean_shell_m of the centre only, tilt more than max_lean_deg.
+/// false when either half has too few points to tell.
+bool stemLeans(const std::vector<Eigen::Vector2d>& band, const std::vector<float>& h_band,
+               const CircleFit& fit, const TrunkExtractorParams& p);
+
+/// Stem base of a fitted stem (local centre cx, cy, radius r).
+struct StemBase {
+  double z = 0.0;          ///< base elevation, local [m]
+  bool ring_seen = false;  ///< min_base_points ground points in the ring; else z is the grid's
+  bool seen = false;       ///< base observed: ground seen, stem visible down to it, not on a
+                           ///< shrub or log (TrunkLandmark::base_seen)
+};
+
+/// Stem base z_m: robust plane (Tukey constants base_plane_c_up_m / _down_m) through the ground
+/// points (|h| <= base_max_dh_m) of the ring [r + base_ring_inner_m, r + base_ring_outer_m]
+/// around the stem, at the centre; the grid ground when the ring holds too few. Seen when the
+/// grid cell's ground was seen, the ring held enough ground, at most max_base_below_points ring
+/// points lie base_below_m below the plane, and the stem's lowest point (within stem_shell_m of
+/// the circle) is within base_max_gap_m.
+StemBase stemBase(const LocalPoints& pts, const std::vector<float>& h, const GroundGrid& grid,
+                  double cx, double cy, double r, const TrunkExtractorParams& p);
+
+/// A trunk found in a candidate and the support of its fit.
+struct FoundTrunk {
+  TrunkLandmark trunk;  ///< in S
+  size_t inliers = 0;   ///< circle inliers
+};
+
+/// Fits up to max_fits_per_candidate circles in the breast-height band [fit_min_h_m,
+/// fit_max_h_m] of candidate l (close stems or undergrowth can merge columns), each attempt on
+/// the band points the previous circles left. Plausible, upright circles are appended to
+/// *found with their stem base, in S; *stats counts the rejections.
+void fitCandidate(const LocalPoints& pts, const std::vector<float>& h, const GroundGrid& grid,
+                  const TrunkCandidates& cand, int l, const TrunkExtractorParams& p,
+                  std::vector<FoundTrunk>* found, TrunkExtractionStats* stats);
+
+// --- Result ---------------------------------------------------------------------------------
+
+/// Two stems cannot overlap: the better supported of two trunks closer than
+/// min_trunk_separation_m or their radii sum is kept (stats->duplicates counts the others).
+/// Sorted by x, then y: an order independent of the candidate numbering.
+Trunks keepDistinctTrunks(std::vector<FoundTrunk> found, const TrunkExtractorParams& p,
+                          TrunkExtractionStats* stats);
+
+/// The lowest surface around the trunks (their box plus ground_map_margin_m), when fewer than
+/// ground_map_below_seen of them have a seen base; else (or ground_map_cell_m 0) empty.
+GroundMap groundMapIfFewBasesSeen(const Trunks& trunks, const LocalPoints& pts,
+                                  const TrunkExtractorParams& p);
+
+}  // namespace dtif

@@ -1,0 +1,241 @@
+// Robust circle fit of a breast-height slice (paper Sec. 3.B, "circle fitting"): RANSAC over
+// 3-point circles, an algebraic Kasa fit of the inliers, a Tukey-weighted geometric
+// Gauss-Newton refinement, and the evidence that the circle is bark.
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <random>
+
+#include "dtif/core/extraction/extraction_stages.h"
+#include "dtif/core/extraction/trunk_extractor.h"
+#include "dtif/core/robust.h"
+
+namespace dtif {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// Circle through three points; false when they are (nearly) collinear.
+bool circleFrom3(const Eigen::Vector2d& a, const Eigen::Vector2d& b, const Eigen::Vector2d& c,
+                 double* cx, double* cy, double* r) {
+  const double bx = b.x() - a.x(), by = b.y() - a.y();
+  const double qx = c.x() - a.x(), qy = c.y() - a.y();
+  const double d = 2.0 * (bx * qy - by * qx);
+  if (std::abs(d) < 1e-12) return false;
+  const double b2 = bx * bx + by * by, q2 = qx * qx + qy * qy;
+  const double ux = (qy * b2 - by * q2) / d;
+  const double uy = (bx * q2 - qx * b2) / d;
+  *cx = a.x() + ux;
+  *cy = a.y() + uy;
+  *r = std::sqrt(ux * ux + uy * uy);
+  return std::isfinite(*r);
+}
+
+// Algebraic (Kasa) fit: x^2 + y^2 + D x + E y + F = 0 in the least-squares sense.
+bool kasaFit(const std::vector<Eigen::Vector2d>& xy, const std::vector<char>& use, double* cx,
+             double* cy, double* r) {
+  Eigen::Vector2d mean(0, 0);
+  size_t n = 0;
+  for (size_t i = 0; i < xy.size(); ++i)
+    if (use[i]) mean += xy[i], ++n;
+  if (n < 3) return false;
+  mean /= static_cast<double>(n);
+  Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d b = Eigen::Vector3d::Zero();
+  for (size_t i = 0; i < xy.size(); ++i) {
+    if (!use[i]) continue;
+    const Eigen::Vector2d p = xy[i] - mean;  // centred for conditioning
+    const Eigen::Vector3d row(p.x(), p.y(), 1.0);
+    const double rhs = -(p.x() * p.x() + p.y() * p.y());
+    A += row * row.transpose();
+    b += row * rhs;
+  }
+  const Eigen::Vector3d s = A.ldlt().solve(b);
+  if (!s.allFinite()) return false;
+  const double ux = -0.5 * s(0), uy = -0.5 * s(1);
+  const double r2 = ux * ux + uy * uy - s(2);
+  if (!(r2 > 0.0)) return false;
+  *cx = mean.x() + ux;
+  *cy = mean.y() + uy;
+  *r = std::sqrt(r2);
+  return true;
+}
+
+// Angular coverage of the inliers: 360 minus the gaps wider than max_gap_deg between
+// consecutive inlier angles. Only wide gaps count, so a few stray inliers in an unseen sector
+// do not make a partial arc look complete, and sparse points on a seen sector do not make it
+// look empty.
+double arcCoverageDeg(const std::vector<Eigen::Vector2d>& xy, const std::vector<char>& inl,
+                      double cx, double cy, double max_gap_deg) {
+  std::vector<double> ang;
+  for (size_t i = 0; i < xy.size(); ++i)
+    if (inl[i]) ang.push_back(std::atan2(xy[i].y() - cy, xy[i].x() - cx) * 180.0 / kPi);
+  if (ang.size() < 2) return 0.0;
+  std::sort(ang.begin(), ang.end());
+  double uncovered = 0.0;
+  for (size_t i = 0; i < ang.size(); ++i) {
+    const double gap = i + 1 < ang.size() ? ang[i + 1] - ang[i] : ang[0] + 360.0 - ang[i];
+    if (gap > max_gap_deg) uncovered += gap;
+  }
+  return std::max(0.0, 360.0 - uncovered);
+}
+
+struct Circle {
+  double cx = 0.0, cy = 0.0, r = 0.0;  // centre and radius [m]
+};
+
+// RANSAC over 3-point circles with an adaptive stop. Score: inliers minus points well inside
+// the circle (a stem is opaque). Returns the best score; <= 0: no usable hypothesis.
+long ransacCircle(const std::vector<Eigen::Vector2d>& xy, const CircleFitParams& params,
+                  Circle* best) {
+  const size_t n = xy.size();
+  const size_t stride = std::max<size_t>(1, n / static_cast<size_t>(params.score_points));
+  std::mt19937 rng(params.seed);
+  std::uniform_int_distribution<size_t> pick(0, n - 1);
+  const double tol = params.inlier_m;
+  long best_score = -1;
+  size_t scored = 0;
+  for (size_t m = 0; m < n; m += stride) ++scored;
+  int needed = params.iterations;
+  for (int it = 0; it < std::min(needed, params.iterations); ++it) {
+    const size_t i = pick(rng), j = pick(rng), k = pick(rng);
+    if (i == j || j == k || i == k) continue;
+    double cx, cy, r;
+    if (!circleFrom3(xy[i], xy[j], xy[k], &cx, &cy, &r)) continue;
+    if (r < params.min_radius_m || r > params.max_radius_m) continue;
+    // Squared distances: no square root in the hot loop.
+    const double in_lo = r > tol ? (r - tol) * (r - tol) : 0.0, in_hi = (r + tol) * (r + tol);
+    const double inside = r > 2.0 * tol ? (r - 2.0 * tol) * (r - 2.0 * tol) : -1.0;
+    long score = 0;
+    for (size_t m = 0; m < n; m += stride) {
+      const double dx = xy[m].x() - cx, dy = xy[m].y() - cy;
+      const double d2 = dx * dx + dy * dy;
+      if (d2 > in_lo && d2 < in_hi)
+        ++score;
+      else if (d2 < inside)
+        --score;
+    }
+    if (score > best_score) {
+      best_score = score;
+      best->cx = cx, best->cy = cy, best->r = r;
+      const double w = std::min(0.999, static_cast<double>(score) / static_cast<double>(scored));
+      if (w > 0.0)
+        needed = std::max(params.min_iterations,
+                          static_cast<int>(std::ceil(std::log(0.01) / std::log(1.0 - w * w * w))));
+    }
+  }
+  return best_score;
+}
+
+// Kasa on the inliers of the RANSAC circle (when plausible), then Tukey-weighted geometric
+// refinement (Gauss-Newton), which removes the Kasa bias on partial arcs.
+Circle refineCircle(const std::vector<Eigen::Vector2d>& xy, const Circle& start,
+                    const CircleFitParams& params) {
+  const size_t n = xy.size();
+  const double tol = params.inlier_m;
+  std::vector<char> use(n, 0);
+  for (size_t m = 0; m < n; ++m)
+    use[m] = std::abs(planarDist(xy[m].x() - start.cx, xy[m].y() - start.cy) - start.r) < tol;
+  double cx = start.cx, cy = start.cy, r = start.r;
+  double kx, ky, kr;
+  if (kasaFit(xy, use, &kx, &ky, &kr) && kr >= 0.5 * params.min_radius_m &&
+      kr <= 2.0 * params.max_radius_m && planarDist(kx - cx, ky - cy) < std::max(r, 0.05)) {
+    cx = kx, cy = ky, r = kr;
+  }
+  const double c_tukey = 2.0 * tol;
+  for (int it = 0; it < 15; ++it) {
+    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+    Eigen::Vector3d g = Eigen::Vector3d::Zero();
+    for (size_t m = 0; m < n; ++m) {
+      const double dx = xy[m].x() - cx, dy = xy[m].y() - cy;
+      const double d = planarDist(dx, dy);
+      if (d < 1e-9) continue;
+      const double e = d - r;
+      const double w = tukeyWeight(e, c_tukey);
+      if (w <= 0.0) continue;
+      const Eigen::Vector3d J(-dx / d, -dy / d, -1.0);
+      A += w * J * J.transpose();
+      g += w * J * e;
+    }
+    if (A.trace() <= 0.0) break;
+    A.diagonal() *= 1.0 + 1e-6;  // damping keeps a near-singular arc well posed
+    const Eigen::Vector3d step = -A.ldlt().solve(g);
+    if (!step.allFinite()) break;
+    cx += step(0), cy += step(1), r += step(2);
+    if (step.norm() < 1e-7) break;
+  }
+  Circle c;
+  c.cx = cx, c.cy = cy, c.r = r;
+  return c;
+}
+
+// Inliers, inside / shell ratios, RMS and arc coverage of the final circle.
+void circleEvidence(const std::vector<Eigen::Vector2d>& xy, const Circle& c, double tol,
+                    CircleFit* fit) {
+  size_t inliers = 0, inside = 0, shell = 0;
+  double sq = 0.0;
+  for (size_t m = 0; m < xy.size(); ++m) {
+    const double e = planarDist(xy[m].x() - c.cx, xy[m].y() - c.cy) - c.r;
+    const bool in = std::abs(e) < tol;
+    fit->is_inlier[m] = in;
+    if (in) ++inliers, sq += e * e;
+    if (e <= -tol) ++inside;
+    if (std::abs(e) < 3.0 * tol) ++shell;
+  }
+  if (inliers < 3) return;
+  fit->ok = true;
+  fit->cx = c.cx, fit->cy = c.cy, fit->r = c.r;
+  fit->inliers = inliers;
+  fit->inlier_ratio = static_cast<double>(inliers) / static_cast<double>(inliers + inside);
+  fit->shell_ratio = static_cast<double>(inliers) / static_cast<double>(shell);
+  fit->rms_m = std::sqrt(sq / static_cast<double>(inliers));
+  // Gap threshold: 20 deg, or the angle of 10 cm of bark on thin stems (sparse points).
+  const double max_gap = std::max(20.0, 0.1 / c.r * 180.0 / kPi);
+  fit->arc_deg = arcCoverageDeg(xy, fit->is_inlier, c.cx, c.cy, max_gap);
+}
+
+}  // namespace
+
+CircleFit fitCircleRobust(const std::vector<Eigen::Vector2d>& xy, const CircleFitParams& params) {
+  CircleFit fit;
+  fit.is_inlier.assign(xy.size(), 0);
+  if (xy.size() < 3 || params.iterations < 1 || params.score_points < 1 || !(params.inlier_m > 0.0))
+    return fit;
+  Circle best;
+  if (ransacCircle(xy, params, &best) <= 0) return fit;
+  const Circle c = refineCircle(xy, best, params);
+  if (!std::isfinite(c.cx) || !std::isfinite(c.cy) || !(c.r >= params.min_radius_m) ||
+      c.r > params.max_radius_m)
+    return fit;
+  circleEvidence(xy, c, params.inlier_m, &fit);
+  return fit;
+}
+
+bool fitCentreFixedRadius(const std::vector<Eigen::Vector2d>& xy, double r, double c_tukey,
+                          Eigen::Vector2d* c, size_t min_support) {
+  for (int it = 0; it < 15; ++it) {
+    Eigen::Matrix2d A = Eigen::Matrix2d::Zero();
+    Eigen::Vector2d g = Eigen::Vector2d::Zero();
+    size_t support = 0;
+    for (const auto& q : xy) {
+      const Eigen::Vector2d d = q - *c;
+      const double dn = d.norm();
+      if (dn < 1e-9) continue;
+      const double e = dn - r;
+      const double w = tukeyWeight(e, c_tukey);
+      if (w <= 0.0) continue;
+      const Eigen::Vector2d J = -d / dn;
+      A += w * J * J.transpose();
+      g += w * J * e;
+      ++support;
+    }
+    if (support < min_support || std::abs(A.determinant()) < 1e-12) return false;
+    const Eigen::Vector2d step = -A.ldlt().solve(g);
+    if (!step.allFinite()) return false;
+    *c += step;
+    if (step.norm() < 1e-6) break;
+  }
+  return true;
+}
+
+}  // namespace dtif

@@ -1,0 +1,171 @@
+// Trunk candidates (paper Sec. 3.B): vertical-continuity voxel columns in the low slab above
+// the local ground, merged into candidates by connectivity. An open-addressing hash and
+// counting sorts instead of kd-trees: the descriptor is timed (DESIGN.md).
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+#include "dtif/core/extraction/extraction_stages.h"
+
+namespace dtif {
+namespace {
+
+int findRoot(std::vector<int>& parent, int i) {
+  while (parent[i] != i) {
+    parent[i] = parent[parent[i]];
+    i = parent[i];
+  }
+  return i;
+}
+
+// Connected components of the passing columns within cluster_gap_m: a dense label per passing
+// column (numbered by first column), -1 elsewhere.
+std::vector<int> labelPassingColumns(const VoxelColumns& cols, const TrunkExtractorParams& p,
+                                     int* ncand) {
+  const size_t ncol = cols.size();
+  std::vector<int> parent(ncol);
+  std::iota(parent.begin(), parent.end(), 0);
+  const int reach = std::max(1, static_cast<int>(std::ceil(p.cluster_gap_m / p.column_cell_m)));
+  for (size_t c = 0; c < ncol; ++c) {
+    if (!cols.pass[c]) continue;
+    for (int dy = -reach; dy <= reach; ++dy) {
+      for (int dx = -reach; dx <= reach; ++dx) {
+        if (dy < 0 || (dy == 0 && dx <= 0)) continue;  // each pair once
+        const int o = cols.index.find(cellKey(cols.ix[c] + dx, cols.iy[c] + dy));
+        if (o < 0 || !cols.pass[o]) continue;
+        const int ra = findRoot(parent, static_cast<int>(c)), rb = findRoot(parent, o);
+        if (ra != rb) parent[std::max(ra, rb)] = std::min(ra, rb);
+      }
+    }
+  }
+  std::vector<int> root_label(ncol, -1), col_label(ncol, -1);
+  *ncand = 0;
+  for (size_t c = 0; c < ncol; ++c) {
+    if (!cols.pass[c]) continue;
+    const int r = findRoot(parent, static_cast<int>(c));
+    if (root_label[r] < 0) root_label[r] = (*ncand)++;
+    col_label[c] = root_label[r];
+  }
+  return col_label;
+}
+
+// Failing columns touching a labelled column join its candidate.
+void attachFailingColumns(const VoxelColumns& cols, std::vector<int>* col_label) {
+  for (size_t c = 0; c < cols.size(); ++c) {
+    if (cols.pass[c]) continue;
+    for (int dy = -1; dy <= 1 && (*col_label)[c] < 0; ++dy) {
+      for (int dx = -1; dx <= 1; ++dx) {
+        const int o = cols.index.find(cellKey(cols.ix[c] + dx, cols.iy[c] + dy));
+        if (o >= 0 && cols.pass[o]) {
+          (*col_label)[c] = (*col_label)[o];
+          break;
+        }
+      }
+    }
+  }
+}
+
+}  // namespace
+
+CellHash::CellHash(size_t expected) {
+  size_t cap = 16;
+  while (cap < 2 * expected + 1) cap <<= 1;
+  keys_.assign(cap, kEmpty);
+  vals_.assign(cap, -1);
+  mask_ = cap - 1;
+}
+
+int CellHash::findOrInsert(uint64_t key, int next_index, bool* inserted) {
+  size_t h = hash(key) & mask_;
+  while (true) {
+    if (keys_[h] == key) {
+      *inserted = false;
+      return vals_[h];
+    }
+    if (keys_[h] == kEmpty) {
+      keys_[h] = key;
+      vals_[h] = next_index;
+      *inserted = true;
+      return next_index;
+    }
+    h = (h + 1) & mask_;
+  }
+}
+
+int CellHash::find(uint64_t key) const {
+  size_t h = hash(key) & mask_;
+  while (true) {
+    if (keys_[h] == key) return vals_[h];
+    if (keys_[h] == kEmpty) return -1;
+    h = (h + 1) & mask_;
+  }
+}
+
+size_t CellHash::hash(uint64_t k) {
+  k ^= k >> 33;
+  k *= 0xff51afd7ed558ccdULL;
+  k ^= k >> 33;
+  return static_cast<size_t>(k);
+}
+
+VoxelColumns slabColumns(const LocalPoints& pts, const std::vector<float>& h,
+                         const TrunkExtractorParams& p) {
+  VoxelColumns cols;
+  const double cs = p.column_cell_m;
+  const int nlayers =
+      std::max(1, static_cast<int>(std::ceil((p.slab_max_h_m - p.slab_min_h_m) / p.layer_h_m)));
+  for (size_t i = 0; i < pts.size(); ++i)
+    if (h[i] >= p.slab_min_h_m && h[i] < p.slab_max_h_m)
+      cols.slab.push_back(static_cast<uint32_t>(i));
+  if (cols.slab.empty()) return cols;
+  cols.index = CellHash(cols.slab.size());
+  cols.slab_col.resize(cols.slab.size());
+  for (size_t k = 0; k < cols.slab.size(); ++k) {
+    const uint32_t i = cols.slab[k];
+    const int64_t ix = static_cast<int64_t>(std::floor(pts.x[i] / cs));
+    const int64_t iy = static_cast<int64_t>(std::floor(pts.y[i] / cs));
+    bool inserted;
+    const int id =
+        cols.index.findOrInsert(cellKey(ix, iy), static_cast<int>(cols.ix.size()), &inserted);
+    if (inserted) {
+      cols.ix.push_back(ix), cols.iy.push_back(iy);
+      cols.count.push_back(0), cols.mask.push_back(0);
+    }
+    cols.slab_col[k] = id;
+    ++cols.count[id];
+    const int layer =
+        std::min(nlayers - 1, static_cast<int>((h[i] - p.slab_min_h_m) / p.layer_h_m));
+    cols.mask[id] |= uint64_t{1} << layer;
+  }
+  cols.pass.assign(cols.size(), 0);
+  for (size_t c = 0; c < cols.size(); ++c) {
+    const int occupied = __builtin_popcountll(cols.mask[c]);
+    cols.pass[c] = cols.count[c] >= static_cast<uint32_t>(p.min_column_points) &&
+                   occupied >= p.min_continuity * nlayers;
+    cols.passing += cols.pass[c];
+  }
+  return cols;
+}
+
+TrunkCandidates clusterColumns(const VoxelColumns& cols, const TrunkExtractorParams& p) {
+  TrunkCandidates cand;
+  std::vector<int> col_label = labelPassingColumns(cols, p, &cand.count);
+  cand.start.assign(cand.count + 1, 0);
+  if (cand.count == 0) return cand;
+  attachFailingColumns(cols, &col_label);
+  // Bucket slab points by candidate.
+  for (size_t k = 0; k < cols.slab.size(); ++k) {
+    const int l = col_label[cols.slab_col[k]];
+    if (l >= 0) ++cand.start[l + 1];
+  }
+  for (int l = 0; l < cand.count; ++l) cand.start[l + 1] += cand.start[l];
+  cand.points.resize(cand.start[cand.count]);
+  std::vector<uint32_t> fill(cand.start.begin(), cand.start.end() - 1);
+  for (size_t k = 0; k < cols.slab.size(); ++k) {
+    const int l = col_label[cols.slab_col[k]];
+    if (l >= 0) cand.points[fill[l]++] = cols.slab[k];
+  }
+  return cand;
+}
+
+}  // namespace dtif
