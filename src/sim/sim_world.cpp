@@ -522,10 +522,16 @@ void World::buildIndex() {
     object_max_z_ = std::max(object_max_z_, f.centre.z() + f.radii.z());
   }
   num_items_ = stems_.size() + cylinders_.size() + foliage_.size();
-  // Terrain bounds per cell (highest node and largest slope of the bilinear patches touching
-  // it), so that rays high above the ground skip it and sphere tracing takes long steps.
-  cell_ground_max_.assign(cells.size(), -1e30f);
-  cell_ground_lip_.assign(cells.size(), 0.0f);
+  boundTerrainPerCell();
+  flattenCells(&cells);
+}
+
+// Terrain bounds per cell (highest node and largest slope of the bilinear patches touching
+// it), so that rays high above the ground skip it and sphere tracing takes long steps.
+void World::boundTerrainPerCell() {
+  const size_t n_cells = static_cast<size_t>(grid_nx_) * grid_ny_;
+  cell_ground_max_.assign(n_cells, -1e30f);
+  cell_ground_lip_.assign(n_cells, 0.0f);
   for (int j = 0; j < grid_ny_; ++j) {
     for (int i = 0; i < grid_nx_; ++i) {
       const size_t c = static_cast<size_t>(j) * grid_nx_ + i;
@@ -553,6 +559,12 @@ void World::buildIndex() {
       cell_ground_lip_[c] = static_cast<float>(lip * 1.01 + 1e-4);
     }
   }
+}
+
+// Flattens the per-cell lists into cell_start_/cell_items_, each cell's items sorted by their
+// lowest point (castRay stops at the first item above the ray).
+void World::flattenCells(std::vector<std::vector<CellItem>>* cells_in) {
+  std::vector<std::vector<CellItem>>& cells = *cells_in;
   cell_start_.assign(cells.size() + 1, 0);
   cell_items_.clear();
   for (size_t c = 0; c < cells.size(); ++c) {

@@ -110,6 +110,7 @@ class World {
   void addShrubs(const UnderstoryParams& up, double area_ha, std::mt19937_64& rng);
   void addLogs(const UnderstoryParams& up, double area_ha, std::mt19937_64& rng);
   void buildIndex();
+  void boundTerrainPerCell();
 
   // Ray casting.
   void testCell(size_t cell, double t_cell, double t_out, Ray* ray) const;
@@ -142,6 +143,7 @@ class World {
     uint32_t item;
     float z_min, z_max;
   };
+  void flattenCells(std::vector<std::vector<CellItem>>* cells);
   double grid_cell_ = 2.0;
   int grid_nx_ = 0, grid_ny_ = 0;
   std::vector<uint32_t> cell_start_;
