@@ -29,12 +29,23 @@ namespace {
 
 constexpr double kDeg = M_PI / 180.0;
 
+// The tests' folders, removed when the process ends: being per process, they would pile up.
+struct TempDirs {
+  std::vector<fs::path> paths;
+  ~TempDirs() {
+    std::error_code ec;
+    for (const fs::path& p : paths) fs::remove_all(p, ec);
+  }
+};
+TempDirs temp_dirs;
+
 fs::path tempDir(const std::string& name) {
   // Per process: other checkouts may run these tests on the same machine at the same time.
   const fs::path p =
       fs::temp_directory_path() / ("dtif_sim_test_" + name + "_" + std::to_string(::getpid()));
   fs::remove_all(p);
   fs::create_directories(p);
+  temp_dirs.paths.push_back(p);
   return p;
 }
 
@@ -442,6 +453,7 @@ TEST(SimulatorDataset, WrittenEqualsRead) {
   const SceneParams s = liteScene();
   const fs::path dir = tempDir("rw");
   const fs::path png = dir.string() + ".png";
+  temp_dirs.paths.push_back(png);
   Simulator sim(s, 9);
   CollectSubmaps sink;
   sim.run(nullptr, &sink, 1);
