@@ -83,22 +83,22 @@ class Canvas {
   std::vector<uint8_t> px_;
 };
 
-}  // namespace
+// Plot coordinates (W, metres) to pixels. Image y grows downwards; W's y grows upwards.
+struct View {
+  Eigen::Vector2d lo, hi;  // extent shown [m]
+  double px_per_m;
+  double X(double x) const { return (x - lo.x()) * px_per_m; }
+  double Y(double y) const { return (hi.y() - y) * px_per_m; }
+};
 
-void writeScenePng(const std::string& path, const Simulator& sim,
-                   const std::vector<SubmapExtent>& extents, double px_per_m) {
-  const World& world = sim.world();
-  const double margin = 4.0;
-  const Eigen::Vector2d lo(-margin, -margin),
-      hi = world.plotSize() + Eigen::Vector2d(margin, margin);
-  const int w = static_cast<int>((hi.x() - lo.x()) * px_per_m);
-  const int h = static_cast<int>((hi.y() - lo.y()) * px_per_m);
-  Canvas c(w, h);
-  // Image y grows downwards; W's y grows upwards.
-  auto X = [&](double x) { return (x - lo.x()) * px_per_m; };
-  auto Y = [&](double y) { return (hi.y() - y) * px_per_m; };
-
-  // Terrain: light shading by height with 1 m contour lines.
+// Terrain: light shading by height with 1 m contour lines.
+void drawTerrain(const World& world, const View& v, Canvas* canvas) {
+  Canvas& c = *canvas;
+  const Eigen::Vector2d& lo = v.lo;
+  const Eigen::Vector2d& hi = v.hi;
+  const double px_per_m = v.px_per_m;
+  const int w = c.width(), h = c.height();
+  // Height range from a coarse pass (every 4th pixel), for the shading scale.
   double zmin = 1e9, zmax = -1e9;
   for (int y = 0; y < h; y += 4) {
     for (int x = 0; x < w; x += 4) {
@@ -123,28 +123,36 @@ void writeScenePng(const std::string& path, const Simulator& sim,
       }
     }
   }
-  // Plot border.
+}
+
+// Plot border, then the understory: shrubs (light green), logs (brown).
+void drawPlotAndUnderstory(const World& world, const View& v, Canvas* canvas) {
+  Canvas& c = *canvas;
   const Eigen::Vector2d ps = world.plotSize();
-  c.line(X(0), Y(0), X(ps.x()), Y(0), {120, 120, 120});
-  c.line(X(ps.x()), Y(0), X(ps.x()), Y(ps.y()), {120, 120, 120});
-  c.line(X(ps.x()), Y(ps.y()), X(0), Y(ps.y()), {120, 120, 120});
-  c.line(X(0), Y(ps.y()), X(0), Y(0), {120, 120, 120});
-  // Understory: shrubs (light green), logs (brown).
+  c.line(v.X(0), v.Y(0), v.X(ps.x()), v.Y(0), {120, 120, 120});
+  c.line(v.X(ps.x()), v.Y(0), v.X(ps.x()), v.Y(ps.y()), {120, 120, 120});
+  c.line(v.X(ps.x()), v.Y(ps.y()), v.X(0), v.Y(ps.y()), {120, 120, 120});
+  c.line(v.X(0), v.Y(ps.y()), v.X(0), v.Y(0), {120, 120, 120});
   const size_t n_fol = world.foliage().size();
   for (size_t i = n_fol - world.numShrubs(); i < n_fol; ++i) {
     const Foliage& f = world.foliage()[i];
-    c.disk(X(f.centre.x()), Y(f.centre.y()), f.radii.x() * px_per_m, {150, 200, 120}, 0.5);
+    c.disk(v.X(f.centre.x()), v.Y(f.centre.y()), f.radii.x() * v.px_per_m, {150, 200, 120}, 0.5);
   }
   for (const Cylinder& cy : world.cylinders()) {
     if (cy.material != Material::kLog) continue;
     const Eigen::Vector3d b = cy.a + cy.length * cy.axis;
-    c.line(X(cy.a.x()), Y(cy.a.y()), X(b.x()), Y(b.y()), {140, 100, 60},
-           std::max(1.0, 2 * cy.radius * px_per_m));
+    c.line(v.X(cy.a.x()), v.Y(cy.a.y()), v.X(b.x()), v.Y(b.y()), {140, 100, 60},
+           std::max(1.0, 2 * cy.radius * v.px_per_m));
   }
-  // Submap extents (robust bounding boxes in S, drawn with the ground-truth pose).
-  const size_t n_colours = sizeof(kRobotColours) / sizeof(kRobotColours[0]);
+}
+
+const size_t kNumRobotColours = sizeof(kRobotColours) / sizeof(kRobotColours[0]);
+
+// Submap extents (robust bounding boxes in S, drawn with the ground-truth pose).
+void drawSubmapExtents(const std::vector<SubmapExtent>& extents, const View& v, Canvas* canvas) {
+  Canvas& c = *canvas;
   for (const auto& e : extents) {
-    const Rgb col = kRobotColours[e.robot_index % n_colours];
+    const Rgb col = kRobotColours[e.robot_index % kNumRobotColours];
     const Eigen::Vector2d corners[4] = {{e.min_S.x(), e.min_S.y()},
                                         {e.max_S.x(), e.min_S.y()},
                                         {e.max_S.x(), e.max_S.y()},
@@ -153,34 +161,61 @@ void writeScenePng(const std::string& path, const Simulator& sim,
       const Eigen::Vector3d a = e.T_W_S * Eigen::Vector3d(corners[k].x(), corners[k].y(), 0);
       const Eigen::Vector3d b =
           e.T_W_S * Eigen::Vector3d(corners[(k + 1) % 4].x(), corners[(k + 1) % 4].y(), 0);
-      c.line(X(a.x()), Y(a.y()), X(b.x()), Y(b.y()), col, 1.0, 0.35);
+      c.line(v.X(a.x()), v.Y(a.y()), v.X(b.x()), v.Y(b.y()), col, 1.0, 0.35);
     }
     const Eigen::Vector3d o = e.T_W_S.translation();
-    c.disk(X(o.x()), Y(o.y()), 2.5, col);
+    c.disk(v.X(o.x()), v.Y(o.y()), 2.5, col);
   }
-  // Stems: trunks by DBH (dead ones grey), saplings as small dots.
+}
+
+// Stems: trunks by DBH (dead ones grey), saplings as small dots.
+void drawStems(const World& world, const View& v, Canvas* canvas) {
   for (const Stem& s : world.stems()) {
     const Eigen::Vector2d p = s.axisAt(1.3);
     if (s.sapling) {
-      c.disk(X(p.x()), Y(p.y()), 0.8, {90, 150, 70});
+      canvas->disk(v.X(p.x()), v.Y(p.y()), 0.8, {90, 150, 70});
     } else {
-      c.disk(X(p.x()), Y(p.y()), std::max(1.5, s.r_bh * px_per_m * 1.5),
-             s.dead ? Rgb{130, 130, 130} : Rgb{20, 90, 30});
+      canvas->disk(v.X(p.x()), v.Y(p.y()), std::max(1.5, s.r_bh * v.px_per_m * 1.5),
+                   s.dead ? Rgb{130, 130, 130} : Rgb{20, 90, 30});
     }
   }
-  // Trajectories (ground truth), one colour per robot; start marked with a ring.
-  for (size_t r = 0; r < sim.trajectories().size(); ++r) {
-    const Rgb col = kRobotColours[r % n_colours];
-    const auto& T = sim.trajectories()[r].T_W_B;
+}
+
+// Trajectories (ground truth), one colour per robot; start marked with a ring.
+void drawTrajectories(const std::vector<Trajectory>& trajectories, const View& v, Canvas* canvas) {
+  Canvas& c = *canvas;
+  for (size_t r = 0; r < trajectories.size(); ++r) {
+    const Rgb col = kRobotColours[r % kNumRobotColours];
+    const auto& T = trajectories[r].T_W_B;
     for (size_t i = 10; i < T.size(); i += 10) {
       const Eigen::Vector3d a = T[i - 10].translation(), b = T[i].translation();
-      c.line(X(a.x()), Y(a.y()), X(b.x()), Y(b.y()), col, 2.0);
+      c.line(v.X(a.x()), v.Y(a.y()), v.X(b.x()), v.Y(b.y()), col, 2.0);
     }
     if (!T.empty()) {
       const Eigen::Vector3d s = T.front().translation();
-      c.disk(X(s.x()), Y(s.y()), 6, col, 0.6);
+      c.disk(v.X(s.x()), v.Y(s.y()), 6, col, 0.6);
     }
   }
+}
+
+}  // namespace
+
+// Layers from the bottom up: what is drawn later covers what is drawn earlier.
+void writeScenePng(const std::string& path, const Simulator& sim,
+                   const std::vector<SubmapExtent>& extents, double px_per_m) {
+  const World& world = sim.world();
+  const double margin = 4.0;
+  const Eigen::Vector2d lo(-margin, -margin),
+      hi = world.plotSize() + Eigen::Vector2d(margin, margin);
+  const int w = static_cast<int>((hi.x() - lo.x()) * px_per_m);
+  const int h = static_cast<int>((hi.y() - lo.y()) * px_per_m);
+  Canvas c(w, h);
+  const View view{lo, hi, px_per_m};
+  drawTerrain(world, view, &c);
+  drawPlotAndUnderstory(world, view, &c);
+  drawSubmapExtents(extents, view, &c);
+  drawStems(world, view, &c);
+  drawTrajectories(sim.trajectories(), view, &c);
   c.save(path);
 }
 

@@ -79,22 +79,26 @@ void check(bool ok, const std::string& what, std::ostringstream* errors) {
   if (!ok) *errors << what << "\n";
 }
 
-}  // namespace
-
-double Trajectory::duration() const {
-  return T_W_B.empty() ? 0.0 : static_cast<double>(T_W_B.size() - 1) / kTrajectoryRateHz;
-}
-
-std::string SceneParams::validate() const {
-  std::ostringstream e;
+// Each section checks its own fields; the messages keep their order (loadSceneYaml reports the
+// first one).
+void checkPlot(const PlotParams& plot, std::ostringstream* errors) {
+  std::ostringstream& e = *errors;
   check(plot.size_x_m >= 5 && plot.size_y_m >= 5, "plot: size_x_m and size_y_m must be >= 5", &e);
   check(plot.size_x_m <= 2000 && plot.size_y_m <= 2000, "plot: sizes must be <= 2000 m", &e);
   check(plot.margin_m >= 0, "plot.margin_m must be >= 0", &e);
+}
+
+void checkTerrain(const TerrainParams& terrain, std::ostringstream* errors) {
+  std::ostringstream& e = *errors;
   check(terrain.slope_deg >= 0 && terrain.slope_deg <= 35, "terrain.slope_deg must be 0..35", &e);
   check(terrain.hill_amplitude_m >= 0, "terrain.hill_amplitude_m must be >= 0", &e);
   check(terrain.hill_wavelength_m > 1, "terrain.hill_wavelength_m must be > 1", &e);
   check(terrain.roughness_m >= 0 && terrain.roughness_m <= 0.5,
         "terrain.roughness_m must be 0..0.5", &e);
+}
+
+void checkStems(const StemParams& stems, std::ostringstream* errors) {
+  std::ostringstream& e = *errors;
   check(stems.density_per_ha >= 0 && stems.density_per_ha <= 5000,
         "stems.density_per_ha must be 0..5000", &e);
   check(stems.pattern == "random" || stems.pattern == "clustered" || stems.pattern == "grid",
@@ -118,6 +122,10 @@ std::string SceneParams::validate() const {
   check(stems.ellipticity >= 0 && stems.ellipticity < 0.5, "stems.ellipticity must be 0..0.5", &e);
   check(stems.bark_roughness >= 0 && stems.bark_roughness < 0.3,
         "stems.bark_roughness must be 0..0.3", &e);
+}
+
+void checkTrees(const TreeParams& trees, std::ostringstream* errors) {
+  std::ostringstream& e = *errors;
   check(trees.height_at_30cm_m >= 2 && trees.height_at_30cm_m <= 60,
         "trees.height_at_30cm_m must be 2..60", &e);
   check(trees.height_exponent >= 0 && trees.height_exponent <= 2,
@@ -131,11 +139,19 @@ std::string SceneParams::validate() const {
         "trees.branches_per_m must be 0..20", &e);
   check(trees.branch_min_h_m >= 0, "trees.branch_min_h_m must be >= 0", &e);
   check(trees.branch_length_m > 0, "trees.branch_length_m must be > 0", &e);
+}
+
+void checkUnderstory(const UnderstoryParams& understory, std::ostringstream* errors) {
+  std::ostringstream& e = *errors;
   check(understory.saplings_per_ha >= 0 && understory.shrubs_per_ha >= 0 &&
             understory.logs_per_ha >= 0,
         "understory: densities must be >= 0", &e);
   check(understory.shrub_radius_m > 0, "understory.shrub_radius_m must be > 0", &e);
   check(understory.shrub_density > 0, "understory.shrub_density must be > 0", &e);
+}
+
+void checkSensor(const SensorParams& sensor, std::ostringstream* errors) {
+  std::ostringstream& e = *errors;
   check(sensor.points_per_s >= 1000 && sensor.points_per_s <= 2e6,
         "sensor.points_per_s must be 1e3..2e6", &e);
   check(sensor.frame_rate_hz >= 1 && sensor.frame_rate_hz <= 100,
@@ -151,6 +167,10 @@ std::string SceneParams::validate() const {
   check(sensor.range_noise_m >= 0 && sensor.range_noise_m < 1, "sensor.range_noise_m: 0..1", &e);
   check(sensor.divergence_deg >= 0 && sensor.divergence_deg < 5, "sensor.divergence_deg: 0..5", &e);
   check(sensor.dropout >= 0 && sensor.dropout < 1, "sensor.dropout must be 0..1", &e);
+}
+
+void checkMotion(const MotionParams& motion, std::ostringstream* errors) {
+  std::ostringstream& e = *errors;
   check(motion.speed_min_mps > 0.05 && motion.speed_min_mps <= motion.speed_max_mps &&
             motion.speed_max_mps <= 5,
         "motion: need 0.05 < speed_min_mps <= speed_max_mps <= 5", &e);
@@ -161,6 +181,10 @@ std::string SceneParams::validate() const {
         "motion.look_around_deg must be 0..90", &e);
   check(motion.sway_deg >= 0 && motion.sway_deg <= 10, "motion.sway_deg must be 0..10", &e);
   check(motion.clearance_m >= 0.1 && motion.clearance_m <= 3, "motion.clearance_m: 0.1..3", &e);
+}
+
+void checkOdometry(const OdometryParams& odometry, std::ostringstream* errors) {
+  std::ostringstream& e = *errors;
   check(odometry.trans_drift_min >= 0 && odometry.trans_drift_min <= odometry.trans_drift_max &&
             odometry.trans_drift_max <= 0.2,
         "odometry: need 0 <= trans_drift_min <= trans_drift_max <= 0.2", &e);
@@ -170,11 +194,24 @@ std::string SceneParams::validate() const {
         "odometry: need 0 <= yaw_drift_min_deg_per_m <= yaw_drift_max_deg_per_m <= 1", &e);
   check(odometry.tilt_sd_deg >= 0 && odometry.tilt_sd_deg <= 5, "odometry.tilt_sd_deg: 0..5", &e);
   check(odometry.tilt_time_s > 0, "odometry.tilt_time_s must be > 0", &e);
+}
+
+// A submap is a whole number of frames.
+void checkSubmap(const SubmapParams& submap, const SensorParams& sensor,
+                 std::ostringstream* errors) {
+  std::ostringstream& e = *errors;
   check(submap.duration_s >= 0.5 && submap.duration_s <= 600, "submap.duration_s: 0.5..600", &e);
   const double frames_per_submap = submap.duration_s * sensor.frame_rate_hz;
   check(std::abs(frames_per_submap - std::round(frames_per_submap)) < 1e-6,
         "submap.duration_s must be a whole number of frames (1 / sensor.frame_rate_hz)", &e);
   check(submap.voxel_m >= 0.005 && submap.voxel_m <= 1, "submap.voxel_m: 0.005..1", &e);
+}
+
+// Waypoints are checked against the plot only for generated stands: a stem map sets its own
+// plot extent.
+void checkRobots(const std::vector<RobotRoute>& robots, const PlotParams& plot,
+                 const StemParams& stems, std::ostringstream* errors) {
+  std::ostringstream& e = *errors;
   check(!robots.empty(), "robots: at least one robot", &e);
   const std::regex name_re("[A-Za-z0-9_]+");
   std::set<std::string> names;
@@ -190,10 +227,33 @@ std::string SceneParams::validate() const {
       }
     }
   }
+}
+
+}  // namespace
+
+double Trajectory::duration() const {
+  return T_W_B.empty() ? 0.0 : static_cast<double>(T_W_B.size() - 1) / kTrajectoryRateHz;
+}
+
+std::string SceneParams::validate() const {
+  std::ostringstream e;
+  checkPlot(plot, &e);
+  checkTerrain(terrain, &e);
+  checkStems(stems, &e);
+  checkTrees(trees, &e);
+  checkUnderstory(understory, &e);
+  checkSensor(sensor, &e);
+  checkMotion(motion, &e);
+  checkOdometry(odometry, &e);
+  checkSubmap(submap, sensor, &e);
+  checkRobots(robots, plot, stems, &e);
   return e.str();
 }
 
-SceneParams loadSceneYaml(const std::string& path) {
+namespace {
+
+// Parses the file and checks its top-level keys; YAML errors name the file and line.
+YAML::Node loadSceneRoot(const std::string& path) {
   YAML::Node root;
   try {
     root = YAML::LoadFile(path);
@@ -211,6 +271,50 @@ SceneParams loadSceneYaml(const std::string& path) {
     const std::string key = kv.first.as<std::string>();
     if (!kTop.count(key)) throw ParamError(path + ": unknown key '" + key + "'");
   }
+  return root;
+}
+
+// One entry of `robots`; `where` names it in errors.
+RobotRoute readRobot(const YAML::Node& r, const std::string& where) {
+  if (!r.IsMap()) throw ParamError(where + ": must be a map");
+  for (const auto& kv : r) {
+    const std::string key = kv.first.as<std::string>();
+    if (key != "name" && key != "waypoints" && key != "start_s") {
+      throw ParamError(where + ": unknown key '" + key + "'");
+    }
+  }
+  RobotRoute route;
+  try {
+    route.name = r["name"].as<std::string>("");
+    route.start_s = r["start_s"].as<double>(0.0);
+    for (const auto& w : r["waypoints"]) {
+      const auto xy = w.as<std::vector<double>>();
+      if (xy.size() != 2) throw ParamError(where + ": a waypoint must be [x, y]");
+      route.waypoints.emplace_back(xy[0], xy[1]);
+    }
+  } catch (const YAML::Exception&) {
+    throw ParamError(where +
+                     ": wrong type (name: string, start_s: number, "
+                     "waypoints: [[x, y], ...])");
+  }
+  return route;
+}
+
+std::vector<RobotRoute> readRobots(const YAML::Node& root, const std::string& path) {
+  std::vector<RobotRoute> routes;
+  const YAML::Node robots = root["robots"];
+  if (!robots) return routes;
+  if (!robots.IsSequence()) throw ParamError(path + ": robots: must be a list");
+  for (size_t i = 0; i < robots.size(); ++i) {
+    routes.push_back(readRobot(robots[i], path + ": robots[" + std::to_string(i) + "]"));
+  }
+  return routes;
+}
+
+}  // namespace
+
+SceneParams loadSceneYaml(const std::string& path) {
+  const YAML::Node root = loadSceneRoot(path);
   SceneParams s;
   try {
     if (root["name"]) s.name = root["name"].as<std::string>();
@@ -228,36 +332,8 @@ SceneParams loadSceneYaml(const std::string& path) {
   readSection(root, "motion", path, &s.motion);
   readSection(root, "odometry", path, &s.odometry);
   readSection(root, "submap", path, &s.submap);
-  const YAML::Node robots = root["robots"];
-  if (robots) {
-    if (!robots.IsSequence()) throw ParamError(path + ": robots: must be a list");
-    for (size_t i = 0; i < robots.size(); ++i) {
-      const YAML::Node r = robots[i];
-      const std::string where = path + ": robots[" + std::to_string(i) + "]";
-      if (!r.IsMap()) throw ParamError(where + ": must be a map");
-      for (const auto& kv : r) {
-        const std::string key = kv.first.as<std::string>();
-        if (key != "name" && key != "waypoints" && key != "start_s") {
-          throw ParamError(where + ": unknown key '" + key + "'");
-        }
-      }
-      RobotRoute route;
-      try {
-        route.name = r["name"].as<std::string>("");
-        route.start_s = r["start_s"].as<double>(0.0);
-        for (const auto& w : r["waypoints"]) {
-          const auto xy = w.as<std::vector<double>>();
-          if (xy.size() != 2) throw ParamError(where + ": a waypoint must be [x, y]");
-          route.waypoints.emplace_back(xy[0], xy[1]);
-        }
-      } catch (const YAML::Exception&) {
-        throw ParamError(where +
-                         ": wrong type (name: string, start_s: number, "
-                         "waypoints: [[x, y], ...])");
-      }
-      s.robots.push_back(route);
-    }
-  }
+  s.robots = readRobots(root, path);
+  // The stem map travels with the scene: relative to the YAML's folder, not the working one.
   if (!s.stems.stem_map.empty() && std::filesystem::path(s.stems.stem_map).is_relative()) {
     const auto dir = std::filesystem::path(path).parent_path();
     s.stems.stem_map = (dir / s.stems.stem_map).lexically_normal().string();

@@ -215,95 +215,117 @@ double Stem::maxRadius() const {
   return r * (sapling ? 1.1 : 1.3) * (1.0 + ell.norm() + lobe.norm() + rough.norm()) + 1e-3;
 }
 
+namespace {
+
+// The stems' positions at breast height: from the stem map (shifted to start at the margin,
+// the plot grown to fit) or generated over the configured plot. Sets *plot_size.
+std::vector<StemSeed> placeStems(const SceneParams& scene, std::mt19937_64& rng,
+                                 Eigen::Vector2d* plot_size) {
+  *plot_size = Eigen::Vector2d(scene.plot.size_x_m, scene.plot.size_y_m);
+  if (scene.stems.stem_map.empty()) return generateStems(scene.stems, *plot_size, rng);
+  std::vector<StemSeed> seeds = readStemMap(scene.stems.stem_map);
+  Eigen::Vector2d lo = seeds[0].xy, hi = seeds[0].xy;
+  for (const auto& s : seeds) {
+    lo = lo.cwiseMin(s.xy);
+    hi = hi.cwiseMax(s.xy);
+  }
+  const Eigen::Vector2d m(scene.plot.margin_m, scene.plot.margin_m);
+  for (auto& s : seeds) s.xy += m - lo;
+  *plot_size = hi - lo + 2 * m;
+  return seeds;
+}
+
+}  // namespace
+
+// Everything is drawn from one stream, in a fixed order: stems' positions, terrain, trunks
+// (each with its branches and crown), saplings, shrubs, logs. Changing the order changes every
+// scene.
 World::World(const SceneParams& scene, uint64_t seed) {
   std::mt19937_64 rng(seed * 0x9E3779B97F4A7C15ULL + 17);
-  plot_size_ = Eigen::Vector2d(scene.plot.size_x_m, scene.plot.size_y_m);
-  std::vector<StemSeed> seeds;
-  if (!scene.stems.stem_map.empty()) {
-    seeds = readStemMap(scene.stems.stem_map);
-    Eigen::Vector2d lo = seeds[0].xy, hi = seeds[0].xy;
-    for (const auto& s : seeds) {
-      lo = lo.cwiseMin(s.xy);
-      hi = hi.cwiseMax(s.xy);
-    }
-    const Eigen::Vector2d m(scene.plot.margin_m, scene.plot.margin_m);
-    for (auto& s : seeds) s.xy += m - lo;
-    plot_size_ = hi - lo + 2 * m;
-  } else {
-    seeds = generateStems(scene.stems, plot_size_, rng);
-  }
+  const std::vector<StemSeed> seeds = placeStems(scene, rng, &plot_size_);
   min_xy_ = Eigen::Vector2d(-kTerrainMargin, -kTerrainMargin);
   max_xy_ = plot_size_ + Eigen::Vector2d(kTerrainMargin, kTerrainMargin);
   buildTerrain(scene.terrain, rng);
-
-  const StemParams& sp = scene.stems;
-  const TreeParams& tp = scene.trees;
-  // Trunks.
   for (const auto& seed_xy : seeds) {
-    Stem s;
-    s.id = static_cast<int64_t>(stems_.size());
-    const double dbh = seed_xy.dbh > 0 ? seed_xy.dbh : drawDbh(rng, sp);
-    s.r_bh = 0.5 * dbh;
-    const double lean = uniform(rng, 0, sp.lean_max_deg) * kDeg;
-    const double lean_dir = uniform(rng, -kPi, kPi);
-    s.lean = std::tan(lean) * Eigen::Vector2d(std::cos(lean_dir), std::sin(lean_dir));
-    // The map gives the position at breast height; the base sits below it along the lean.
-    s.base_xy = seed_xy.xy - 1.3 * s.lean;
-    s.z_base = terrainHeight(s.base_xy.x(), s.base_xy.y());
-    s.taper = tp.taper * uniform(rng, 0.7, 1.3);
-    s.height = std::clamp(
-        tp.height_at_30cm_m * std::pow(dbh / 0.3, tp.height_exponent) * uniform(rng, 0.85, 1.15),
-        3.0, 50.0);
-    auto harmonic = [&](double amp) {
-      const double ph = uniform(rng, -kPi, kPi);
-      return Eigen::Vector2d(amp * std::cos(ph), amp * std::sin(ph));
-    };
-    s.ell = harmonic(uniform(rng, 0, sp.ellipticity));
-    s.lobe = harmonic(uniform(rng, 0, 0.4 * sp.ellipticity));
-    s.rough = harmonic(sp.bark_roughness * uniform(rng, 0.5, 1.5));
-    s.rough_phase = uniform(rng, 0, 1);
-    s.dead = uniform(rng, 0, 1) < sp.dead_fraction;
-    if (s.dead) {
-      s.height = std::min(s.height, uniform(rng, 2.0, 12.0));  // broken snag
-      s.rough *= 1.5;
-    }
-    const double crown_base =
-        std::clamp(tp.crown_base_frac * s.height * uniform(rng, 0.8, 1.2), 2.0, 0.9 * s.height);
-    // Branches (mostly dead) between the lowest branch height and the crown: the clutter that
-    // sits right in the trunk-extraction slab.
-    const double branch_top = s.dead ? s.height : crown_base;
-    const int nb = poisson(rng, tp.branches_per_m * std::max(0.0, branch_top - tp.branch_min_h_m));
-    for (int i = 0; i < nb; ++i) {
-      const double h = uniform(rng, tp.branch_min_h_m, branch_top);
-      const double az = uniform(rng, -kPi, kPi);
-      const double el = uniform(rng, -25, 30) * kDeg;
-      Cylinder c;
-      c.material = Material::kBranch;
-      const Eigen::Vector2d axis_xy = s.axisAt(h);
-      c.axis =
-          Eigen::Vector3d(std::cos(az) * std::cos(el), std::sin(az) * std::cos(el), std::sin(el));
-      const double r0 = std::max(s.r_bh - s.taper * (h - 1.3), 0.3 * s.r_bh);
-      c.a = Eigen::Vector3d(axis_xy.x(), axis_xy.y(), s.z_base + h) + 0.8 * r0 * c.axis;
-      c.length = tp.branch_length_m * uniform(rng, 0.3, 1.6) * std::sqrt(dbh / 0.3);
-      c.radius = uniform(rng, 0.008, 0.025) * std::sqrt(dbh / 0.3);
-      cylinders_.push_back(c);
-    }
-    if (!s.dead && tp.crown_density > 0) {
-      Foliage f;
-      const double mid = 0.5 * (crown_base + s.height);
-      const Eigen::Vector2d cxy = s.axisAt(mid);
-      const double cr = (0.8 + tp.crown_radius_per_dbh * dbh) * uniform(rng, 0.8, 1.2);
-      f.centre = Eigen::Vector3d(cxy.x(), cxy.y(), s.z_base + mid);
-      f.radii = Eigen::Vector3d(cr, cr, 0.5 * (s.height - crown_base));
-      f.density = tp.crown_density;
-      foliage_.push_back(f);
-    }
-    stems_.push_back(s);
+    const double dbh = seed_xy.dbh > 0 ? seed_xy.dbh : drawDbh(rng, scene.stems);
+    addTrunk(seed_xy.xy, dbh, scene.stems, scene.trees, rng);
   }
-  const size_t num_trunks = stems_.size();
   const double area_ha = plot_size_.x() * plot_size_.y() / 1e4;
-  // Saplings: thin stems with a small porous crown.
-  const UnderstoryParams& up = scene.understory;
+  addSaplings(scene.understory, scene.stems, area_ha, rng);
+  addShrubs(scene.understory, area_ha, rng);
+  addLogs(scene.understory, area_ha, rng);
+  buildIndex();
+}
+
+void World::addTrunk(const Eigen::Vector2d& xy_bh, double dbh, const StemParams& sp,
+                     const TreeParams& tp, std::mt19937_64& rng) {
+  Stem s;
+  s.id = static_cast<int64_t>(stems_.size());
+  s.r_bh = 0.5 * dbh;
+  const double lean = uniform(rng, 0, sp.lean_max_deg) * kDeg;
+  const double lean_dir = uniform(rng, -kPi, kPi);
+  s.lean = std::tan(lean) * Eigen::Vector2d(std::cos(lean_dir), std::sin(lean_dir));
+  // The map gives the position at breast height; the base sits below it along the lean.
+  s.base_xy = xy_bh - 1.3 * s.lean;
+  s.z_base = terrainHeight(s.base_xy.x(), s.base_xy.y());
+  s.taper = tp.taper * uniform(rng, 0.7, 1.3);
+  s.height = std::clamp(
+      tp.height_at_30cm_m * std::pow(dbh / 0.3, tp.height_exponent) * uniform(rng, 0.85, 1.15), 3.0,
+      50.0);
+  auto harmonic = [&](double amp) {
+    const double ph = uniform(rng, -kPi, kPi);
+    return Eigen::Vector2d(amp * std::cos(ph), amp * std::sin(ph));
+  };
+  s.ell = harmonic(uniform(rng, 0, sp.ellipticity));
+  s.lobe = harmonic(uniform(rng, 0, 0.4 * sp.ellipticity));
+  s.rough = harmonic(sp.bark_roughness * uniform(rng, 0.5, 1.5));
+  s.rough_phase = uniform(rng, 0, 1);
+  s.dead = uniform(rng, 0, 1) < sp.dead_fraction;
+  if (s.dead) {
+    s.height = std::min(s.height, uniform(rng, 2.0, 12.0));  // broken snag
+    s.rough *= 1.5;
+  }
+  const double crown_base =
+      std::clamp(tp.crown_base_frac * s.height * uniform(rng, 0.8, 1.2), 2.0, 0.9 * s.height);
+  addBranches(s, dbh, s.dead ? s.height : crown_base, tp, rng);
+  if (!s.dead && tp.crown_density > 0) {
+    Foliage f;
+    const double mid = 0.5 * (crown_base + s.height);
+    const Eigen::Vector2d cxy = s.axisAt(mid);
+    const double cr = (0.8 + tp.crown_radius_per_dbh * dbh) * uniform(rng, 0.8, 1.2);
+    f.centre = Eigen::Vector3d(cxy.x(), cxy.y(), s.z_base + mid);
+    f.radii = Eigen::Vector3d(cr, cr, 0.5 * (s.height - crown_base));
+    f.density = tp.crown_density;
+    foliage_.push_back(f);
+  }
+  stems_.push_back(s);
+}
+
+// Branches (mostly dead) between the lowest branch height and `branch_top` (the crown base, or
+// the top of a snag): the clutter that sits right in the trunk-extraction slab.
+void World::addBranches(const Stem& s, double dbh, double branch_top, const TreeParams& tp,
+                        std::mt19937_64& rng) {
+  const int nb = poisson(rng, tp.branches_per_m * std::max(0.0, branch_top - tp.branch_min_h_m));
+  for (int i = 0; i < nb; ++i) {
+    const double h = uniform(rng, tp.branch_min_h_m, branch_top);
+    const double az = uniform(rng, -kPi, kPi);
+    const double el = uniform(rng, -25, 30) * kDeg;
+    Cylinder c;
+    c.material = Material::kBranch;
+    const Eigen::Vector2d axis_xy = s.axisAt(h);
+    c.axis =
+        Eigen::Vector3d(std::cos(az) * std::cos(el), std::sin(az) * std::cos(el), std::sin(el));
+    const double r0 = std::max(s.r_bh - s.taper * (h - 1.3), 0.3 * s.r_bh);
+    c.a = Eigen::Vector3d(axis_xy.x(), axis_xy.y(), s.z_base + h) + 0.8 * r0 * c.axis;
+    c.length = tp.branch_length_m * uniform(rng, 0.3, 1.6) * std::sqrt(dbh / 0.3);
+    c.radius = uniform(rng, 0.008, 0.025) * std::sqrt(dbh / 0.3);
+    cylinders_.push_back(c);
+  }
+}
+
+// Saplings: thin stems with a small porous crown, anywhere on the plot.
+void World::addSaplings(const UnderstoryParams& up, const StemParams& sp, double area_ha,
+                        std::mt19937_64& rng) {
   const int n_sap = poisson(rng, up.saplings_per_ha * area_ha);
   for (int i = 0; i < n_sap; ++i) {
     Stem s;
@@ -327,8 +349,10 @@ World::World(const SceneParams& scene, uint64_t seed) {
     f.density = 1.5;
     foliage_.push_back(f);
   }
-  (void)num_trunks;
-  // Shrubs.
+}
+
+// Shrubs: porous ellipsoids sitting on the ground.
+void World::addShrubs(const UnderstoryParams& up, double area_ha, std::mt19937_64& rng) {
   const int n_shrub = poisson(rng, up.shrubs_per_ha * area_ha);
   for (int i = 0; i < n_shrub; ++i) {
     Foliage f;
@@ -341,7 +365,10 @@ World::World(const SceneParams& scene, uint64_t seed) {
     foliage_.push_back(f);
   }
   num_shrubs_ = static_cast<size_t>(n_shrub);
-  // Fallen logs resting on the terrain.
+}
+
+// Fallen logs resting on the terrain.
+void World::addLogs(const UnderstoryParams& up, double area_ha, std::mt19937_64& rng) {
   const int n_log = poisson(rng, up.logs_per_ha * area_ha);
   for (int i = 0; i < n_log; ++i) {
     const double len = uniform(rng, 2.0, 10.0), r = uniform(rng, 0.08, 0.3);
@@ -360,7 +387,6 @@ World::World(const SceneParams& scene, uint64_t seed) {
     cylinders_.push_back(cy);
   }
   num_logs_ = static_cast<size_t>(n_log);
-  buildIndex();
 }
 
 World::World(const SceneParams& scene, std::vector<Stem> stems, std::vector<Cylinder> cylinders,
@@ -496,10 +522,16 @@ void World::buildIndex() {
     object_max_z_ = std::max(object_max_z_, f.centre.z() + f.radii.z());
   }
   num_items_ = stems_.size() + cylinders_.size() + foliage_.size();
-  // Terrain bounds per cell (highest node and largest slope of the bilinear patches touching
-  // it), so that rays high above the ground skip it and sphere tracing takes long steps.
-  cell_ground_max_.assign(cells.size(), -1e30f);
-  cell_ground_lip_.assign(cells.size(), 0.0f);
+  boundTerrainPerCell();
+  flattenCells(&cells);
+}
+
+// Terrain bounds per cell (highest node and largest slope of the bilinear patches touching
+// it), so that rays high above the ground skip it and sphere tracing takes long steps.
+void World::boundTerrainPerCell() {
+  const size_t n_cells = static_cast<size_t>(grid_nx_) * grid_ny_;
+  cell_ground_max_.assign(n_cells, -1e30f);
+  cell_ground_lip_.assign(n_cells, 0.0f);
   for (int j = 0; j < grid_ny_; ++j) {
     for (int i = 0; i < grid_nx_; ++i) {
       const size_t c = static_cast<size_t>(j) * grid_nx_ + i;
@@ -527,6 +559,12 @@ void World::buildIndex() {
       cell_ground_lip_[c] = static_cast<float>(lip * 1.01 + 1e-4);
     }
   }
+}
+
+// Flattens the per-cell lists into cell_start_/cell_items_, each cell's items sorted by their
+// lowest point (castRay stops at the first item above the ray).
+void World::flattenCells(std::vector<std::vector<CellItem>>* cells_in) {
+  std::vector<std::vector<CellItem>>& cells = *cells_in;
   cell_start_.assign(cells.size() + 1, 0);
   cell_items_.clear();
   for (size_t c = 0; c < cells.size(); ++c) {
@@ -634,15 +672,24 @@ bool World::hitStem(const Stem& s, double bound, const Eigen::Vector3d& o, const
   return false;
 }
 
-RayHit World::castRay(const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t_min,
-                      double t_max, RayScratch* scratch) const {
+// One ray being cast: its line and limits, and the closest hit so far.
+struct World::Ray {
+  const Eigen::Vector3d& o;
+  const Eigen::Vector3d& d;
+  double t_min, t_max;
+  uint32_t id;  // mailbox stamp: each object is tested once per ray
+  RayScratch* scratch;
   RayHit best;
   double best_t = kInf;
+};
+
+RayHit World::castRay(const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t_min,
+                      double t_max, RayScratch* scratch) const {
   if (++scratch->ray == 0) {
     std::fill(scratch->mailbox.begin(), scratch->mailbox.end(), 0);
     scratch->ray = 1;
   }
-  const uint32_t ray_id = scratch->ray;
+  Ray ray{o, d, t_min, t_max, scratch->ray, scratch, RayHit(), kInf};
   // 2-D DDA over the grid; each cell tests the terrain under it and its objects, in ray order,
   // so the walk stops at the first cell that ends beyond the closest hit.
   const double gx = (o.x() - min_xy_.x()) / grid_cell_, gy = (o.y() - min_xy_.y()) / grid_cell_;
@@ -653,69 +700,13 @@ RayHit World::castRay(const Eigen::Vector3d& o, const Eigen::Vector3d& d, double
   double tmx = std::abs(d.x()) > 1e-12 ? ((d.x() > 0 ? ix + 1 - gx : gx - ix) * tdx) : kInf;
   double tmy = std::abs(d.y()) > 1e-12 ? ((d.y() > 0 ? iy + 1 - gy : gy - iy) * tdy) : kInf;
   double t_cell = 0.0;
-  std::uniform_real_distribution<double> unit(0.0, 1.0);
   while (true) {
     if (ix < 0 || iy < 0 || ix >= grid_nx_ || iy >= grid_ny_) break;
     if (d.z() > 0 && o.z() + t_cell * d.z() > object_max_z_) break;
     const size_t cell = static_cast<size_t>(iy) * grid_nx_ + ix;
     const double t_out = std::min({tmx, tmy, t_max});
-    // Height range of the ray inside this cell.
-    double t_far = std::min(t_out, best_t);
-    double za = o.z() + t_cell * d.z(), zb = o.z() + t_far * d.z();
-    float z_lo = static_cast<float>(std::min(za, zb));
-    if (z_lo <= cell_ground_max_[cell]) {
-      const double tg = traceTerrain(o, d, t_cell, t_far, cell_ground_lip_[cell]);
-      if (tg >= t_min && tg < best_t) {
-        best_t = tg;
-        best.material = Material::kGround;
-        best.stem_id = -1;
-        t_far = tg;
-        zb = o.z() + t_far * d.z();
-        z_lo = static_cast<float>(std::min(za, zb));
-      }
-    }
-    const float z_hi = static_cast<float>(std::max(za, zb));
-    const uint32_t k_end = z_lo > cell_top_[cell] ? cell_start_[cell] : cell_start_[cell + 1];
-    for (uint32_t k = cell_start_[cell]; k < k_end; ++k) {
-      const CellItem& ci = cell_items_[k];
-      if (ci.z_min > z_hi) break;  // items are sorted by z_min
-      if (ci.z_max < z_lo) continue;
-      const uint32_t item = ci.item;
-      const uint32_t kind = item >> 30, idx = item & 0x3FFFFFFFu;
-      const size_t mb = kind == kItemStem       ? idx
-                        : kind == kItemCylinder ? stems_.size() + idx
-                                                : stems_.size() + cylinders_.size() + idx;
-      if (scratch->mailbox[mb] == ray_id) continue;
-      scratch->mailbox[mb] = ray_id;
-      double t = kInf;
-      const double limit = std::min(best_t, t_max);
-      if (kind == kItemStem) {
-        if (hitStem(stems_[idx], stem_bound_[idx], o, d, limit, &t) && t >= t_min && t < best_t) {
-          best_t = t;
-          best.material = Material::kBark;
-          best.stem_id = stems_[idx].sapling ? -1 : stems_[idx].id;
-        }
-      } else if (kind == kItemCylinder) {
-        if (hitCylinder(cylinders_[idx], o, d, t_min, &t) && t < best_t && t <= t_max) {
-          best_t = t;
-          best.material = cylinders_[idx].material;
-          best.stem_id = -1;
-        }
-      } else {
-        double tin, tout;
-        if (chordFoliage(foliage_[idx], o, d, &tin, &tout) && tout > t_min && tin < limit) {
-          // Porous volume: exponential free path (one draw per crossed volume).
-          const double depth = -std::log(1.0 - unit(scratch->rng)) / foliage_[idx].density;
-          t = std::max(tin, t_min) + depth;
-          if (t < tout && t < best_t && t <= t_max) {
-            best_t = t;
-            best.material = Material::kFoliage;
-            best.stem_id = -1;
-          }
-        }
-      }
-    }
-    if (t_out >= best_t || t_out >= t_max) break;
+    testCell(cell, t_cell, t_out, &ray);
+    if (t_out >= ray.best_t || t_out >= t_max) break;
     t_cell = t_out;
     if (tmx < tmy) {
       tmx += tdx;
@@ -725,12 +716,88 @@ RayHit World::castRay(const Eigen::Vector3d& o, const Eigen::Vector3d& d, double
       iy += sy;
     }
   }
-  if (best_t <= t_max && best.material != Material::kNone) {
-    best.range = best_t;
+  RayHit best = ray.best;
+  if (ray.best_t <= t_max && best.material != Material::kNone) {
+    best.range = ray.best_t;
   } else {
     best.material = Material::kNone;
   }
   return best;
+}
+
+// The part [t_cell, t_out] of the ray over one grid cell: the terrain when the ray comes low
+// enough, then the cell's objects whose height range the ray crosses.
+void World::testCell(size_t cell, double t_cell, double t_out, Ray* ray) const {
+  const Eigen::Vector3d& o = ray->o;
+  const Eigen::Vector3d& d = ray->d;
+  double& best_t = ray->best_t;
+  // Height range of the ray inside this cell.
+  double t_far = std::min(t_out, best_t);
+  double za = o.z() + t_cell * d.z(), zb = o.z() + t_far * d.z();
+  float z_lo = static_cast<float>(std::min(za, zb));
+  if (z_lo <= cell_ground_max_[cell]) {
+    const double tg = traceTerrain(o, d, t_cell, t_far, cell_ground_lip_[cell]);
+    if (tg >= ray->t_min && tg < best_t) {
+      best_t = tg;
+      ray->best.material = Material::kGround;
+      ray->best.stem_id = -1;
+      t_far = tg;
+      zb = o.z() + t_far * d.z();
+      z_lo = static_cast<float>(std::min(za, zb));
+    }
+  }
+  const float z_hi = static_cast<float>(std::max(za, zb));
+  const uint32_t k_end = z_lo > cell_top_[cell] ? cell_start_[cell] : cell_start_[cell + 1];
+  for (uint32_t k = cell_start_[cell]; k < k_end; ++k) {
+    const CellItem& ci = cell_items_[k];
+    if (ci.z_min > z_hi) break;  // items are sorted by z_min
+    if (ci.z_max < z_lo) continue;
+    testItem(ci.item, ray);
+  }
+}
+
+// The exact test of one object (once per ray), keeping the closer hit.
+void World::testItem(uint32_t item, Ray* ray) const {
+  const Eigen::Vector3d& o = ray->o;
+  const Eigen::Vector3d& d = ray->d;
+  const double t_min = ray->t_min, t_max = ray->t_max;
+  double& best_t = ray->best_t;
+  RayHit& best = ray->best;
+  const uint32_t kind = item >> 30, idx = item & 0x3FFFFFFFu;
+  const size_t mb = kind == kItemStem       ? idx
+                    : kind == kItemCylinder ? stems_.size() + idx
+                                            : stems_.size() + cylinders_.size() + idx;
+  if (ray->scratch->mailbox[mb] == ray->id) return;
+  ray->scratch->mailbox[mb] = ray->id;
+  double t = kInf;
+  const double limit = std::min(best_t, t_max);
+  if (kind == kItemStem) {
+    if (hitStem(stems_[idx], stem_bound_[idx], o, d, limit, &t) && t >= t_min && t < best_t) {
+      best_t = t;
+      best.material = Material::kBark;
+      best.stem_id = stems_[idx].sapling ? -1 : stems_[idx].id;
+    }
+  } else if (kind == kItemCylinder) {
+    if (hitCylinder(cylinders_[idx], o, d, t_min, &t) && t < best_t && t <= t_max) {
+      best_t = t;
+      best.material = cylinders_[idx].material;
+      best.stem_id = -1;
+    }
+  } else {
+    double tin, tout;
+    if (chordFoliage(foliage_[idx], o, d, &tin, &tout) && tout > t_min && tin < limit) {
+      // Porous volume: exponential free path (one draw per crossed volume; the distribution
+      // holds no state, so a fresh one per draw gives the same numbers).
+      std::uniform_real_distribution<double> unit(0.0, 1.0);
+      const double depth = -std::log(1.0 - unit(ray->scratch->rng)) / foliage_[idx].density;
+      t = std::max(tin, t_min) + depth;
+      if (t < tout && t < best_t && t <= t_max) {
+        best_t = t;
+        best.material = Material::kFoliage;
+        best.stem_id = -1;
+      }
+    }
+  }
 }
 
 ScanPattern::ScanPattern(const SensorParams& p)

@@ -3,6 +3,7 @@
 #include "dtif/sim/simulator.h"
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -17,6 +18,7 @@
 #include "dtif/core/params.h"
 #include "dtif/io/dataset.h"
 #include "dtif/sim/sim_world.h"
+#include "dtif/sim/window_plan.h"
 #include "dtif_test/test_config.h"
 
 namespace fs = std::filesystem;
@@ -27,10 +29,23 @@ namespace {
 
 constexpr double kDeg = M_PI / 180.0;
 
+// The tests' folders, removed when the process ends: being per process, they would pile up.
+struct TempDirs {
+  std::vector<fs::path> paths;
+  ~TempDirs() {
+    std::error_code ec;
+    for (const fs::path& p : paths) fs::remove_all(p, ec);
+  }
+};
+TempDirs temp_dirs;
+
 fs::path tempDir(const std::string& name) {
-  const fs::path p = fs::temp_directory_path() / ("dtif_sim_test_" + name);
+  // Per process: other checkouts may run these tests on the same machine at the same time.
+  const fs::path p =
+      fs::temp_directory_path() / ("dtif_sim_test_" + name + "_" + std::to_string(::getpid()));
   fs::remove_all(p);
   fs::create_directories(p);
+  temp_dirs.paths.push_back(p);
   return p;
 }
 
@@ -107,6 +122,72 @@ TEST(SimulatorScenes, UnknownKeysAndBadValuesAreErrors) {
   expectError("robots: [{name: a, waypoints: [[1, 1], [5, 5]], speed: 3}]\n", "speed");
   expectError("robots: [{name: 'a b', waypoints: [[1, 1], [5, 5]]}]\n", "bad name");
   expectError("submap: {duration_s: 10.05}\n" + robots, "whole number of frames");
+}
+
+namespace {
+
+// A trajectory of `frames` whole frames of 10 samples (plus the closing sample).
+Trajectory trajectoryOfFrames(int frames, double start_s) {
+  Trajectory tr;
+  tr.start_s = start_s;
+  tr.T_W_B.assign(static_cast<size_t>(frames) * 10 + 1, Pose::Identity());
+  tr.T_O_B = tr.T_W_B;
+  return tr;
+}
+
+}  // namespace
+
+TEST(SimulatorWindowPlan, WindowsFramesAndSubmapIds) {
+  // Frames of 10 samples, windows of 5 frames (5 s). Robot 0: 12 frames (2 windows and a
+  // 2-frame tail); robot 1: starts 5 s later, 10 frames (2 windows, no tail); robot 2: 4
+  // frames, too short for a submap. Anchors at epoch + start + (w + 0.5) * 5 s: robot 0
+  // 102.5 and 107.5, robot 1 107.5 (a tie, broken by the robot index) and 112.5.
+  const std::vector<Trajectory> trs = {trajectoryOfFrames(12, 0.0), trajectoryOfFrames(10, 5.0),
+                                       trajectoryOfFrames(4, 0.0)};
+  const WindowPlan plan = planWindows(trs, 100.0, 5.0, 10, 5);
+  EXPECT_EQ(plan.submaps, 4u);
+  struct Expected {
+    int robot, window, f_begin, f_end;
+    int64_t submap_id;
+  };
+  // Interleaved window by window, robots in order within a window.
+  const std::vector<Expected> expected = {{0, 0, 0, 5, 0},  {1, 0, 0, 5, 2},  {2, 0, 0, 4, -1},
+                                          {0, 1, 5, 10, 1}, {1, 1, 5, 10, 3}, {0, 2, 10, 12, -1}};
+  ASSERT_EQ(plan.tasks.size(), expected.size());
+  for (size_t i = 0; i < expected.size(); ++i) {
+    SCOPED_TRACE(i);
+    EXPECT_EQ(plan.tasks[i].robot, expected[i].robot);
+    EXPECT_EQ(plan.tasks[i].window, expected[i].window);
+    EXPECT_EQ(plan.tasks[i].f_begin, expected[i].f_begin);
+    EXPECT_EQ(plan.tasks[i].f_end, expected[i].f_end);
+    EXPECT_EQ(plan.tasks[i].submap_id, expected[i].submap_id);
+  }
+}
+
+TEST(SimulatorWindowPlan, SubmapIdsMatchTheRun) {
+  // The ids a run hands out are the plan's, with the anchor stamps in id order.
+  const SceneParams scene = liteScene();
+  Simulator sim(scene, 3);
+  CollectSubmaps sink;
+  sim.run(nullptr, &sink, 2);
+  const int spf = static_cast<int>(std::lround(kTrajectoryRateHz / scene.sensor.frame_rate_hz));
+  const int fpw =
+      static_cast<int>(std::lround(scene.submap.duration_s * scene.sensor.frame_rate_hz));
+  const WindowPlan plan =
+      planWindows(sim.trajectories(), scene.epoch_s, scene.submap.duration_s, spf, fpw);
+  ASSERT_EQ(sink.submaps.size(), plan.submaps);
+  for (const WindowTask& t : plan.tasks) {
+    if (t.submap_id < 0) continue;
+    const Submap& sm = sink.submaps.at(t.submap_id);
+    EXPECT_EQ(sm.robot_index, t.robot);
+    EXPECT_DOUBLE_EQ(sm.stamp, scene.epoch_s + sim.trajectories()[t.robot].start_s +
+                                   (t.window + 0.5) * scene.submap.duration_s);
+  }
+  double prev = -1.0;
+  for (const auto& [id, sm] : sink.submaps) {
+    EXPECT_GE(sm.stamp, prev) << id;
+    prev = sm.stamp;
+  }
 }
 
 TEST(SimulatorScan, PointRateAndFieldOfView) {
@@ -371,7 +452,8 @@ TEST(SimulatorDeterminism, SinkFailureReachesTheCaller) {
 TEST(SimulatorDataset, WrittenEqualsRead) {
   const SceneParams s = liteScene();
   const fs::path dir = tempDir("rw");
-  const fs::path png = dir.parent_path() / "dtif_sim_test_rw.png";
+  const fs::path png = dir.string() + ".png";
+  temp_dirs.paths.push_back(png);
   Simulator sim(s, 9);
   CollectSubmaps sink;
   sim.run(nullptr, &sink, 1);

@@ -95,8 +95,26 @@ class World {
   Eigen::Vector2d plotSize() const { return plot_size_; }  ///< stems live in [0, size]
 
  private:
+  struct Ray;
+
+  // Generation, in the order the constructor draws from its random stream.
   void buildTerrain(const TerrainParams& p, std::mt19937_64& rng);
+  /// A trunk of the given DBH [m] standing at xy_bh [m] (at breast height), with its branches
+  /// and crown.
+  void addTrunk(const Eigen::Vector2d& xy_bh, double dbh, const StemParams& sp,
+                const TreeParams& tp, std::mt19937_64& rng);
+  void addBranches(const Stem& s, double dbh, double branch_top, const TreeParams& tp,
+                   std::mt19937_64& rng);
+  void addSaplings(const UnderstoryParams& up, const StemParams& sp, double area_ha,
+                   std::mt19937_64& rng);
+  void addShrubs(const UnderstoryParams& up, double area_ha, std::mt19937_64& rng);
+  void addLogs(const UnderstoryParams& up, double area_ha, std::mt19937_64& rng);
   void buildIndex();
+  void boundTerrainPerCell();
+
+  // Ray casting.
+  void testCell(size_t cell, double t_cell, double t_out, Ray* ray) const;
+  void testItem(uint32_t item, Ray* ray) const;
   double traceTerrain(const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t0, double t1,
                       double lip) const;
   bool hitStem(const Stem& s, double bound, const Eigen::Vector3d& o, const Eigen::Vector3d& d,
@@ -125,6 +143,7 @@ class World {
     uint32_t item;
     float z_min, z_max;
   };
+  void flattenCells(std::vector<std::vector<CellItem>>* cells);
   double grid_cell_ = 2.0;
   int grid_nx_ = 0, grid_ny_ = 0;
   std::vector<uint32_t> cell_start_;
