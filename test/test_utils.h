@@ -1,6 +1,8 @@
 // Small helpers shared by the core and glue tests.
 #pragma once
 
+#include <unistd.h>
+
 #include <filesystem>
 #include <string>
 
@@ -19,9 +21,11 @@ inline Pose makePose(double x, double y, double z, double roll, double pitch, do
   return T;
 }
 
-/// An empty folder under the system's temporary folder (removed first if it exists).
+/// An empty folder of this process under the system's temporary folder (removed first if it
+/// exists); the process id keeps test runs on one machine out of each other's way.
 inline std::filesystem::path freshTempDir(const std::string& name) {
-  const std::filesystem::path p = std::filesystem::temp_directory_path() / name;
+  const std::filesystem::path p =
+      std::filesystem::temp_directory_path() / (name + "_" + std::to_string(::getpid()));
   std::filesystem::remove_all(p);
   std::filesystem::create_directories(p);
   return p;

@@ -157,7 +157,7 @@ TEST(SummaryOutput, JsonHasExactKeysAndNullsWhenUndefined) {
   EvalSummary s;
   s.dataset = "d";
   s.submaps = 4;
-  const auto path = std::filesystem::temp_directory_path() / "dtif_eval_summary_test.json";
+  const auto path = test::freshTempDir("dtif_eval_summary_test") / "summary.json";
   writeSummaryJson(path.string(), s);
   std::ifstream in(path);
   std::stringstream ss;
@@ -170,7 +170,7 @@ TEST(SummaryOutput, JsonHasExactKeysAndNullsWhenUndefined) {
         "\"time_ms\"", "\"solver\"", "\"descriptor_bytes_mean\""}) {
     EXPECT_NE(text.find(key), std::string::npos) << key;
   }
-  std::filesystem::remove(path);
+  std::filesystem::remove_all(path.parent_path());
 }
 
 // A 10 m x 10 m patch of ground with vegetation 1 m above it, in S.

@@ -15,6 +15,7 @@
 
 #include "dtif/io/dataset.h"
 #include "dtif_test/test_config.h"
+#include "test_utils.h"
 
 namespace dtif {
 namespace {
@@ -191,8 +192,7 @@ void writeTinyDataset(const std::filesystem::path& dir) {
 /// overrides an earlier one key by key), --unit-weights and --method.
 TEST(CliTest, EvalAppliesConfigFilesInOrder) {
   namespace fs = std::filesystem;
-  const fs::path dir = fs::temp_directory_path() / "dtif_cli_test_eval";
-  fs::remove_all(dir);
+  const fs::path dir = test::freshTempDir("dtif_cli_test_eval");
   writeTinyDataset(dir / "dataset");
   std::ofstream(dir / "a.yaml") << "descriptor:\n  min_trunks: 5\n  min_triangles: 3\n";
   std::ofstream(dir / "b.yaml") << "descriptor:\n  min_trunks: 7\n";
@@ -230,8 +230,7 @@ TEST(CliTest, EvalAppliesConfigFilesInOrder) {
 /// switch their parts off.
 TEST(CliTest, BenchRunsTheBackEndsGiven) {
   namespace fs = std::filesystem;
-  const fs::path dir = fs::temp_directory_path() / "dtif_cli_test_bench";
-  fs::remove_all(dir);
+  const fs::path dir = test::freshTempDir("dtif_cli_test_bench");
   writeTinyDataset(dir / "tiny" / "dataset");
   const ToolRun r =
       runTool("bench " + (dir / "tiny" / "dataset").string() + " --out " + (dir / "out").string() +
