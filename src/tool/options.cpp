@@ -36,6 +36,13 @@ void addConfig(CLI::App* cmd, std::vector<std::string>* configs) {
       ->allow_extra_args(false);
 }
 
+/// --out, the folder a command writes its results into.
+void addOutDir(CLI::App* cmd, std::string* out) {
+  cmd->add_option("--out", *out, "output folder (created when missing)")
+      ->type_name("<dir>")
+      ->required();
+}
+
 void addSimulate(CLI::App* dtif, SimulateArgs* a) {
   CLI::App* cmd = dtif->add_subcommand(
       "simulate",
@@ -118,9 +125,7 @@ void addEval(CLI::App* dtif, EvalArgs* a) {
   cmd->add_option("dataset", a->dataset, "dataset folder (DATASET.md)")
       ->type_name("<dataset_dir>")
       ->required();
-  cmd->add_option("--out", a->out, "output folder (created when missing)")
-      ->type_name("<dir>")
-      ->required();
+  addOutDir(cmd, &a->out);
   addConfig(cmd, &a->configs);
   cmd->add_flag("--unit-weights", a->unit_weights,
                 "pose estimation with unit weights (the paper's ablation)");
@@ -142,9 +147,7 @@ void addScore(CLI::App* dtif, ScoreArgs* a) {
   cmd->add_option("--loops", a->loops, "loop log of the LoopClosureNodelet (~loop_log)")
       ->type_name("<loop_log.csv>")
       ->required();
-  cmd->add_option("--out", a->out, "output folder (created when missing)")
-      ->type_name("<dir>")
-      ->required();
+  addOutDir(cmd, &a->out);
   addConfig(cmd, &a->configs);
   cmd->add_option("--eval", a->eval, "output folder of dtif eval on the same dataset, to compare")
       ->type_name("<eval_out_dir>");
@@ -159,9 +162,7 @@ void addBench(CLI::App* dtif, BenchArgs* a) {
   cmd->add_option("datasets", a->datasets, "dataset folders, one scene each")
       ->type_name("<dataset_dir>")
       ->required();
-  cmd->add_option("--out", a->out, "output folder (created when missing)")
-      ->type_name("<dir>")
-      ->required();
+  addOutDir(cmd, &a->out);
   addConfig(cmd, &a->configs);
   a->back_ends = baselines::BenchOptions{}.back_ends;
   cmd->add_option("--back-ends", a->back_ends, "back ends on dtif's correspondences")
