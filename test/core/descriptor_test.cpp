@@ -11,6 +11,7 @@
 #include <random>
 #include <stdexcept>
 
+#include "core/descriptor_test_utils.h"
 #include "core/ground_test_utils.h"
 #include "core/match_test_utils.h"
 #include "dtif/core/descriptor/validation.h"
@@ -330,14 +331,7 @@ TEST(DescriptorValidation, DecodeThrowsTheCheckWords) {
   ASSERT_TRUE(good.valid);
   // What the wire format can carry: encode the bad descriptor, decode must say what the check
   // says about it.
-  const std::vector<std::function<void(Descriptor&)>> corruptions = {
-      [](Descriptor& d) { d.trunks[3].r = kNaNf; },
-      [](Descriptor& d) { d.trunks[1].x = kNaNf; },
-      [](Descriptor& d) { d.trunks[2].r = -0.1; },
-      [](Descriptor& d) { d.triangles[4].v[1] = static_cast<int>(d.trunks.size()); },
-      [](Descriptor& d) { d.triangles[2].v[2] = d.triangles[2].v[0]; },
-      [](Descriptor& d) { std::fill(d.radius_hist.begin(), d.radius_hist.end(), 0.0f); },
-  };
+  const auto corruptions = test::descriptorCorruptions();
   for (size_t i = 0; i < corruptions.size(); ++i) {
     Descriptor bad = good;
     corruptions[i](bad);

@@ -11,6 +11,7 @@
 #include <limits>
 #include <random>
 
+#include "core/descriptor_test_utils.h"
 #include "dtif/core/descriptor/descriptor.h"
 #include "dtif/core/descriptor/validation.h"
 #include "test_utils.h"
@@ -168,15 +169,7 @@ TEST(DescriptorConversion, RejectsWhatDecodeRejectsInTheSameWords) {
   const Descriptor good = buildDescriptor(forest(12, 4), DescriptorParams());
   ASSERT_TRUE(good.valid);
   ASSERT_GT(good.triangles.size(), 4u);
-  constexpr float kNaNf = std::numeric_limits<float>::quiet_NaN();
-  const std::vector<std::function<void(Descriptor&)>> corruptions = {
-      [](Descriptor& d) { d.trunks[3].r = kNaNf; },
-      [](Descriptor& d) { d.trunks[1].x = kNaNf; },
-      [](Descriptor& d) { d.trunks[2].r = -0.1; },
-      [](Descriptor& d) { d.triangles[4].v[1] = static_cast<int>(d.trunks.size()); },
-      [](Descriptor& d) { d.triangles[2].v[2] = d.triangles[2].v[0]; },
-      [](Descriptor& d) { std::fill(d.edge_hist.begin(), d.edge_hist.end(), 0.0f); },
-  };
+  const auto corruptions = test::descriptorCorruptions();
   for (size_t i = 0; i < corruptions.size(); ++i) {
     Descriptor bad = good;
     corruptions[i](bad);
