@@ -75,337 +75,467 @@ PoseSolver makeBackEnd(const std::string& name, const PoseEstimatorParams& pose)
                               "' (dtif, dtif_unit, quatro, svd_ransac, fgr)");
 }
 
-SceneBench runSceneBench(const Dataset& ds, const std::string& scene, const DtifParams& params,
-                         const BenchOptions& options,
-                         const std::function<void(const std::string&)>& progress) {
-  auto say = [&](const std::string& s) {
+namespace {
+
+/// A scene described once, with the ground truth of its pairs: what every stage of the bench
+/// reads, so that each method runs on the same descriptors, features and pairs. Lives within
+/// one runSceneBench call: it refers to that call's arguments.
+struct SceneData {
+  SceneData(const Dataset& ds, const DtifParams& params, const BenchOptions& options,
+            const std::function<void(const std::string&)>& progress)
+      : ds(ds),
+        params(params),
+        options(options),
+        progress(progress),
+        n(ds.submaps.size()),
+        cells(n),
+        descs(n),
+        feats(n),
+        scs(n),
+        base(n),
+        overlap(n, std::vector<double>(n, -1.0)) {}
+
+  void say(const std::string& s) const {
     if (progress) progress(s);
-  };
-  for (const auto& name : options.back_ends) makeBackEnd(name, params.loop.pose);  // validate
-  SceneBench out;
-  out.scene = scene;
-  const size_t n = ds.submaps.size();
-  std::vector<std::unordered_set<int64_t>> cells(n);
-  std::vector<std::shared_ptr<Descriptor>> descs(n);
-  std::vector<FpfhFeaturesPtr> feats(n);
-  std::vector<ScanContext> scs(n);
-  std::vector<EvalRow> base(n);
-  double bytes_sum = 0.0, fpfh_bytes_sum = 0.0, sc_bytes_sum = 0.0;
-
-  // One pass over the clouds: ground-truth cells, dtif's descriptor, the FPFH features.
-  for (size_t i = 0; i < n; ++i) {
-    const SubmapRecord& rec = ds.submaps[i];
-    if (!ds.T_W_S.count(rec.id)) {
-      throw DatasetError(ds.root + ": no ground truth for submap " + std::to_string(rec.id));
-    }
-    say("describing " + std::to_string(i + 1) + "/" + std::to_string(n));
-    const Cloud::Ptr cloud = loadSubmapCloud(ds, rec);
-    cells[i] = overlapCells(*cloud, ds.T_W_S.at(rec.id));
-    SubmapStats st;
-    st.id = rec.id;
-    st.points = cloud->size();
-    TrunkExtractionResult ext;
-    DescribeTimings timings;
-    descs[i] = std::make_shared<Descriptor>(describeCloud(*cloud, {rec.robot, rec.id, rec.stamp},
-                                                          params.trunk_extraction,
-                                                          params.descriptor, &timings, &ext));
-    st.t_extract_ms = timings.extract_ms;
-    st.t_desc_ms = timings.total_ms;
-    st.trunks = ext.trunks.size();
-    st.bytes = encodeDescriptor(*descs[i]).size();
-    bytes_sum += static_cast<double>(st.bytes);
-    if (options.front_ends) {
-      const auto t0 = Clock::now();
-      feats[i] = computeFpfh(*cloud, options.fpfh);
-      st.t_fpfh_ms = msSince(t0);
-      st.fpfh_points = fpfhPoints(*feats[i]);
-      fpfh_bytes_sum += static_cast<double>(fpfhBytes(*feats[i]));
-    }
-    if (options.place_recognition) {
-      const auto t0 = Clock::now();
-      scs[i] = makeScanContext(*cloud, options.scan_context);
-      st.t_scan_context_ms = msSince(t0);
-      sc_bytes_sum += static_cast<double>(scs[i].bytes());
-    }
-    if (descs[i]->valid) out.descriptors.push_back(descs[i]);
-    base[i].query = rec.id;
-    base[i].trunks = st.trunks;
-    base[i].t_desc_ms = st.t_desc_ms;
-    base[i].invalid_reason = descs[i]->invalid_reason;
-    out.submaps.push_back(st);
   }
-
-  // Ground truth of every eligible pair (DATASET.md).
-  const double exclude_s = params.loop.database.exclude_recent_s;
-  std::vector<std::vector<double>> overlap(n, std::vector<double>(n, -1.0));  // -1: ineligible
-  for (size_t i = 0; i < n; ++i) {
-    for (size_t j = 0; j < i; ++j) {
-      if (!eligiblePair(ds.submaps[i], ds.submaps[j], exclude_s)) continue;
-      overlap[i][j] = cellOverlap(cells[i], cells[j]);
-      base[i].has_loop = base[i].has_loop || overlap[i][j] >= options.eval.true_loop_overlap;
-    }
-  }
-  auto gtPose = [&](size_t i, size_t j) {
+  /// Ground truth T_c_q of query i against candidate j.
+  Pose gtPose(size_t i, size_t j) const {
     return ds.T_W_S.at(ds.submaps[j].id).inverse() * ds.T_W_S.at(ds.submaps[i].id);
-  };
-  auto indexOf = [&](int64_t id, size_t before) {
+  }
+  /// The index of a candidate a detector answered, among the submaps before the query.
+  size_t indexOf(int64_t id, size_t before) const {
     for (size_t j = 0; j < before; ++j) {
       if (ds.submaps[j].id == id) return j;
     }
     throw std::logic_error("unknown candidate id " + std::to_string(id));
-  };
-
-  // Back ends: the sequential protocol with each solver on dtif's correspondences. The
-  // solver's own pose and the pose after dtif's guided refinement are scored separately.
-  for (const std::string& name : options.back_ends) {
-    say("back end " + name);
-    LoopDetectorParams lp = params.loop;
-    if (name == "dtif_unit") lp.pose.unit_weights = true;
-    LoopDetector det(lp);
-    det.setSolver(makeBackEnd(name, lp.pose));
-    std::vector<EvalRow> raw = base, refined = base;
-    for (size_t i = 0; i < n; ++i) {
-      QueryStats qs;
-      const auto t0 = Clock::now();
-      const std::optional<Loop> lc = det.query(*descs[i], &qs);
-      const double t_loop = msSince(t0);
-      for (EvalRow* r : {&raw[i], &refined[i]}) {
-        r->t_loop_ms = t_loop;
-        r->t_solver_ms = qs.solver_ms;
-        if (!lc) continue;
-        const size_t j = indexOf(lc->candidate_id, i);
-        r->candidate = lc->candidate_id;
-        r->inliers = lc->inliers;
-        r->score = lc->score;
-        scoreAcceptedLoop(gtPose(i, j), r == &raw[i] ? lc->T_hypothesis : lc->T_c_q, overlap[i][j],
-                          options.eval, r);
-      }
-      det.insert(descs[i]);
-    }
-    out.runs.push_back({displayName(name) + ": solver pose", "back_end", raw,
-                        summarizeRows(raw, ds.root, bytes_sum)});
-    out.runs.push_back({displayName(name) + " + dtif refinement", "back_end", refined,
-                        summarizeRows(refined, ds.root, bytes_sum)});
   }
 
-  // Precision-recall over the acceptance threshold: dtif with loose verification, accepted
-  // loops then thresholded on their refined inlier count.
-  if (options.pr_curve) {
-    say("precision-recall sweep");
-    LoopDetectorParams lp = params.loop;
-    VerifierParams& v = lp.verification;
-    v.min_hypothesis_inliers = v.min_inliers = 3;
-    v.min_inlier_weight = 0.0;
-    v.min_covisible = 0;
-    v.min_covisible_ratio = 0.0;
-    v.min_overlap = 0.0;
-    v.min_z_pairs = 0;
-    LoopDetector det(lp);
-    std::vector<EvalRow> rows = base;
-    for (size_t i = 0; i < n; ++i) {
-      const std::optional<Loop> lc = det.query(*descs[i]);
-      if (lc) {
-        const size_t j = indexOf(lc->candidate_id, i);
-        rows[i].inliers = lc->inliers;
-        scoreAcceptedLoop(gtPose(i, j), lc->T_c_q, overlap[i][j], options.eval, &rows[i]);
-      }
-      det.insert(descs[i]);
-    }
-    size_t loops = 0;
-    for (const EvalRow& r : rows) loops += r.has_loop;
-    for (int k = 3; k <= 60; ++k) {
-      // dtif's TP rule, and place recognition's (a true loop, whatever the pose error).
-      size_t accepted = 0, tp = 0, true_loops = 0;
-      for (const EvalRow& r : rows) {
-        if (!r.accepted || r.inliers < k) continue;
-        ++accepted;
-        tp += r.true_positive;
-        true_loops += r.true_loop;
-      }
-      out.pr.push_back(prPoint("dtif", k, accepted, tp, loops));
-      if (options.place_recognition) {
-        out.pr.push_back(prPoint("dtif (place recognition)", k, accepted, true_loops, loops));
-      }
-    }
-  }
+  const Dataset& ds;
+  const DtifParams& params;
+  const BenchOptions& options;
+  const std::function<void(const std::string&)>& progress;
+  const size_t n;
+  std::vector<std::unordered_set<int64_t>> cells;  ///< ground-truth cells of each submap
+  std::vector<std::shared_ptr<Descriptor>> descs;
+  std::vector<FpfhFeaturesPtr> feats;
+  std::vector<ScanContext> scs;
+  std::vector<EvalRow> base;  ///< each method's rows start as these: ground truth, no answer
+  std::vector<std::vector<double>> overlap;  ///< [query][candidate]; -1: ineligible pair
+  double bytes_sum = 0.0, fpfh_bytes_sum = 0.0, sc_bytes_sum = 0.0;  ///< summed over submaps
+};
 
-  // Place recognition: scan context on the sequential protocol (the same eligible database as
-  // dtif's), its best entry per query the answer, correct when the pair is a true loop; then
-  // dtif's sequential run scored the same way.
+/// Describes submap i for every method (dtif, and the FPFH and scan-context baselines when
+/// they run), timing each front-end stage; the cloud is loaded once for all of them.
+void describeSubmap(size_t i, SceneData* d, SceneBench* out) {
+  const Dataset& ds = d->ds;
+  const BenchOptions& options = d->options;
+  const SubmapRecord& rec = ds.submaps[i];
+  if (!ds.T_W_S.count(rec.id)) {
+    throw DatasetError(ds.root + ": no ground truth for submap " + std::to_string(rec.id));
+  }
+  d->say("describing " + std::to_string(i + 1) + "/" + std::to_string(d->n));
+  const Cloud::Ptr cloud = loadSubmapCloud(ds, rec);
+  d->cells[i] = overlapCells(*cloud, ds.T_W_S.at(rec.id));
+  SubmapStats st;
+  st.id = rec.id;
+  st.points = cloud->size();
+  TrunkExtractionResult ext;
+  DescribeTimings timings;
+  d->descs[i] = std::make_shared<Descriptor>(describeCloud(*cloud, {rec.robot, rec.id, rec.stamp},
+                                                           d->params.trunk_extraction,
+                                                           d->params.descriptor, &timings, &ext));
+  st.t_extract_ms = timings.extract_ms;
+  st.t_desc_ms = timings.total_ms;
+  st.trunks = ext.trunks.size();
+  st.bytes = encodeDescriptor(*d->descs[i]).size();
+  d->bytes_sum += static_cast<double>(st.bytes);
+  if (options.front_ends) {
+    const auto t0 = Clock::now();
+    d->feats[i] = computeFpfh(*cloud, options.fpfh);
+    st.t_fpfh_ms = msSince(t0);
+    st.fpfh_points = fpfhPoints(*d->feats[i]);
+    d->fpfh_bytes_sum += static_cast<double>(fpfhBytes(*d->feats[i]));
+  }
   if (options.place_recognition) {
-    say("scan context");
-    const ScanContextParams& scp = options.scan_context;
-    std::vector<EvalRow> rows = base;
-    std::vector<ScanContextAnswer> answers(n);
-    std::vector<size_t> answer_j(n, n);
-    for (size_t i = 0; i < n; ++i) {
-      const auto t0 = Clock::now();
-      std::vector<const ScanContext*> db;
-      std::vector<size_t> db_j;
-      for (size_t j = 0; j < i; ++j) {
-        if (!eligiblePair(ds.submaps[i], ds.submaps[j], exclude_s)) continue;
-        db.push_back(&scs[j]);
-        db_j.push_back(j);
-      }
-      answers[i] = queryScanContext(scs[i], db, scp);
-      rows[i].t_loop_ms = msSince(t0);
-      rows[i].t_desc_ms = out.submaps[i].t_scan_context_ms;
-      rows[i].t_solver_ms = 0.0;
-      rows[i].trunks = 0;
-      rows[i].invalid_reason = scs[i].invalid_reason;
-      if (answers[i].index >= 0) answer_j[i] = db_j[answers[i].index];
-    }
-    auto isTrueLoop = [&](size_t i) {
-      return answer_j[i] < n && overlap[i][answer_j[i]] >= options.eval.true_loop_overlap;
-    };
-    for (size_t i = 0; i < n; ++i) {
-      if (answer_j[i] == n || !(answers[i].match.distance < scp.max_distance)) continue;
-      Pose T = Pose::Identity();  // yaw only: scan context estimates no translation
-      T.linear() = rotZ(answers[i].match.yaw_rad);
-      rows[i].candidate = ds.submaps[answer_j[i]].id;
-      rows[i].score = answers[i].match.distance;
-      scoreAcceptedLoop(gtPose(i, answer_j[i]), T, overlap[i][answer_j[i]], options.eval, &rows[i]);
-    }
-    size_t loops = 0;
-    for (const EvalRow& r : base) loops += r.has_loop;
-    for (int k = 1; k <= 50; ++k) {
-      const double thr = 0.02 * k;
-      size_t accepted = 0, correct = 0;
-      for (size_t i = 0; i < n; ++i) {
-        if (answer_j[i] == n || !(answers[i].match.distance < thr)) continue;
-        ++accepted;
-        correct += isTrueLoop(i);
-      }
-      out.pr.push_back(prPoint("scan context", thr, accepted, correct, loops));
-    }
-    out.place.push_back({"scan context", rows, sc_bytes_sum});
-    for (const MethodRun& run : out.runs) {
-      if (run.method == displayName("dtif") + " + dtif refinement") {
-        out.place.push_back({"dtif", run.rows, bytes_sum});
-      }
+    const auto t0 = Clock::now();
+    d->scs[i] = makeScanContext(*cloud, options.scan_context);
+    st.t_scan_context_ms = msSince(t0);
+    d->sc_bytes_sum += static_cast<double>(d->scs[i].bytes());
+  }
+  if (d->descs[i]->valid) out->descriptors.push_back(d->descs[i]);
+  EvalRow& row = d->base[i];
+  row.query = rec.id;
+  row.trunks = st.trunks;
+  row.t_desc_ms = st.t_desc_ms;
+  row.invalid_reason = d->descs[i]->invalid_reason;
+  out->submaps.push_back(st);
+}
+
+/// Ground truth of every eligible pair (DATASET.md), and which queries have a true loop.
+void scoreGroundTruth(SceneData* d) {
+  const double exclude_s = d->params.loop.database.exclude_recent_s;
+  for (size_t i = 0; i < d->n; ++i) {
+    for (size_t j = 0; j < i; ++j) {
+      if (!eligiblePair(d->ds.submaps[i], d->ds.submaps[j], exclude_s)) continue;
+      d->overlap[i][j] = cellOverlap(d->cells[i], d->cells[j]);
+      d->base[i].has_loop =
+          d->base[i].has_loop || d->overlap[i][j] >= d->options.eval.true_loop_overlap;
     }
   }
-  if (!options.front_ends) return out;
+}
 
-  // Front ends on the same pairs: each query with a loop registers with its most overlapping
-  // eligible candidate and with its least overlapping one (when that is not a true loop).
-  // Retrieval is an oracle for every method (it favours the baselines, whose own retrieval
-  // would have to register against every candidate); the second pair tests rejection.
-  std::vector<std::vector<size_t>> pairs(n);
+/// One back end on the sequential protocol with dtif's correspondences. The solver's own pose
+/// and the pose after dtif's guided refinement are scored separately (two runs).
+void runBackEnd(const SceneData& d, const std::string& name, SceneBench* out) {
+  d.say("back end " + name);
+  LoopDetectorParams lp = d.params.loop;
+  if (name == "dtif_unit") lp.pose.unit_weights = true;
+  LoopDetector det(lp);
+  det.setSolver(makeBackEnd(name, lp.pose));
+  std::vector<EvalRow> raw = d.base, refined = d.base;
+  for (size_t i = 0; i < d.n; ++i) {
+    QueryStats qs;
+    const auto t0 = Clock::now();
+    const std::optional<Loop> lc = det.query(*d.descs[i], &qs);
+    const double t_loop = msSince(t0);
+    for (EvalRow* r : {&raw[i], &refined[i]}) {
+      r->t_loop_ms = t_loop;
+      r->t_solver_ms = qs.solver_ms;
+      if (!lc) continue;
+      const size_t j = d.indexOf(lc->candidate_id, i);
+      r->candidate = lc->candidate_id;
+      r->inliers = lc->inliers;
+      r->score = lc->score;
+      scoreAcceptedLoop(d.gtPose(i, j), r == &raw[i] ? lc->T_hypothesis : lc->T_c_q,
+                        d.overlap[i][j], d.options.eval, r);
+    }
+    det.insert(d.descs[i]);
+  }
+  out->runs.push_back({displayName(name) + ": solver pose", "back_end", raw,
+                       summarizeRows(raw, d.ds.root, d.bytes_sum)});
+  out->runs.push_back({displayName(name) + " + dtif refinement", "back_end", refined,
+                       summarizeRows(refined, d.ds.root, d.bytes_sum)});
+}
+
+/// dtif's sequential run with loose verification, so that the precision-recall sweep can
+/// threshold every loop it would accept at any stricter inlier count.
+std::vector<EvalRow> looselyVerifiedRows(const SceneData& d) {
+  LoopDetectorParams lp = d.params.loop;
+  VerifierParams& v = lp.verification;
+  v.min_hypothesis_inliers = v.min_inliers = 3;
+  v.min_inlier_weight = 0.0;
+  v.min_covisible = 0;
+  v.min_covisible_ratio = 0.0;
+  v.min_overlap = 0.0;
+  v.min_z_pairs = 0;
+  LoopDetector det(lp);
+  std::vector<EvalRow> rows = d.base;
+  for (size_t i = 0; i < d.n; ++i) {
+    const std::optional<Loop> lc = det.query(*d.descs[i]);
+    if (lc) {
+      const size_t j = d.indexOf(lc->candidate_id, i);
+      rows[i].inliers = lc->inliers;
+      scoreAcceptedLoop(d.gtPose(i, j), lc->T_c_q, d.overlap[i][j], d.options.eval, &rows[i]);
+    }
+    det.insert(d.descs[i]);
+  }
+  return rows;
+}
+
+/// Precision-recall over the acceptance threshold: the loosely verified loops thresholded on
+/// their refined inlier count.
+void runPrSweep(const SceneData& d, SceneBench* out) {
+  d.say("precision-recall sweep");
+  const std::vector<EvalRow> rows = looselyVerifiedRows(d);
+  size_t loops = 0;
+  for (const EvalRow& r : rows) loops += r.has_loop;
+  for (int k = 3; k <= 60; ++k) {
+    // dtif's TP rule, and place recognition's (a true loop, whatever the pose error).
+    size_t accepted = 0, tp = 0, true_loops = 0;
+    for (const EvalRow& r : rows) {
+      if (!r.accepted || r.inliers < k) continue;
+      ++accepted;
+      tp += r.true_positive;
+      true_loops += r.true_loop;
+    }
+    out->pr.push_back(prPoint("dtif", k, accepted, tp, loops));
+    if (d.options.place_recognition) {
+      out->pr.push_back(prPoint("dtif (place recognition)", k, accepted, true_loops, loops));
+    }
+  }
+}
+
+/// Scan context on the sequential protocol: each query against the same eligible database as
+/// dtif's, its best entry the answer.
+struct ScanContextAnswers {
+  std::vector<EvalRow> rows;  ///< scan context's own times; scored by scoreScanContext
+  std::vector<ScanContextAnswer> answers;
+  std::vector<size_t> answer_j;  ///< the answer's submap index; n: no answer
+};
+
+ScanContextAnswers queryScanContexts(const SceneData& d, const SceneBench& out) {
+  const double exclude_s = d.params.loop.database.exclude_recent_s;
+  ScanContextAnswers a{d.base, std::vector<ScanContextAnswer>(d.n), std::vector<size_t>(d.n, d.n)};
+  for (size_t i = 0; i < d.n; ++i) {
+    const auto t0 = Clock::now();
+    std::vector<const ScanContext*> db;
+    std::vector<size_t> db_j;
+    for (size_t j = 0; j < i; ++j) {
+      if (!eligiblePair(d.ds.submaps[i], d.ds.submaps[j], exclude_s)) continue;
+      db.push_back(&d.scs[j]);
+      db_j.push_back(j);
+    }
+    a.answers[i] = queryScanContext(d.scs[i], db, d.options.scan_context);
+    a.rows[i].t_loop_ms = msSince(t0);
+    a.rows[i].t_desc_ms = out.submaps[i].t_scan_context_ms;
+    a.rows[i].t_solver_ms = 0.0;
+    a.rows[i].trunks = 0;
+    a.rows[i].invalid_reason = d.scs[i].invalid_reason;
+    if (a.answers[i].index >= 0) a.answer_j[i] = db_j[a.answers[i].index];
+  }
+  return a;
+}
+
+/// Scores the answers closer than scan context's own distance threshold, with a yaw-only pose.
+void scoreScanContext(const SceneData& d, ScanContextAnswers* a) {
+  for (size_t i = 0; i < d.n; ++i) {
+    const size_t j = a->answer_j[i];
+    const ScanContextMatch& match = a->answers[i].match;
+    if (j == d.n || !(match.distance < d.options.scan_context.max_distance)) continue;
+    Pose T = Pose::Identity();  // yaw only: scan context estimates no translation
+    T.linear() = rotZ(match.yaw_rad);
+    a->rows[i].candidate = d.ds.submaps[j].id;
+    a->rows[i].score = match.distance;
+    scoreAcceptedLoop(d.gtPose(i, j), T, d.overlap[i][j], d.options.eval, &a->rows[i]);
+  }
+}
+
+/// Scan context's precision-recall over its distance threshold: an answer is correct when its
+/// pair is a true loop.
+void scanContextPrCurve(const SceneData& d, const ScanContextAnswers& a, SceneBench* out) {
+  auto isTrueLoop = [&](size_t i) {
+    return a.answer_j[i] < d.n && d.overlap[i][a.answer_j[i]] >= d.options.eval.true_loop_overlap;
+  };
+  size_t loops = 0;
+  for (const EvalRow& r : d.base) loops += r.has_loop;
+  for (int k = 1; k <= 50; ++k) {
+    const double thr = 0.02 * k;
+    size_t accepted = 0, correct = 0;
+    for (size_t i = 0; i < d.n; ++i) {
+      if (a.answer_j[i] == d.n || !(a.answers[i].match.distance < thr)) continue;
+      ++accepted;
+      correct += isTrueLoop(i);
+    }
+    out->pr.push_back(prPoint("scan context", thr, accepted, correct, loops));
+  }
+}
+
+/// Place recognition: scan context on the sequential protocol, then dtif's sequential run
+/// (its refined back-end run, when it ran) scored the same way.
+void runPlaceRecognition(const SceneData& d, SceneBench* out) {
+  d.say("scan context");
+  ScanContextAnswers a = queryScanContexts(d, *out);
+  scoreScanContext(d, &a);
+  scanContextPrCurve(d, a, out);
+  out->place.push_back({"scan context", a.rows, d.sc_bytes_sum});
+  for (const MethodRun& run : out->runs) {
+    if (run.method == displayName("dtif") + " + dtif refinement") {
+      out->place.push_back({"dtif", run.rows, d.bytes_sum});
+    }
+  }
+}
+
+/// The pairs every front end registers: each query with a loop against its most overlapping
+/// eligible candidate and against its least overlapping one (when that is not a true loop).
+/// Retrieval is an oracle for every method (it favours the baselines, whose own retrieval
+/// would have to register against every candidate); the second pair tests rejection.
+struct FrontEndPairs {
+  std::vector<std::vector<size_t>> candidates;  ///< per query, the candidates it registers with
+  size_t evaluated = 0;                         ///< queries with at least one pair
+};
+
+FrontEndPairs frontEndPairs(const SceneData& d) {
+  const size_t n = d.n;
+  FrontEndPairs pairs;
+  pairs.candidates.resize(n);
   for (size_t i = 0; i < n; ++i) {
-    if (!base[i].has_loop) continue;
+    if (!d.base[i].has_loop) continue;
+    const std::vector<double>& overlap = d.overlap[i];
     size_t pos = n, neg = n;
     for (size_t j = 0; j < i; ++j) {
-      if (overlap[i][j] < 0.0) continue;
-      if (pos == n || overlap[i][j] > overlap[i][pos]) pos = j;
-      if (neg == n || overlap[i][j] < overlap[i][neg]) neg = j;
+      if (overlap[j] < 0.0) continue;
+      if (pos == n || overlap[j] > overlap[pos]) pos = j;
+      if (neg == n || overlap[j] < overlap[neg]) neg = j;
     }
-    pairs[i].push_back(pos);
-    if (neg != n && overlap[i][neg] < options.eval.true_loop_overlap) pairs[i].push_back(neg);
+    pairs.candidates[i].push_back(pos);
+    if (neg != n && overlap[neg] < d.options.eval.true_loop_overlap) {
+      pairs.candidates[i].push_back(neg);
+    }
   }
-  size_t evaluated = 0;
-  for (const auto& p : pairs) evaluated += !p.empty();
-  // One front-end run from its per-pair results; loop/solver times are per registered query.
-  auto frontEndRun = [&](const std::string& method, const std::vector<std::vector<PairResult>>& res,
-                         const std::vector<double>& t_loop, const std::vector<double>& t_solver,
-                         const std::vector<double>& t_desc, double bytes) {
-    std::vector<EvalRow> rows = base;
-    double loop_sum = 0.0, solver_sum = 0.0;
-    for (size_t i = 0; i < n; ++i) {
-      rows[i].t_desc_ms = t_desc[i];
-      rows[i].t_loop_ms = t_loop[i];
-      rows[i].t_solver_ms = t_solver[i];
-      loop_sum += t_loop[i];
-      solver_sum += t_solver[i];
+  for (const auto& p : pairs.candidates) pairs.evaluated += !p.empty();
+  return pairs;
+}
+
+/// A front end's registrations of the pairs: per query, its accepted pairs and its times
+/// summed over its pairs [ms].
+struct Registrations {
+  explicit Registrations(size_t n) : accepted(n), t_loop_ms(n, 0.0), t_solver_ms(n, 0.0) {}
+  std::vector<std::vector<PairResult>> accepted;
+  std::vector<double> t_loop_ms, t_solver_ms;
+};
+
+/// One stage time of every submap, as a front end's per-query descriptor time.
+std::vector<double> submapTimes(const SceneBench& out, double SubmapStats::*t_ms) {
+  std::vector<double> t(out.submaps.size());
+  for (size_t i = 0; i < t.size(); ++i) t[i] = out.submaps[i].*t_ms;
+  return t;
+}
+
+/// One front-end run from its registrations, each query answered by its best accepted pair.
+/// Loop and solver times are per registered query: a query without pairs costs nothing.
+MethodRun frontEndRun(const SceneData& d, const FrontEndPairs& pairs, const std::string& method,
+                      const Registrations& reg, const std::vector<double>& t_desc, double bytes) {
+  std::vector<EvalRow> rows = d.base;
+  double loop_sum = 0.0, solver_sum = 0.0;
+  for (size_t i = 0; i < d.n; ++i) {
+    rows[i].t_desc_ms = t_desc[i];
+    rows[i].t_loop_ms = reg.t_loop_ms[i];
+    rows[i].t_solver_ms = reg.t_solver_ms[i];
+    loop_sum += reg.t_loop_ms[i];
+    solver_sum += reg.t_solver_ms[i];
+    const PairResult* best = nullptr;
+    for (const PairResult& r : reg.accepted[i]) {
+      if (r.accepted && (!best || r.rank > best->rank)) best = &r;
+    }
+    if (!best) continue;
+    rows[i].candidate = d.ds.submaps[best->j].id;
+    rows[i].inliers = best->inliers;
+    scoreAcceptedLoop(d.gtPose(i, best->j), best->T, d.overlap[i][best->j], d.options.eval,
+                      &rows[i]);
+  }
+  MethodRun run{method, "front_end", rows, summarizeRows(rows, d.ds.root, bytes)};
+  if (pairs.evaluated > 0) {
+    run.summary.t_loop_ms = loop_sum / pairs.evaluated;
+    run.summary.t_solver_ms = solver_sum / pairs.evaluated;
+    run.summary.t_total_ms = run.summary.t_desc_ms + run.summary.t_loop_ms;
+  }
+  return run;
+}
+
+/// dtif as a front end: matchPair on each pair, ranked by score.
+void runDtifFrontEnd(const SceneData& d, const FrontEndPairs& pairs, SceneBench* out) {
+  d.say("front end dtif on the same pairs");
+  Registrations reg(d.n);
+  for (size_t i = 0; i < d.n; ++i) {
+    for (size_t j : pairs.candidates[i]) {
+      QueryStats qs;
+      const auto t0 = Clock::now();
+      const auto lc = matchPair(*d.descs[i], *d.descs[j], d.params.loop, nullptr, nullptr, &qs);
+      reg.t_loop_ms[i] += msSince(t0);
+      reg.t_solver_ms[i] += qs.solver_ms;
+      if (lc) reg.accepted[i].push_back({j, true, lc->score, lc->inliers, lc->T_c_q});
+    }
+  }
+  out->runs.push_back(
+      frontEndRun(d, pairs, "dtif", reg, submapTimes(*out, &SubmapStats::t_desc_ms), d.bytes_sum));
+}
+
+/// FPFH correspondences of each pair, matched once for every solver.
+struct FpfhMatches {
+  std::vector<std::vector<std::vector<Correspondence>>> corrs;  ///< [query][pair]
+  std::vector<double> t_match_ms;  ///< per query, summed over its pairs [ms]
+};
+
+FpfhMatches matchFpfhPairs(const SceneData& d, const FrontEndPairs& pairs) {
+  FpfhMatches m{std::vector<std::vector<std::vector<Correspondence>>>(d.n),
+                std::vector<double>(d.n, 0.0)};
+  for (size_t i = 0; i < d.n; ++i) {
+    d.say("FPFH matching " + std::to_string(i + 1) + "/" + std::to_string(d.n));
+    for (size_t j : pairs.candidates[i]) {
+      const auto t0 = Clock::now();
+      m.corrs[i].push_back(matchFpfh(*d.feats[i], *d.feats[j]));
+      m.t_match_ms[i] += msSince(t0);
+    }
+  }
+  return m;
+}
+
+/// An FPFH front end's precision-recall over the inlier threshold, from all its registrations
+/// (accepted or not), each query answered by its pair with the most inliers.
+void fpfhPrCurve(const SceneData& d, const std::string& method,
+                 const std::vector<std::vector<PairResult>>& all, SceneBench* out) {
+  for (int k = 3; k <= 60; ++k) {
+    size_t loops = 0, accepted = 0, tp = 0;
+    for (size_t i = 0; i < d.n; ++i) {
+      loops += d.base[i].has_loop;
       const PairResult* best = nullptr;
-      for (const PairResult& r : res[i]) {
-        if (r.accepted && (!best || r.rank > best->rank)) best = &r;
+      for (const PairResult& r : all[i]) {
+        if (r.inliers >= k && (!best || r.inliers > best->inliers)) best = &r;
       }
       if (!best) continue;
-      rows[i].candidate = ds.submaps[best->j].id;
-      rows[i].inliers = best->inliers;
-      scoreAcceptedLoop(gtPose(i, best->j), best->T, overlap[i][best->j], options.eval, &rows[i]);
+      EvalRow row;
+      scoreAcceptedLoop(d.gtPose(i, best->j), best->T, d.overlap[i][best->j], d.options.eval, &row);
+      ++accepted;
+      tp += row.true_positive;
     }
-    MethodRun run{method, "front_end", rows, summarizeRows(rows, ds.root, bytes)};
-    if (evaluated > 0) {
-      run.summary.t_loop_ms = loop_sum / evaluated;
-      run.summary.t_solver_ms = solver_sum / evaluated;
-      run.summary.t_total_ms = run.summary.t_desc_ms + run.summary.t_loop_ms;
-    }
-    return run;
-  };
+    out->pr.push_back(prPoint(method, k, accepted, tp, loops));
+  }
+}
 
-  std::vector<double> t_desc_dtif(n), t_desc_fpfh(n);
-  for (size_t i = 0; i < n; ++i) {
-    t_desc_dtif[i] = out.submaps[i].t_desc_ms;
-    t_desc_fpfh[i] = out.submaps[i].t_fpfh_ms;
-  }
-  {
-    say("front end dtif on the same pairs");
-    std::vector<std::vector<PairResult>> res(n);
-    std::vector<double> t_loop(n, 0.0), t_solver(n, 0.0);
-    for (size_t i = 0; i < n; ++i) {
-      for (size_t j : pairs[i]) {
-        QueryStats qs;
-        const auto t0 = Clock::now();
-        const auto lc = matchPair(*descs[i], *descs[j], params.loop, nullptr, nullptr, &qs);
-        t_loop[i] += msSince(t0);
-        t_solver[i] += qs.solver_ms;
-        if (lc) res[i].push_back({j, true, lc->score, lc->inliers, lc->T_c_q});
-      }
-    }
-    out.runs.push_back(frontEndRun("dtif", res, t_loop, t_solver, t_desc_dtif, bytes_sum));
-  }
-  // FPFH correspondences of each pair, matched once for every solver (timed per query).
-  std::vector<std::vector<std::vector<Correspondence>>> fpfh_corrs(n);
-  std::vector<double> t_fpfh_match(n, 0.0);
-  if (!options.fpfh_solvers.empty()) {
-    for (size_t i = 0; i < n; ++i) {
-      say("FPFH matching " + std::to_string(i + 1) + "/" + std::to_string(n));
-      for (size_t j : pairs[i]) {
-        const auto t0 = Clock::now();
-        fpfh_corrs[i].push_back(matchFpfh(*feats[i], *feats[j]));
-        t_fpfh_match[i] += msSince(t0);
-      }
+/// The FPFH baseline with one solver on the matched pairs, ranked by inliers; its loop time
+/// is matching plus solving.
+void runFpfhFrontEnd(const SceneData& d, const FrontEndPairs& pairs, const FpfhMatches& matches,
+                     const std::string& solver, SceneBench* out) {
+  d.say("front end FPFH + " + solver);
+  FpfhParams fp = d.options.fpfh;
+  fp.solver = solver;
+  Registrations reg(d.n);
+  reg.t_loop_ms = matches.t_match_ms;
+  std::vector<std::vector<PairResult>> all(d.n);
+  for (size_t i = 0; i < d.n; ++i) {
+    for (size_t p = 0; p < pairs.candidates[i].size(); ++p) {
+      const size_t j = pairs.candidates[i][p];
+      const FpfhRegistration r = solveFpfh(matches.corrs[i][p], fp);
+      reg.t_loop_ms[i] += r.solver_ms;
+      reg.t_solver_ms[i] += r.solver_ms;
+      all[i].push_back({j, true, static_cast<double>(r.inliers), r.inliers, r.T_c_q});
+      if (r.accepted) reg.accepted[i].push_back(all[i].back());
     }
   }
-  for (const std::string& solver : options.fpfh_solvers) {
-    say("front end FPFH + " + solver);
-    FpfhParams fp = options.fpfh;
-    fp.solver = solver;
-    std::vector<std::vector<PairResult>> res(n), all(n);
-    std::vector<double> t_loop(t_fpfh_match), t_solver(n, 0.0);
-    for (size_t i = 0; i < n; ++i) {
-      for (size_t p = 0; p < pairs[i].size(); ++p) {
-        const size_t j = pairs[i][p];
-        const FpfhRegistration reg = solveFpfh(fpfh_corrs[i][p], fp);
-        t_loop[i] += reg.solver_ms;
-        t_solver[i] += reg.solver_ms;
-        all[i].push_back({j, true, static_cast<double>(reg.inliers), reg.inliers, reg.T_c_q});
-        if (reg.accepted) res[i].push_back(all[i].back());
-      }
-    }
-    const std::string method =
-        std::string("FPFH + ") + (fp.prune ? "clique + " : "") + displayName(solver);
-    out.runs.push_back(frontEndRun(method, res, t_loop, t_solver, t_desc_fpfh, fpfh_bytes_sum));
-    // Its precision-recall over the inlier threshold.
-    for (int k = 3; k <= 60; ++k) {
-      size_t loops = 0, accepted = 0, tp = 0;
-      for (size_t i = 0; i < n; ++i) {
-        loops += base[i].has_loop;
-        const PairResult* best = nullptr;
-        for (const PairResult& r : all[i]) {
-          if (r.inliers >= k && (!best || r.inliers > best->inliers)) best = &r;
-        }
-        if (!best) continue;
-        EvalRow row;
-        scoreAcceptedLoop(gtPose(i, best->j), best->T, overlap[i][best->j], options.eval, &row);
-        ++accepted;
-        tp += row.true_positive;
-      }
-      out.pr.push_back(prPoint(method, k, accepted, tp, loops));
-    }
+  const std::string method =
+      std::string("FPFH + ") + (fp.prune ? "clique + " : "") + displayName(solver);
+  out->runs.push_back(frontEndRun(d, pairs, method, reg, submapTimes(*out, &SubmapStats::t_fpfh_ms),
+                                  d.fpfh_bytes_sum));
+  fpfhPrCurve(d, method, all, out);
+}
+
+/// Front ends on the same pairs: dtif, then the FPFH baseline with each solver.
+void runFrontEnds(const SceneData& d, SceneBench* out) {
+  const FrontEndPairs pairs = frontEndPairs(d);
+  runDtifFrontEnd(d, pairs, out);
+  if (d.options.fpfh_solvers.empty()) return;
+  const FpfhMatches matches = matchFpfhPairs(d, pairs);
+  for (const std::string& solver : d.options.fpfh_solvers) {
+    runFpfhFrontEnd(d, pairs, matches, solver, out);
   }
+}
+
+}  // namespace
+
+SceneBench runSceneBench(const Dataset& ds, const std::string& scene, const DtifParams& params,
+                         const BenchOptions& options,
+                         const std::function<void(const std::string&)>& progress) {
+  for (const auto& name : options.back_ends) makeBackEnd(name, params.loop.pose);  // validate
+  SceneBench out;
+  out.scene = scene;
+  // One pass over the clouds builds every method's descriptors, so all runs share them.
+  SceneData d(ds, params, options, progress);
+  for (size_t i = 0; i < d.n; ++i) describeSubmap(i, &d, &out);
+  scoreGroundTruth(&d);
+  for (const std::string& name : options.back_ends) runBackEnd(d, name, &out);
+  if (options.pr_curve) runPrSweep(d, &out);
+  if (options.place_recognition) runPlaceRecognition(d, &out);
+  if (options.front_ends) runFrontEnds(d, &out);
   return out;
 }
 
