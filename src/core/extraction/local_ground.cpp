@@ -93,7 +93,9 @@ struct GroundWindow {
 LocalPoints toLocalPoints(const Cloud& cloud) {
   LocalPoints pts;
   bool have_origin = false;
-  pts.x.reserve(cloud.size()), pts.y.reserve(cloud.size()), pts.z.reserve(cloud.size());
+  // Sized once and written by index: this runs once per point of every submap.
+  pts.x.resize(cloud.size()), pts.y.resize(cloud.size()), pts.z.resize(cloud.size());
+  size_t n = 0;
   for (const auto& pt : cloud.points) {
     if (!std::isfinite(pt.x) || !std::isfinite(pt.y) || !std::isfinite(pt.z)) continue;
     // Absurd magnitudes would overflow the cell indices; they are not survey points.
@@ -102,10 +104,12 @@ LocalPoints toLocalPoints(const Cloud& cloud) {
       pts.ox = std::floor(pt.x), pts.oy = std::floor(pt.y), pts.oz = std::floor(pt.z);
       have_origin = true;
     }
-    pts.x.push_back(static_cast<float>(pt.x - pts.ox));
-    pts.y.push_back(static_cast<float>(pt.y - pts.oy));
-    pts.z.push_back(static_cast<float>(pt.z - pts.oz));
+    pts.x[n] = static_cast<float>(pt.x - pts.ox);
+    pts.y[n] = static_cast<float>(pt.y - pts.oy);
+    pts.z[n] = static_cast<float>(pt.z - pts.oz);
+    ++n;
   }
+  pts.x.resize(n), pts.y.resize(n), pts.z.resize(n);
   return pts;
 }
 
@@ -142,11 +146,6 @@ GroundPlane fitGroundPlane(const double* x, const double* y, const double* z, co
     }
   }
   return p;
-}
-
-void GroundGrid::cellOf(double x, double y, int* gx, int* gy) const {
-  *gx = std::clamp(static_cast<int>(std::floor((x - minx) / cell_m)), 0, nx - 1);
-  *gy = std::clamp(static_cast<int>(std::floor((y - miny) / cell_m)), 0, ny - 1);
 }
 
 double GroundGrid::groundAt(double x, double y) const {

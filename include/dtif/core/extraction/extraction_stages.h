@@ -10,6 +10,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -71,8 +72,11 @@ struct GroundGrid {
   std::vector<char> seen;  ///< the cell's window held enough ground cells: ground observed
 
   size_t cells() const { return static_cast<size_t>(nx) * static_cast<size_t>(ny); }
-  /// Cell holding the local point (x, y), clamped to the grid.
-  void cellOf(double x, double y, int* gx, int* gy) const;
+  /// Cell holding the local point (x, y), clamped to the grid. Inline: called per point.
+  void cellOf(double x, double y, int* gx, int* gy) const {
+    *gx = std::clamp(static_cast<int>(std::floor((x - minx) / cell_m)), 0, nx - 1);
+    *gy = std::clamp(static_cast<int>(std::floor((y - miny) / cell_m)), 0, ny - 1);
+  }
   /// Height of the local ground under the local point (x, y): its cell's plane [m].
   double groundAt(double x, double y) const;
 };
