@@ -11,6 +11,7 @@
 #include <chrono>
 #include <condition_variable>
 #include <deque>
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <memory>
@@ -22,6 +23,7 @@
 #include "dtif/core/database/loop_detector.h"
 #include "dtif/core/database/robot_links.h"
 #include "dtif/core/descriptor/validation.h"
+#include "dtif/core/file_io.h"
 #include "dtif/core/timing.h"
 #include "dtif/io/dataset.h"
 #include "dtif/ros/conversions.h"
@@ -59,7 +61,12 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     ros::NodeHandle& pnh = getPrivateNodeHandle();
     detector_ = std::make_unique<LoopDetector>(readParams(pnh));
     openLoopLog();
-    if (!node_.database_file.empty() && std::ifstream(node_.database_file).good()) {
+    // A save that a crash interrupted leaves its temporary; the file itself is whole.
+    if (!node_.database_file.empty() && removeStaleTemporary(node_.database_file)) {
+      NODELET_WARN("removed a stale %s.tmp (an interrupted save)", node_.database_file.c_str());
+    }
+    // Exists, not opened: opening a FIFO would block (loadDatabase refuses one).
+    if (!node_.database_file.empty() && std::filesystem::exists(node_.database_file)) {
       std::string message;
       loadDatabase(node_.database_file, &message);
       NODELET_INFO("%s", message.c_str());
@@ -320,13 +327,16 @@ class LoopClosureNodelet : public nodelet::Nodelet {
   }
 
   bool loadDatabase(const std::string& path, std::string* message) {
-    std::lock_guard<std::mutex> lock(db_mutex_);
+    // Read and checked before the lock: a slow disk never stalls queries and inserts.
+    std::vector<std::shared_ptr<const Descriptor>> entries;
     try {
-      detector_->load(path);  // throws and leaves the database unchanged on a bad file
+      entries = readDatabaseFile(path);  // throws on a bad file; the database is unchanged
     } catch (const std::exception& e) {
       *message = std::string("load failed, database unchanged: ") + e.what();
       return false;
     }
+    std::lock_guard<std::mutex> lock(db_mutex_);
+    detector_->replaceEntries(std::move(entries));
     index_.clear();
     for (const auto& e : detector_->entries()) index_[Key(e->robot, e->submap_id)] = e;
     // Odometry poses of loaded entries are unknown until they are seen again (no TF for them).

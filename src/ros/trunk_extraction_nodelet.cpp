@@ -22,6 +22,7 @@
 
 #include "dtif/core/descriptor/describe.h"
 #include "dtif/core/descriptor/descriptor.h"
+#include "dtif/core/extraction/point_bounds.h"
 #include "dtif/core/extraction/trunk_extractor.h"
 #include "dtif/core/timing.h"
 #include "dtif/ros/conversions.h"
@@ -252,8 +253,11 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
   void process(ros_glue::AssembledSubmap& s, const std::string& frame) {
     const auto t0 = std::chrono::steady_clock::now();
     if (voxel_grid_) ros_glue::voxelFilterSubmap(voxel_grid_.get(), s.cloud.get());
+    TrunkExtractionResult ext;
     const Descriptor d = describeCloud(*s.cloud, {node_.robot, s.id, s.stamp}, extractor_params_,
-                                       descriptor_params_);
+                                       descriptor_params_, nullptr, &ext);
+    const std::string bounds = boundsWarning(ext.stats, extractor_params_);
+    if (!bounds.empty()) NODELET_WARN("submap %ld: %s", static_cast<long>(s.id), bounds.c_str());
     const double ms = msSince(t0);
     NODELET_DEBUG("submap %ld: %zu points, %zu trunks, %zu faces, %.1f ms%s%s",
                   static_cast<long>(s.id), s.cloud->size(), d.trunks.size(), d.triangles.size(), ms,

@@ -3,6 +3,7 @@
 
 #include "commands.h"
 #include "dtif/core/descriptor/describe.h"
+#include "dtif/core/extraction/point_bounds.h"
 #include "dtif/io/dataset.h"
 
 namespace dtif::tool {
@@ -17,6 +18,8 @@ int runExtract(const ExtractArgs& a) {
   const Descriptor d =
       describeCloud(*cloud, SubmapKey{}, params.trunk_extraction, params.descriptor, &ms, &ext);
 
+  const std::string warning = boundsWarning(ext.stats, params.trunk_extraction);
+  if (!warning.empty()) std::cerr << path << ": warning: " << warning << "\n";
   std::cout << path << ": " << ext.stats.finite_points << " finite points of "
             << ext.stats.input_points << "\n"
             << "  trunks: " << ext.trunks.size() << " (candidates " << ext.stats.candidates

@@ -163,7 +163,7 @@ TEST(TrunkExtractor, VisitListsEveryKeyOnce) {
   std::vector<std::string> keys;
   auto v = [&](const char* k, auto&) { keys.push_back(k); };
   p.visit(v);
-  EXPECT_EQ(keys.size(), 54u);
+  EXPECT_EQ(keys.size(), 56u);
   std::sort(keys.begin(), keys.end());
   EXPECT_EQ(std::unique(keys.begin(), keys.end()), keys.end());
 }
@@ -448,6 +448,80 @@ TEST(CircleFit, DegenerateInputsFailCleanly) {
   EXPECT_FALSE(fitCircleRobust(line, CircleFitParams()).ok);
   std::vector<Eigen::Vector2d> same(50, Eigen::Vector2d(1, 1));
   EXPECT_FALSE(fitCircleRobust(same, CircleFitParams()).ok);
+}
+
+}  // namespace
+}  // namespace dtif
+
+namespace dtif {
+namespace {
+
+void expectSameTrunks(const TrunkExtractionResult& a, const TrunkExtractionResult& b) {
+  ASSERT_EQ(a.trunks.size(), b.trunks.size());
+  for (size_t i = 0; i < a.trunks.size(); ++i) {
+    EXPECT_EQ(a.trunks[i].x, b.trunks[i].x);
+    EXPECT_EQ(a.trunks[i].y, b.trunks[i].y);
+    EXPECT_EQ(a.trunks[i].z, b.trunks[i].z);
+    EXPECT_EQ(a.trunks[i].r, b.trunks[i].r);
+  }
+  EXPECT_EQ(a.footprint.bits, b.footprint.bits);
+}
+
+// Issue #17: one stray return far away sized the grids by its distance (2 GB and a lost trunk
+// at 1e7 m, bad_alloc at 9e7 m), and as the first point it cost every other point its float
+// precision (no trunks at all). It is dropped, counted, and changes nothing else.
+TEST(TrunkExtractor, OneStrayFarPointIsDroppedAndChangesNothing) {
+  Plot plot(0.2, 0.1, 10);
+  plot.addGround(-10, 10, -10, 10, 0.1, 0.02);
+  for (const Stem& s : kStems) plot.addStem(s);
+  const TrunkExtractorParams p;
+  const auto clean = extractTrunks(plot.cloud, p);
+  ASSERT_EQ(clean.trunks.size(), kStems.size());
+  EXPECT_EQ(clean.stats.far_points, 0u);
+  for (const pcl::PointXYZ far : {pcl::PointXYZ(1e7f, 0.f, 0.f), pcl::PointXYZ(9e7f, 9e7f, 0.f),
+                                  pcl::PointXYZ(0.f, 0.f, 1e7f), pcl::PointXYZ(300.f, 0.f, 0.f)}) {
+    for (const bool first : {false, true}) {
+      Cloud c = plot.cloud;
+      if (first)
+        c.points.insert(c.points.begin(), far);
+      else
+        c.push_back(far);
+      const auto res = extractTrunks(c, p);
+      SCOPED_TRACE(testing::Message() << far << (first ? " first" : " last"));
+      EXPECT_EQ(res.stats.far_points, 1u);
+      EXPECT_EQ(res.stats.finite_points, plot.cloud.size() + 1);
+      expectSameTrunks(clean, res);
+    }
+  }
+}
+
+TEST(TrunkExtractor, CloudOverMaxPointsIsRefusedWhole) {
+  Plot plot(0.2, 0.1, 11);
+  plot.addGround(-10, 10, -10, 10, 0.1, 0.02);
+  for (const Stem& s : kStems) plot.addStem(s);
+  TrunkExtractorParams p;
+  p.max_points = static_cast<int>(plot.cloud.size()) - 1;
+  const auto res = extractTrunks(plot.cloud, p);
+  EXPECT_TRUE(res.stats.over_point_limit);
+  EXPECT_TRUE(res.trunks.empty());
+  p.max_points = static_cast<int>(plot.cloud.size());
+  EXPECT_EQ(extractTrunks(plot.cloud, p).trunks.size(), kStems.size());
+}
+
+// Issue #17: ground_window_m: 1e9 hung, ground_cell_m: 0.01 was 1000 times slower.
+TEST(TrunkExtractor, BoundsAreValidated) {
+  TrunkExtractorParams p;
+  p.ground_window_m = 1e9;
+  EXPECT_NE(p.validate().find("ground_window_m"), std::string::npos);
+  p = TrunkExtractorParams();
+  p.ground_cell_m = 0.01;
+  EXPECT_NE(p.validate().find("ground_cell_m"), std::string::npos);
+  p = TrunkExtractorParams();
+  p.max_range_m = 1e9;
+  EXPECT_NE(p.validate().find("max_range_m"), std::string::npos);
+  p = TrunkExtractorParams();
+  p.max_points = 0;
+  EXPECT_NE(p.validate().find("max_points"), std::string::npos);
 }
 
 }  // namespace

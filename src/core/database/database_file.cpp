@@ -1,22 +1,55 @@
 // The database file: save/load of every entry's encoded descriptor, atomically written and
-// checksummed.
-#include <cstdio>
+// checksummed; read with bounded size and checked entries (docs/limits.md).
 #include <cstring>
-#include <fstream>
-#include <iterator>
+#include <set>
 #include <stdexcept>
+#include <utility>
 
 #include "core/byte_io.h"
 #include "dtif/core/database/loop_detector.h"
 #include "dtif/core/descriptor/validation.h"
+#include "dtif/core/file_io.h"
 
 namespace dtif {
 namespace {
 
 constexpr char kDbMagic[8] = {'D', 'T', 'I', 'F', 'D', 'B', '\0', '\0'};
 constexpr uint32_t kDbVersion = 1;
+constexpr size_t kEntryHeaderBytes = 4;
 
 using detail::fnv1a;
+
+// The body's entries (after magic and version, before the checksum); throws on the first
+// problem.
+std::vector<std::shared_ptr<const Descriptor>> readEntries(detail::ByteReader& r) {
+  const uint64_t n = r.get<uint64_t>();
+  // Bounded before anything is reserved: every entry takes at least its size field.
+  if (n > kMaxDatabaseEntries) {
+    throw std::runtime_error(std::to_string(n) + " entries exceed kMaxDatabaseEntries (" +
+                             std::to_string(kMaxDatabaseEntries) + ")");
+  }
+  if (n > r.remaining() / kEntryHeaderBytes) throw std::runtime_error("entry count exceeds file");
+  std::vector<std::shared_ptr<const Descriptor>> loaded;
+  std::set<std::pair<std::string, int64_t>> keys;
+  // The loosest params: keep each descriptor's saved validity.
+  const DescriptorParams loose = loosestDescriptorParams();
+  for (uint64_t i = 0; i < n; ++i) {
+    const uint32_t sz = r.get<uint32_t>();
+    if (r.remaining() < sz) throw std::runtime_error("entry truncated");
+    const uint8_t* at = r.take(sz);
+    auto d =
+        std::make_shared<Descriptor>(decodeDescriptor(std::vector<uint8_t>(at, at + sz), loose));
+    const std::string entry = "entry " + std::to_string(i);
+    if (!d->valid) throw std::runtime_error(entry + " is not valid");
+    if (!keys.emplace(d->robot, d->submap_id).second) {
+      throw std::runtime_error(entry + " repeats robot '" + d->robot + "' submap " +
+                               std::to_string(d->submap_id));
+    }
+    loaded.push_back(std::move(d));
+  }
+  if (r.remaining() != 0) throw std::runtime_error("trailing bytes");
+  return loaded;
+}
 
 }  // namespace
 
@@ -33,31 +66,15 @@ void LoopDetector::save(const std::string& path) const {
     w.putBytes(e);
   }
   w.put<uint32_t>(fnv1a(w.bytes.data(), w.bytes.size()));
-  const std::vector<uint8_t>& buf = w.bytes;
-
-  const std::string tmp = path + ".tmp";
-  {
-    std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
-    if (!f) throw std::runtime_error(tmp + ": cannot open for writing");
-    f.write(reinterpret_cast<const char*>(buf.data()), static_cast<std::streamsize>(buf.size()));
-    f.flush();
-    if (!f) {
-      std::remove(tmp.c_str());
-      throw std::runtime_error(tmp + ": write failed");
-    }
+  if (w.bytes.size() > kMaxDatabaseBytes) {
+    throw std::runtime_error(path + ": database of " + std::to_string(w.bytes.size()) +
+                             " bytes exceeds kMaxDatabaseBytes: not written");
   }
-  // rename() is atomic on POSIX: readers see the old or the new database, never half of one.
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    std::remove(tmp.c_str());
-    throw std::runtime_error(path + ": cannot rename " + tmp + " into place");
-  }
+  writeFileAtomically(path, w.bytes);
 }
 
-void LoopDetector::load(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
-  if (!f) throw std::runtime_error(path + ": cannot open database file");
-  const std::vector<uint8_t> buf((std::istreambuf_iterator<char>(f)),
-                                 std::istreambuf_iterator<char>());
+std::vector<std::shared_ptr<const Descriptor>> readDatabaseFile(const std::string& path) {
+  const std::vector<uint8_t> buf = readRegularFile(path, kMaxDatabaseBytes);
   auto fail = [&](const std::string& why) {
     throw std::runtime_error(path + ": not a valid dtif database: " + why);
   };
@@ -71,26 +88,18 @@ void LoopDetector::load(const std::string& path) {
   uint32_t stored_sum;
   std::memcpy(&stored_sum, buf.data() + buf.size() - 4, 4);
   if (fnv1a(buf.data(), buf.size() - 4) != stored_sum) fail("checksum mismatch");
-  // Decode everything into a new list first; the database changes only when all of it is good.
-  std::vector<std::shared_ptr<const Descriptor>> loaded;
   try {
-    const uint64_t n = r.get<uint64_t>();
-    // The loosest params: keep each descriptor's saved validity.
-    const DescriptorParams loose = loosestDescriptorParams();
-    for (uint64_t i = 0; i < n; ++i) {
-      const uint32_t sz = r.get<uint32_t>();
-      if (r.remaining() < sz) throw std::runtime_error("entry truncated");
-      const uint8_t* at = r.take(sz);
-      const std::vector<uint8_t> e(at, at + sz);
-      auto d = std::make_shared<Descriptor>(decodeDescriptor(e, loose));
-      if (!d->valid) throw std::runtime_error("entry " + std::to_string(i) + " is not valid");
-      loaded.push_back(std::move(d));
-    }
-    if (r.remaining() != 0) throw std::runtime_error("trailing bytes");
-  } catch (const std::runtime_error& e) {
+    return readEntries(r);
+  } catch (const std::exception& e) {  // also length_error / bad_alloc: name the file
     fail(e.what());
   }
-  entries_ = std::move(loaded);
+  return {};
+}
+
+void LoopDetector::load(const std::string& path) { replaceEntries(readDatabaseFile(path)); }
+
+void LoopDetector::replaceEntries(std::vector<std::shared_ptr<const Descriptor>> entries) {
+  entries_ = std::move(entries);
   triangles_.assign(entries_.size(), nullptr);
 }
 

@@ -166,7 +166,7 @@ LoopDetector::LoopDetector(const LoopDetectorParams& params) : params_(params) {
 }
 
 bool LoopDetector::insert(std::shared_ptr<const Descriptor> d) {
-  if (!d || !d->valid) return false;
+  if (!d || !d->valid || entries_.size() >= kMaxDatabaseEntries) return false;
   entries_.push_back(std::move(d));
   triangles_.push_back(nullptr);
   return true;

@@ -162,10 +162,12 @@ std::string DescriptorParams::validate() const {
   if (min_triangles < 1) err << "min_triangles must be >= 1; ";
   if (!std::isfinite(max_edge_m)) err << "max_edge_m must be finite; ";
   if (!(min_angle_deg >= 0.0 && min_angle_deg < 60.0)) err << "min_angle_deg must be in [0, 60); ";
-  if (edge_hist_bins < 1 || edge_hist_bins > 255) err << "edge_hist_bins must be in [1, 255]; ";
+  if (edge_hist_bins < 1 || edge_hist_bins > static_cast<int>(kMaxHistogramBins)) {
+    err << "edge_hist_bins must be in [1, " << kMaxHistogramBins << "]; ";
+  }
   if (!(edge_hist_max_m > 0.0)) err << "edge_hist_max_m must be > 0; ";
-  if (radius_hist_bins < 1 || radius_hist_bins > 255) {
-    err << "radius_hist_bins must be in [1, 255]; ";
+  if (radius_hist_bins < 1 || radius_hist_bins > static_cast<int>(kMaxHistogramBins)) {
+    err << "radius_hist_bins must be in [1, " << kMaxHistogramBins << "]; ";
   }
   if (!(radius_hist_max_m > 0.0)) err << "radius_hist_max_m must be > 0; ";
   return err.str();
@@ -231,10 +233,12 @@ Descriptor buildDescriptor(const Trunks& input, const DescriptorParams& params) 
           " (" + std::to_string(dropped) + " non-finite or duplicate trunks removed)";
     }
   };
-  if (d.trunks.size() > 65535) {
-    // The wire format indexes trunks with uint16.
+  if (d.trunks.size() > kMaxDescriptorTrunks) {
+    // Beyond what a query may cost (docs/limits.md): never inserted, sent or written.
+    const size_t n = d.trunks.size();
     d.trunks.clear();
-    invalid("more than 65535 trunks");
+    invalid(std::to_string(n) + " trunks: more than kMaxDescriptorTrunks (" +
+            std::to_string(kMaxDescriptorTrunks) + ")");
     return d;
   }
   if (static_cast<int>(d.trunks.size()) < params.min_trunks || d.trunks.size() < 3) {
@@ -289,7 +293,9 @@ Descriptor buildDescriptor(const Trunks& input, const DescriptorParams& params) 
 //            f32 footprint cell (0: none) [, i32 x0, y0; u16 width, height; ceil(w h / 8) bytes];
 //            u32 ground map bytes (0: none), encodeGroundMap's bytes
 std::vector<uint8_t> encodeDescriptor(const Descriptor& d) {
-  if (d.trunks.size() > 65535) throw std::runtime_error("descriptor has more than 65535 trunks");
+  // What a receiver would refuse is never written (a database file that fails to load).
+  const std::string problem = checkDescriptor(d);
+  if (!problem.empty()) throw std::runtime_error("descriptor not encodable: " + problem);
   Writer w;
   w.putString(d.robot);
   w.put<int64_t>(d.submap_id);

@@ -10,7 +10,8 @@ namespace {
 
 std::string checkTrunks(const Trunks& trunks) {
   if (trunks.size() > kMaxDescriptorTrunks) {
-    return "more than " + std::to_string(kMaxDescriptorTrunks) + " trunks (faces index uint16)";
+    return std::to_string(trunks.size()) + " trunks: more than kMaxDescriptorTrunks (" +
+           std::to_string(kMaxDescriptorTrunks) + ")";
   }
   for (size_t i = 0; i < trunks.size(); ++i) {
     if (!finiteTrunk(trunks[i])) {
@@ -21,6 +22,10 @@ std::string checkTrunks(const Trunks& trunks) {
 }
 
 std::string checkFaces(const std::vector<Triangle>& faces, size_t n_trunks) {
+  if (faces.size() > kMaxFacesPerTrunk * n_trunks) {
+    return std::to_string(faces.size()) + " faces: more than a triangulation of " +
+           std::to_string(n_trunks) + " trunks has";
+  }
   for (size_t f = 0; f < faces.size(); ++f) {
     const std::array<int, 3>& v = faces[f].v;
     for (int i : v) {
@@ -37,7 +42,8 @@ std::string checkFaces(const std::vector<Triangle>& faces, size_t n_trunks) {
 
 std::string checkHistogram(const std::vector<float>& h, const std::string& name) {
   if (h.size() > kMaxHistogramBins) {
-    return name + " histogram has more than " + std::to_string(kMaxHistogramBins) + " bins";
+    return name + " histogram has " + std::to_string(h.size()) +
+           " bins: more than kMaxHistogramBins (" + std::to_string(kMaxHistogramBins) + ")";
   }
   double total = 0.0;
   for (float x : h) {

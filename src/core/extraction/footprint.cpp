@@ -146,8 +146,9 @@ size_t Footprint::count() const {
 }
 
 bool Footprint::wellFormed() const {
-  return cell_m > 0.0 && std::isfinite(cell_m) && width > 0 && height > 0 && width <= 65535 &&
-         height <= 65535 && bits.size() == (static_cast<size_t>(width) * height + 7) / 8;
+  return cell_m > 0.0 && std::isfinite(cell_m) && width > 0 && height > 0 &&
+         width <= kMaxFootprintSide && height <= kMaxFootprintSide &&
+         bits.size() == (static_cast<size_t>(width) * height + 7) / 8;
 }
 
 bool Footprint::occupied(int64_t ix, int64_t iy) const {

@@ -33,7 +33,8 @@ int predict(const GroundMap& m, size_t k, int last) {
 
 bool GroundMap::wellFormed() const {
   return cell_m > 0.0 && std::isfinite(cell_m) && z_step_m > 0.0 && std::isfinite(z_step_m) &&
-         std::isfinite(z0_m) && width > 0 && height > 0 && width <= 65535 && height <= 65535 &&
+         std::isfinite(z0_m) && width > 0 && height > 0 && width <= kMaxGroundMapSide &&
+         height <= kMaxGroundMapSide &&
          z.size() == static_cast<size_t>(width) * static_cast<size_t>(height);
 }
 
@@ -159,7 +160,17 @@ GroundMap decodeGroundMap(const uint8_t* data, size_t size) {
   m.y0 = head.get<int32_t>();
   m.width = head.get<uint16_t>();
   m.height = head.get<uint16_t>();
+  // Bounded before anything is allocated: a header of 20000 x 20000 cells in an 800-byte
+  // message asked for 1.28 GB. zlib inflates at most ~1032:1, so the stream must be long enough.
+  if (m.width > kMaxGroundMapSide || m.height > kMaxGroundMapSide) {
+    throw std::runtime_error("ground map of " + std::to_string(m.width) + " x " +
+                             std::to_string(m.height) + " cells exceeds kMaxGroundMapSide (" +
+                             std::to_string(kMaxGroundMapSide) + ")");
+  }
   const size_t cells = static_cast<size_t>(m.width) * m.height;
+  if (cells > 1100 * (size - kHeaderBytes)) {
+    throw std::runtime_error("ground map stream too short for its cells");
+  }
   if (!(m.cell_m > 0.0) || !std::isfinite(m.cell_m) || !(m.z_step_m > 0.0) ||
       !std::isfinite(m.z_step_m) || !std::isfinite(m.z0_m) || cells == 0) {
     throw std::runtime_error("ground map header is invalid");

@@ -16,6 +16,7 @@
 #include <sstream>
 
 #include "dtif/core/extraction/extraction_stages.h"
+#include "dtif/core/extraction/point_bounds.h"
 
 namespace dtif {
 namespace {
@@ -43,6 +44,28 @@ class Checks {
  private:
   std::ostringstream err_;
 };
+
+void checkBounds(const TrunkExtractorParams& p, Checks* c) {
+  c->require(p.max_range_m >= 10.0 && p.max_range_m <= 10000.0,
+             "max_range_m must be in [10, 10000]");
+  c->require(p.max_points >= 1 && p.max_points <= 100000000, "max_points must be in [1, 1e8]");
+  // The ground grid's cost grows with (max_range_m / ground_cell_m)^2 cells, each fitting a
+  // plane over (ground_window_m / ground_cell_m)^2 cells: bounded so no value hangs.
+  c->require(!(p.ground_cell_m < 0.25 || p.ground_cell_m > 20.0),
+             "ground_cell_m must be in [0.25, 20]");
+  c->require(!(p.ground_window_m > 20.0 * p.ground_cell_m || p.ground_window_m > 100.0),
+             "ground_window_m must be <= 20 ground_cell_m and <= 100");
+  c->require(!(p.ground_sub_cell_m < 0.05 || p.ground_sub_cell_m > p.ground_cell_m),
+             "ground_sub_cell_m must be in [0.05, ground_cell_m]");
+  c->require(!(p.column_cell_m < 0.02 || p.column_cell_m > 2.0),
+             "column_cell_m must be in [0.02, 2]");
+  c->require(!(p.ransac_iterations > 100000 || p.max_fits_per_candidate > 100),
+             "ransac_iterations must be <= 1e5 and max_fits_per_candidate <= 100");
+  c->require(!(p.ground_map_cell_m > 0.0 && p.ground_map_cell_m < 0.05),
+             "ground_map_cell_m must be 0 or >= 0.05");
+  c->require(!(p.footprint_cell_m > 0.0 && p.footprint_cell_m < 0.05),
+             "footprint_cell_m must be 0 or >= 0.05");
+}
 
 void checkGroundAndColumns(const TrunkExtractorParams& p, Checks* c) {
   c->positive("ground_cell_m", p.ground_cell_m);
@@ -166,6 +189,18 @@ void removeInliers(const CircleFit& fit, std::vector<Eigen::Vector2d>* band,
 // Plausibility: bark is an opaque thin surface, so few points inside the circle and few in a
 // thin shell around it (foliage and shrubs fill both), a smooth surface, and enough arc that
 // the radius is determined (partial arcs give absurd radii). Counts rejections in *st.
+// The cloud itself when every finite point lies inside b, else *kept (its points inside b).
+const Cloud& keptPoints(const Cloud& cloud, const PointBounds& b, Cloud* kept, size_t* far) {
+  *far = 0;
+  for (const pcl::PointXYZ& q : cloud) {
+    if (std::isfinite(q.x) && std::isfinite(q.y) && std::isfinite(q.z) && !b.inside(q)) {
+      *kept = pointsInside(cloud, b, far);
+      return *kept;
+    }
+  }
+  return cloud;
+}
+
 bool plausibleBark(const CircleFit& fit, const TrunkExtractorParams& p, TrunkExtractionStats* st) {
   if (fit.inlier_ratio < p.min_inlier_ratio || fit.shell_ratio < p.min_shell_ratio ||
       fit.rms_m > p.max_fit_rms_m) {
@@ -183,6 +218,7 @@ bool plausibleBark(const CircleFit& fit, const TrunkExtractorParams& p, TrunkExt
 
 std::string TrunkExtractorParams::validate() const {
   Checks c;
+  checkBounds(*this, &c);
   checkGroundAndColumns(*this, &c);
   checkCircleFit(*this, &c);
   checkBaseAndOutputs(*this, &c);
@@ -365,15 +401,24 @@ TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorPara
   TrunkExtractionStats& st = result.stats;
   st.input_points = cloud.size();
   if (!p.validate().empty()) return result;
-  const LocalPoints pts = toLocalPoints(cloud);
-  st.finite_points = pts.size();
+  if (cloud.size() > static_cast<size_t>(p.max_points)) {
+    st.over_point_limit = true;
+    return result;
+  }
+  // Points beyond what the sensor sees are dropped before any grid is sized; survey data
+  // keeps every point and takes no copy.
+  const PointBounds bounds = pointBounds(cloud, p.max_range_m);
+  Cloud kept;
+  const Cloud& in = keptPoints(cloud, bounds, &kept, &st.far_points);
+  const LocalPoints pts = toLocalPoints(in);
+  st.finite_points = pts.size() + st.far_points;
   if (pts.size() < static_cast<size_t>(p.min_fit_points)) return result;
 
   const GroundGrid ground = estimateLocalGround(pts, p);
   const std::vector<float> h = heightsAboveGround(pts, ground);
   // DATASET.md's overlap cells, so verification measures an aligned pair's overlap as the
   // protocol does.
-  result.footprint = trunkFootprint(cloud, p);
+  result.footprint = trunkFootprint(in, p);
 
   const VoxelColumns cols = slabColumns(pts, h, p);
   if (cols.slab.empty()) return result;

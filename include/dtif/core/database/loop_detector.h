@@ -91,6 +91,18 @@ std::optional<Loop> matchPair(const Descriptor& q, const Descriptor& c,
                               const std::vector<MatchTriangle>* tq = nullptr,
                               const std::vector<MatchTriangle>* tc = nullptr);
 
+/// Bounds of a database (docs/limits.md): a descriptor is 0.5-8 kB, so a day of six units
+/// (10 s submaps) is ~50,000 entries and well under 1 GB. Beyond: insert refuses, a larger file
+/// is refused before it is read.
+constexpr size_t kMaxDatabaseEntries = 200000;
+constexpr uint64_t kMaxDatabaseBytes = uint64_t{1} << 30;
+
+/// The entries of a database file (LoopDetector::save's format), read without any lock held:
+/// a regular file of at most kMaxDatabaseBytes (a FIFO or a device is refused before it is
+/// opened), every entry valid, no (robot, submap id) twice, at most kMaxDatabaseEntries.
+/// Throws std::runtime_error naming the file and the problem.
+std::vector<std::shared_ptr<const Descriptor>> readDatabaseFile(const std::string& path);
+
 /// Sequential loop detector. Not thread-safe: callers serialise access. Descriptors are held
 /// by shared_ptr to const and may be shared with other owners.
 class LoopDetector {
@@ -100,7 +112,8 @@ class LoopDetector {
   /// Best verified loop of q against the database (same-robot recent entries excluded).
   std::optional<Loop> query(const Descriptor& q, QueryStats* stats = nullptr) const;
 
-  /// Inserts q; invalid descriptors are ignored (returns false).
+  /// Inserts q; invalid descriptors are ignored (returns false), as is any once the database
+  /// holds kMaxDatabaseEntries.
   bool insert(std::shared_ptr<const Descriptor> d);
 
   size_t size() const { return entries_.size(); }
@@ -114,6 +127,8 @@ class LoopDetector {
   /// Replaces the database by the file's content. Throws std::runtime_error (naming the file
   /// and the problem) on a missing, corrupt or version-mismatched file; then nothing changes.
   void load(const std::string& path);
+  /// Replaces the database by entries (readDatabaseFile's; it checked them).
+  void replaceEntries(std::vector<std::shared_ptr<const Descriptor>> entries);
 
  private:
   LoopDetectorParams params_;

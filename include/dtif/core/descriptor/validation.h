@@ -12,10 +12,14 @@
 
 namespace dtif {
 
-/// Faces index trunks with uint16 on the wire and in dtif/TrunkDescriptor.
-constexpr size_t kMaxDescriptorTrunks = 65535;
-/// The wire format counts histogram bins with a uint8 (DescriptorParams allows at most 255).
-constexpr size_t kMaxHistogramBins = 255;
+/// Bounds of a descriptor (docs/limits.md). A query's cost grows with the trunks of both
+/// sides (65535 trunks took a 40 s query); a submap of a 70 m range sensor in a dense stand
+/// (2000 stems/ha) holds about 1000. Beyond: refused at acceptance, never built, sent or saved.
+constexpr size_t kMaxDescriptorTrunks = 2000;
+/// A Delaunay triangulation of n points has at most 2n - 5 faces.
+constexpr size_t kMaxFacesPerTrunk = 2;
+/// DescriptorParams' histograms have 16 and 10 bins; the wire format counts them with a uint8.
+constexpr size_t kMaxHistogramBins = 64;
 
 /// A finite centre and a finite radius >= 0: what buildDescriptor keeps and the wire carries.
 bool finiteTrunk(const TrunkLandmark& t);

@@ -16,6 +16,12 @@ namespace dtif {
 
 /// Parameters of trunk extraction. Heights are above the local ground unless stated.
 struct TrunkExtractorParams {
+  /// Bounds of what extraction sizes its grids from (docs/limits.md): points farther than
+  /// max_range_m from the cloud's median point along x, y or z are dropped and counted
+  /// (TrunkExtractionStats::far_points), never gridded. The MID-360 sees 70 m at most and a
+  /// submap is a walk of tens of metres, so survey points lie well inside.
+  double max_range_m = 250.0;       ///< half side of the kept box about the median point [m]
+  int max_points = 20000000;        ///< a larger cloud is refused whole (over_point_limit) [points]
   double ground_cell_m = 1.0;       ///< cell of the local ground grid [m]
   double ground_window_m = 5.0;     ///< window of the ground percentile around a cell [m]
   double ground_percentile = 0.05;  ///< low percentile of z taken as ground [0..1]
@@ -103,6 +109,8 @@ struct TrunkExtractorParams {
 
   template <class V>
   void visit(V& v) {
+    v("max_range_m", max_range_m);
+    v("max_points", max_points);
     v("ground_cell_m", ground_cell_m);
     v("ground_window_m", ground_window_m);
     v("ground_percentile", ground_percentile);
@@ -162,12 +170,14 @@ struct TrunkExtractorParams {
 
 /// What happened during one extraction; for logs and benchmarks.
 struct TrunkExtractionStats {
-  size_t input_points = 0;       ///< points given
-  size_t finite_points = 0;      ///< points left after dropping NaN/inf
-  size_t candidate_columns = 0;  ///< voxel columns that passed density and continuity
-  size_t candidates = 0;         ///< merged trunk candidates
-  size_t rejected_fit = 0;       ///< candidates whose circle fit failed or was implausible
-  size_t rejected_lean = 0;      ///< candidates rejected as leaning clutter
+  size_t input_points = 0;        ///< points given
+  size_t finite_points = 0;       ///< points left after dropping NaN/inf
+  size_t far_points = 0;          ///< finite points beyond max_range_m, dropped (a warning)
+  bool over_point_limit = false;  ///< more than max_points: nothing extracted (a warning)
+  size_t candidate_columns = 0;   ///< voxel columns that passed density and continuity
+  size_t candidates = 0;          ///< merged trunk candidates
+  size_t rejected_fit = 0;        ///< candidates whose circle fit failed or was implausible
+  size_t rejected_lean = 0;       ///< candidates rejected as leaning clutter
   size_t rejected_arc = 0;      ///< fits dropped for too little arc coverage (part of rejected_fit)
   size_t duplicates = 0;        ///< trunks dropped as duplicates
   size_t ground_fallbacks = 0;  ///< trunks whose base came from the grid, not the ring
