@@ -146,6 +146,10 @@ void checkUnderstory(const UnderstoryParams& understory, std::ostringstream* err
   check(understory.saplings_per_ha >= 0 && understory.shrubs_per_ha >= 0 &&
             understory.logs_per_ha >= 0,
         "understory: densities must be >= 0", &e);
+  // Upper bounds (docs/limits.md): 1e9 saplings per ha ended in bad_alloc after 4 GB.
+  check(understory.saplings_per_ha <= 20000, "understory.saplings_per_ha must be <= 20000", &e);
+  check(understory.shrubs_per_ha <= 20000, "understory.shrubs_per_ha must be <= 20000", &e);
+  check(understory.logs_per_ha <= 2000, "understory.logs_per_ha must be <= 2000", &e);
   check(understory.shrub_radius_m > 0, "understory.shrub_radius_m must be > 0", &e);
   check(understory.shrub_density > 0, "understory.shrub_density must be > 0", &e);
 }
@@ -207,19 +211,45 @@ void checkSubmap(const SubmapParams& submap, const SensorParams& sensor,
   check(submap.voxel_m >= 0.005 && submap.voxel_m <= 1, "submap.voxel_m: 0.005..1", &e);
 }
 
+constexpr size_t kMaxSceneRobots = 64;
+constexpr size_t kMaxRouteWaypoints = 1000;
+constexpr double kMaxRouteLengthM = 20000.0;
+
+// Straight-line length of a route through its waypoints [m] (NaN waypoints give NaN).
+double routeLength(const RobotRoute& r) {
+  double len = 0.0;
+  for (size_t i = 1; i < r.waypoints.size(); ++i)
+    len += (r.waypoints[i] - r.waypoints[i - 1]).norm();
+  return len;
+}
+
 // Waypoints are checked against the plot only for generated stands: a stem map sets its own
 // plot extent.
 void checkRobots(const std::vector<RobotRoute>& robots, const PlotParams& plot,
                  const StemParams& stems, std::ostringstream* errors) {
   std::ostringstream& e = *errors;
   check(!robots.empty(), "robots: at least one robot", &e);
+  // Bounds (docs/limits.md): 10,000 robots or waypoints ran on for gigabytes.
+  check(robots.size() <= kMaxSceneRobots,
+        "robots: at most " + std::to_string(kMaxSceneRobots) + " robots", &e);
   const std::regex name_re("[A-Za-z0-9_]+");
   std::set<std::string> names;
   for (const auto& r : robots) {
     check(std::regex_match(r.name, name_re), "robots: bad name '" + r.name + "'", &e);
     check(names.insert(r.name).second, "robots: duplicate name '" + r.name + "'", &e);
     check(r.waypoints.size() >= 2, "robots." + r.name + ": at least 2 waypoints", &e);
-    check(r.start_s >= 0, "robots." + r.name + ".start_s must be >= 0", &e);
+    check(r.start_s >= 0 && r.start_s <= 86400, "robots." + r.name + ".start_s must be 0..86400",
+          &e);
+    check(r.waypoints.size() <= kMaxRouteWaypoints,
+          "robots." + r.name + ": at most " + std::to_string(kMaxRouteWaypoints) + " waypoints",
+          &e);
+    check(
+        routeLength(r) <= kMaxRouteLengthM,
+        "robots." + r.name + ": route longer than " + std::to_string(int(kMaxRouteLengthM)) + " m",
+        &e);
+    // A route of coinciding waypoints has no length: the walk overran its one-point path.
+    check(r.waypoints.size() < 2 || routeLength(r) >= 1.0,
+          "robots." + r.name + ": waypoints coincide (the route is shorter than 1 m)", &e);
     if (stems.stem_map.empty()) {
       for (const auto& w : r.waypoints) {
         check(w.x() >= 0 && w.y() >= 0 && w.x() <= plot.size_x_m && w.y() <= plot.size_y_m,
@@ -237,6 +267,8 @@ double Trajectory::duration() const {
 
 std::string SceneParams::validate() const {
   std::ostringstream e;
+  // Stamps are ROS times (uint32 seconds): a NaN or 1e300 epoch gave NaN or equal stamps.
+  check(std::isfinite(epoch_s) && epoch_s >= 0 && epoch_s <= 4e9, "epoch_s must be 0..4e9", &e);
   checkPlot(plot, &e);
   checkTerrain(terrain, &e);
   checkStems(stems, &e);

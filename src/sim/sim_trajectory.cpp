@@ -174,7 +174,12 @@ std::vector<Eigen::Vector2d> walkingPath(const WalkGrid& grid, const RobotRoute&
     if (!raw.empty()) leg.erase(leg.begin());
     raw.insert(raw.end(), leg.begin(), leg.end());
   }
-  return smoothPath(raw, grid, ds);
+  std::vector<Eigen::Vector2d> path = smoothPath(raw, grid, ds);
+  // PathSampler needs a segment: coinciding waypoints (on one grid cell) give none.
+  if (path.size() < 2) {
+    throw ParamError("simulate: robot " + route.name + ": the route has no length");
+  }
+  return path;
 }
 
 // A path sampled every ds metres, looked up by arc length (clamped to its ends).

@@ -217,3 +217,67 @@ TEST_F(DatasetTest, TrunkCsvWithAndWithoutHeader) {
 
 }  // namespace
 }  // namespace dtif
+
+namespace dtif {
+namespace {
+
+// Issue #17: x y z stored as FLOAT64 (CloudCompare, PDAL), int32 or uint8 were read as float32
+// bytes ("114024 finite points", 0 trunks). They are read by their type.
+TEST_F(DatasetTest, PcdFieldsOfEveryNumericTypeAreReadByValue) {
+  const std::string tail = "WIDTH 2\nHEIGHT 1\nPOINTS 2\nDATA binary\n";
+  std::string f64 = "VERSION .7\nFIELDS x y z\nSIZE 8 8 8\nTYPE F F F\nCOUNT 1 1 1\n" + tail;
+  for (double v : {1.5, -2.25, 1000.125, 4.0, 5.5, -6.0}) {
+    f64.append(reinterpret_cast<const char*>(&v), sizeof(v));
+  }
+  writeFile("f64.pcd", f64);
+  std::string i32 = "VERSION .7\nFIELDS x y z\nSIZE 4 4 1\nTYPE I I U\nCOUNT 1 1 1\n" + tail;
+  for (int k = 0; k < 2; ++k) {
+    const int32_t x = -7 + k, y = 300000 + k;
+    const uint8_t z = static_cast<uint8_t>(200 + k);
+    i32.append(reinterpret_cast<const char*>(&x), 4);
+    i32.append(reinterpret_cast<const char*>(&y), 4);
+    i32.append(reinterpret_cast<const char*>(&z), 1);
+  }
+  writeFile("i32.pcd", i32);
+  const Cloud::Ptr a = loadPcd((dir_ / "f64.pcd").string());
+  ASSERT_EQ(a->size(), 2u);
+  EXPECT_EQ((*a)[0].x, 1.5f);
+  EXPECT_EQ((*a)[0].y, -2.25f);
+  EXPECT_EQ((*a)[0].z, 1000.125f);
+  EXPECT_EQ((*a)[1].z, -6.0f);
+  const Cloud::Ptr b = loadPcd((dir_ / "i32.pcd").string());
+  ASSERT_EQ(b->size(), 2u);
+  EXPECT_EQ((*b)[1].x, -6.0f);
+  EXPECT_EQ((*b)[1].y, 300001.0f);
+  EXPECT_EQ((*b)[1].z, 201.0f);
+}
+
+// ASCII rows with garbage were read as points; a folder or a FIFO as a cloud gave messages
+// that named no file (or blocked); header counts overflowed a signed product.
+TEST_F(DatasetTest, GarbageRowsFoldersAndHugeCountsAreRefusedByName) {
+  const std::string head =
+      "VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 2\nPOINTS 2\n";
+  writeFile("garbage.pcd", head + "DATA ascii\n1 2 3\n4 five 6\n");
+  writeFile("short_row.pcd", head + "DATA ascii\n1 2 3\n4 5\n");
+  writeFile("rows.pcd", head + "DATA ascii\n1 2 3\n");
+  writeFile("huge.pcd",
+            "VERSION .7\nFIELDS x y z\nSIZE 8 8 8\nTYPE F F F\nCOUNT 1 1 1\n"
+            "WIDTH 9223372036854775807\nHEIGHT 9223372036854775807\nDATA binary\n");
+  writeFile("points.pcd",
+            "VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n"
+            "WIDTH 1\nPOINTS 99999999999\nDATA binary\n");
+  fs::create_directories(dir_ / "folder.pcd");
+  for (const char* f :
+       {"garbage.pcd", "short_row.pcd", "rows.pcd", "huge.pcd", "points.pcd", "folder.pcd"}) {
+    try {
+      loadPcd((dir_ / f).string());
+      ADD_FAILURE() << f << " was accepted";
+    } catch (const DatasetError& e) {
+      EXPECT_NE(std::string(e.what()).find(f), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_THROW(readTrunkCsv((dir_ / "folder.pcd").string()), DatasetError);
+}
+
+}  // namespace
+}  // namespace dtif

@@ -534,3 +534,39 @@ TEST(SimulatorStemMap, LoadsACsvStemMap) {
     EXPECT_NE(std::string(e.what()).find("plot.csv:3"), std::string::npos) << e.what();
   }
 }
+
+namespace dtif {
+namespace {
+
+// Issue #17: scene values that ran out of memory, overran a buffer or gave NaN stamps are
+// refused by key.
+TEST(SimulatorScenes, ValuesBeyondTheLimitsAreRefusedByKey) {
+  const fs::path dir = tempDir("limits");
+  auto expectError = [&](const std::string& text, const std::string& needle) {
+    const fs::path p = dir / "scene.yaml";
+    std::ofstream(p) << text;
+    try {
+      loadSceneYaml(p.string());
+      ADD_FAILURE() << "no error for: " << text;
+    } catch (const dtif::ParamError& e) {
+      EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+    }
+  };
+  const std::string robots = "robots: [{name: a, waypoints: [[1, 1], [5, 5]]}]\n";
+  expectError("understory: {saplings_per_ha: 1e9}\n" + robots, "saplings_per_ha");
+  expectError("epoch_s: .nan\n" + robots, "epoch_s");
+  expectError("epoch_s: 1e300\n" + robots, "epoch_s");
+  expectError("robots: [{name: a, waypoints: [[3, 3], [3, 3], [3, 3]]}]\n", "waypoints coincide");
+  std::string many = "robots: [{name: a, waypoints: [";
+  for (int i = 0; i < 10000; ++i) many += std::string(i ? ", " : "") + "[1, 1], [2, 2]";
+  expectError(many + "]}]\n", "waypoints");
+  std::string fleet = "robots: [";
+  for (int i = 0; i < 10000; ++i) {
+    fleet += std::string(i ? ", " : "") + "{name: r" + std::to_string(i) +
+             ", waypoints: [[1, 1], [5, 5]]}";
+  }
+  expectError(fleet + "]\n", "at most 64 robots");
+}
+
+}  // namespace
+}  // namespace dtif
