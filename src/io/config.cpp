@@ -7,6 +7,8 @@
 #include <sstream>
 #include <type_traits>
 
+#include "dtif/core/file_io.h"
+
 namespace dtif {
 
 namespace {
@@ -112,6 +114,10 @@ std::string DtifParams::validate() const {
 
 void loadParamsYaml(const std::string& path, DtifParams* p) {
   YAML::Node root;
+  // A folder read as "basic_filebuf::underflow", a FIFO blocked: checked before opening.
+  constexpr uint64_t kMaxYamlBytes = uint64_t{16} << 20;
+  const std::string problem = regularFileProblem(path, kMaxYamlBytes);
+  if (!problem.empty()) throw ParamError(path + ": cannot open parameter file: " + problem);
   try {
     root = YAML::LoadFile(path);
   } catch (const YAML::BadFile&) {
@@ -119,6 +125,8 @@ void loadParamsYaml(const std::string& path, DtifParams* p) {
   } catch (const YAML::Exception& e) {
     throw ParamError(path + ": malformed YAML: " + e.msg + " (line " +
                      std::to_string(e.mark.line + 1) + ")");
+  } catch (const std::exception& e) {
+    throw ParamError(path + ": cannot read parameter file: " + e.what());
   }
   if (root.IsNull()) return;  // an empty file changes nothing
   if (!root.IsMap()) throw ParamError(path + ": expected a map of parameter sections");

@@ -7,6 +7,7 @@
 #include <set>
 #include <sstream>
 
+#include "dtif/core/file_io.h"
 #include "dtif/core/params.h"
 #include "dtif/sim/simulator.h"
 
@@ -223,6 +224,8 @@ double routeLength(const RobotRoute& r) {
   return len;
 }
 
+constexpr uint64_t kMaxYamlBytes = uint64_t{16} << 20;
+
 // Waypoints are checked against the plot only for generated stands: a stem map sets its own
 // plot extent.
 void checkRobots(const std::vector<RobotRoute>& robots, const PlotParams& plot,
@@ -287,6 +290,9 @@ namespace {
 // Parses the file and checks its top-level keys; YAML errors name the file and line.
 YAML::Node loadSceneRoot(const std::string& path) {
   YAML::Node root;
+  // A folder read as "basic_filebuf::underflow", a FIFO blocked: checked before opening.
+  const std::string problem = regularFileProblem(path, kMaxYamlBytes);
+  if (!problem.empty()) throw ParamError(path + ": " + problem);
   try {
     root = YAML::LoadFile(path);
   } catch (const YAML::BadFile&) {
@@ -294,6 +300,8 @@ YAML::Node loadSceneRoot(const std::string& path) {
   } catch (const YAML::Exception& ex) {
     throw ParamError(path + ": YAML error at line " + std::to_string(ex.mark.line + 1) + ": " +
                      ex.msg);
+  } catch (const std::exception& ex) {
+    throw ParamError(path + ": cannot read the file: " + ex.what());
   }
   if (!root.IsMap()) throw ParamError(path + ": the scene must be a YAML map");
   static const std::set<std::string> kTop = {

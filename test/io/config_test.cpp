@@ -65,6 +65,19 @@ TEST(Config, WrongTypesAndInvalidValuesAreErrors) {
   expectParamError("/nonexistent/dtif.yaml", {"/nonexistent/dtif.yaml", "cannot open"});
 }
 
+// Issue #17: ground_window_m: 1e9 hung and ground_cell_m: 0.01 was 1000 times slower; a folder
+// given as the file read "basic_filebuf::underflow error reading the file: Is a directory".
+TEST(Config, ValuesBeyondTheBoundsAndFoldersAreRefusedByName) {
+  expectParamError(writeTemp("window", "trunk_extraction:\n  ground_window_m: 1e9\n"),
+                   {"ground_window_m", "config_test_window"});
+  expectParamError(writeTemp("cell", "trunk_extraction:\n  ground_cell_m: 0.01\n"),
+                   {"ground_cell_m"});
+  expectParamError(writeTemp("bins", "descriptor:\n  edge_hist_bins: 300\n"), {"edge_hist_bins"});
+  const fs::path folder = fs::temp_directory_path() / "dtif_config_test_folder.yaml";
+  fs::create_directories(folder);
+  expectParamError(folder.string(), {folder.string().c_str(), "is a directory"});
+}
+
 TEST(Config, FailedLoadLeavesParametersUnchanged) {
   DtifParams p;
   p.descriptor.min_trunks = 9;
@@ -117,7 +130,7 @@ TEST(Config, ShippedTrunkExtractionYamlNamesEveryField) {
     EXPECT_NE(text.str().find("\n  " + std::string(key) + ":"), std::string::npos) << key;
   };
   p.visit(named);
-  EXPECT_EQ(fields, 54);
+  EXPECT_EQ(fields, 56);
 }
 
 }  // namespace
