@@ -17,6 +17,7 @@ std::string SubmapAssemblerParams::validate() const {
   if (!(max_odom_age_s >= 0.0)) os << "max_odom_age_s must be >= 0\n";
   if (max_submap_points <= 0) os << "max_submap_points must be > 0\n";
   if (!(std::isfinite(voxel_m) && voxel_m >= 0.0)) os << "voxel_m must be >= 0\n";
+  if (!(clock_jump_s > 0.0 && std::isfinite(clock_jump_s))) os << "clock_jump_s must be > 0\n";
   return os.str();
 }
 
@@ -58,17 +59,27 @@ const char* SubmapAssembler::describe(Status s) {
       return "empty cloud";
     case Status::kTruncated:
       return "submap point limit reached, points dropped";
+    case Status::kClockJump:
+      return "stamp jumped back by more than clock_jump_s (bag replayed, or a future stamp "
+             "before): resynchronised, open submap discarded";
   }
   return "?";
 }
 
 SubmapAssembler::Status SubmapAssembler::addOdometry(double stamp, const Pose& T_O_B) {
+  if (!std::isfinite(stamp)) return Status::kOutOfOrder;
+  Status status = Status::kOk;
   if (!odom_.empty()) {
     const double last = odom_.back().stamp;
     if (stamp == last) return Status::kDuplicateStamp;
-    if (stamp < last) return Status::kOutOfOrder;
+    if (stamp < last - params_.clock_jump_s) {
+      // One future stamp must not silence the stream for good: start the history afresh.
+      odom_.clear();
+      status = Status::kClockJump;
+    } else if (stamp < last) {
+      return Status::kOutOfOrder;
+    }
   }
-  Status status = Status::kOk;
   if (!odom_.empty() && stamp - odom_.back().stamp > params_.max_odom_gap_s) {
     // The front end may have re-initialised (a new O): do not mix points across the gap, and
     // partition the new stream afresh.
@@ -144,9 +155,19 @@ std::optional<AssembledSubmap> SubmapAssembler::close() {
 SubmapAssembler::Status SubmapAssembler::addCloud(double stamp, const Cloud& cloud_O,
                                                   std::optional<AssembledSubmap>* done) {
   done->reset();
+  if (!std::isfinite(stamp)) return Status::kOutOfOrder;
+  Status status = Status::kOk;
   if (last_cloud_stamp_ >= 0.0) {
     if (stamp == last_cloud_stamp_) return Status::kDuplicateStamp;
-    if (stamp < last_cloud_stamp_) return Status::kOutOfOrder;
+    if (stamp < last_cloud_stamp_ - params_.clock_jump_s) {
+      // A bag replayed again, or the last cloud was stamped in the future: the windows start
+      // afresh from this cloud (the odometry resynchronises itself the same way).
+      open_.reset();
+      t0_.reset();
+      status = Status::kClockJump;
+    } else if (stamp < last_cloud_stamp_) {
+      return Status::kOutOfOrder;
+    }
   }
   last_cloud_stamp_ = stamp;
   if (cloud_O.empty()) return Status::kEmptyCloud;
@@ -154,7 +175,6 @@ SubmapAssembler::Status SubmapAssembler::addCloud(double stamp, const Cloud& clo
   // arrives before its odometry (another connection; a fast replay) is kept.
   if (!t0_) t0_ = stamp - params_.cloud_period_s;
   const int64_t k = windowOf(stamp);
-  Status status = Status::kOk;
   if (open_ && open_->index != k) {
     // The open window's last cloud never came: finish it with what it has.
     *done = close();

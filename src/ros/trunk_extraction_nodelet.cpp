@@ -26,6 +26,7 @@
 #include "dtif/core/extraction/trunk_extractor.h"
 #include "dtif/core/timing.h"
 #include "dtif/ros/conversions.h"
+#include "dtif/ros/frame_lock.h"
 #include "dtif/ros/markers.h"
 #include "dtif/ros/msgs.h"
 #include "dtif/ros/node_params.h"
@@ -121,12 +122,20 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
       NODELET_WARN_THROTTLE(5.0, "%s without frame_id: dropped", what);
       return false;
     }
-    if (odom_frame_.empty()) odom_frame_ = node_.odom_frame.empty() ? frame : node_.odom_frame;
-    if (frame != odom_frame_) {
+    if (!frame_lock_) frame_lock_ = std::make_unique<ros_glue::FrameLock>(node_.odom_frame);
+    const std::string before = frame_lock_->frame();
+    const ros_glue::FrameLock::Verdict v = frame_lock_->check(frame);
+    if (v == ros_glue::FrameLock::Verdict::kDrop) {
       NODELET_WARN_THROTTLE(5.0, "%s in frame '%s', expected '%s': dropped", what, frame.c_str(),
-                            odom_frame_.c_str());
+                            before.c_str());
       return false;
     }
+    if (v == ros_glue::FrameLock::Verdict::kSwitched) {
+      NODELET_WARN("%s: only frame '%s' arrives now, not '%s': switched to it", what, frame.c_str(),
+                   before.c_str());
+      assembler_->reset();  // nothing of the old frame mixes with the new one
+    }
+    odom_frame_ = frame_lock_->frame();
     return true;
   }
 
@@ -302,6 +311,7 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
   std::unique_ptr<ros_glue::SubmapAssembler> assembler_;
   std::map<std::pair<std::string, int>, ros::WallTime> last_warning_;
   std::string odom_frame_;
+  std::unique_ptr<ros_glue::FrameLock> frame_lock_;  // created on the first message
   double last_submap_stamp_ = -1.0;
   int64_t next_submap_id_ = 0;
 

@@ -249,3 +249,66 @@ TEST(SubmapAssembler, VoxelFilterAveragesEachVoxelOfS) {
 }  // namespace
 }  // namespace ros_glue
 }  // namespace dtif
+
+namespace dtif {
+namespace ros_glue {
+namespace {
+
+// Feeds odometry and one cloud every 0.1 s over [t0, t1); returns the submaps finished.
+std::vector<AssembledSubmap> feed(SubmapAssembler* a, double t0, double t1,
+                                  std::vector<Status>* statuses) {
+  std::vector<AssembledSubmap> out;
+  for (double t = t0; t < t1 - 1e-9; t += 0.1) {
+    statuses->push_back(a->addOdometry(t, test::makePose(t - t0, 0, 0, 0, 0, 0)));
+    std::optional<AssembledSubmap> done;
+    statuses->push_back(a->addCloud(t, cloudOf({{1, 1, 1}}), &done));
+    if (done) out.push_back(std::move(*done));
+  }
+  return out;
+}
+
+size_t countOf(const std::vector<Status>& s, Status x) {
+  return static_cast<size_t>(std::count(s.begin(), s.end(), x));
+}
+
+// Issue #17: one future-stamped cloud and odometry message made every later message "out of
+// order": 0 of 15 descriptors afterwards. Now the stream resynchronises (kClockJump) and the
+// robot's submaps keep coming.
+TEST(SubmapAssembler, FutureStampDoesNotSilenceTheRobot) {
+  SubmapAssembler a{unfiltered(2.0)};
+  std::vector<Status> st;
+  const size_t before = feed(&a, 100.05, 104.05, &st).size();
+  EXPECT_EQ(before, 2u);
+  std::optional<AssembledSubmap> done;
+  EXPECT_EQ(a.addOdometry(5e8, test::makePose(0, 0, 0, 0, 0, 0)), Status::kOk);
+  a.addCloud(5e8, cloudOf({{1, 1, 1}}), &done);  // may finish the open window
+  st.clear();
+  const auto after = feed(&a, 104.05, 120.05, &st);
+  EXPECT_EQ(countOf(st, Status::kClockJump), 2u);  // the odometry's and the clouds' stream
+  EXPECT_EQ(countOf(st, Status::kOutOfOrder), 0u);
+  EXPECT_GE(after.size(), 7u);  // 16 s of 2 s windows, the first one after the jump partial
+}
+
+// A bag replayed a second time: its stamps jump back by the bag's length.
+TEST(SubmapAssembler, BagReplayedTwiceIsAssembledTwice) {
+  SubmapAssembler a{unfiltered(2.0)};
+  std::vector<Status> st;
+  const auto first = feed(&a, 100.05, 110.05, &st);
+  const auto second = feed(&a, 100.05, 110.05, &st);
+  EXPECT_EQ(first.size(), 5u);
+  EXPECT_EQ(second.size(), 5u);
+  EXPECT_EQ(countOf(st, Status::kClockJump), 2u);
+  EXPECT_GT(second.front().id, first.back().id);  // ids stay unique
+}
+
+TEST(SubmapAssembler, SmallBackwardStepsAreStillOutOfOrder) {
+  SubmapAssembler a{unfiltered(2.0)};
+  std::optional<AssembledSubmap> done;
+  EXPECT_EQ(a.addCloud(10.0, cloudOf({{1, 1, 1}}), &done), Status::kOk);
+  EXPECT_EQ(a.addCloud(9.0, cloudOf({{1, 1, 1}}), &done), Status::kOutOfOrder);
+  EXPECT_EQ(a.addCloud(NAN, cloudOf({{1, 1, 1}}), &done), Status::kOutOfOrder);
+}
+
+}  // namespace
+}  // namespace ros_glue
+}  // namespace dtif

@@ -32,6 +32,10 @@ struct SubmapAssemblerParams {
   /// dataset's submaps (default: its submap.voxel_m), so that the same returns give the same
   /// submap; 0 keeps every point [m].
   double voxel_m = 0.05;
+  /// A stamp this much older than the previous one of its stream is a clock jump (a bag replayed
+  /// again, or the previous message was stamped in the future): the stream starts afresh (a
+  /// warning) instead of dropping every later message as out of order [s].
+  double clock_jump_s = 5.0;
 
   std::string validate() const;
 
@@ -43,6 +47,7 @@ struct SubmapAssemblerParams {
     v("max_odom_age_s", max_odom_age_s);
     v("max_submap_points", max_submap_points);
     v("voxel_m", voxel_m);
+    v("clock_jump_s", clock_jump_s);
   }
 };
 
@@ -67,6 +72,7 @@ class SubmapAssembler {
     kOdometryGap,     ///< odometry was silent too long: the open submap was discarded
     kEmptyCloud,      ///< nothing to add
     kTruncated,       ///< max_submap_points reached: some points dropped
+    kClockJump,       ///< stamp clock_jump_s older than the last: the stream started afresh
   };
 
   explicit SubmapAssembler(const SubmapAssemblerParams& params, int64_t first_id = 0);
