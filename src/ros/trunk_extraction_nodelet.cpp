@@ -140,14 +140,16 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
     if (input_watch_) input_watch_->seen(sub.getTopic(), ros::WallTime::now().toSec());
   }
 
-  // TF output frame -> <robot>/<child_frame_id> at the odometry's stamp, so rviz can show where
-  // each unit is. Skipped when the child is already the robot's (its source publishes that TF).
+  // TF output frame -> <robot>/<child_frame_id>, so rviz can show where each unit is. Skipped
+  // when the child is already the robot's (its source publishes that TF). Stamped on receipt, as
+  // the loop-closure nodelet stamps the TF between robots, so the two chain also when per-unit
+  // bags play without a shared clock (their stamps are then far from ROS time).
   void publishBodyTf(const nav_msgs::Odometry& msg, const std::string& frame) {
     if (!node_.publish_body_tf || msg.child_frame_id.empty()) return;
     const std::string child = ros_glue::robotFrame(node_.robot, msg.child_frame_id);
     if (child == msg.child_frame_id) return;
     geometry_msgs::TransformStamped t;
-    t.header.stamp = msg.header.stamp;
+    t.header.stamp = ros::Time::now();
     t.header.frame_id = frame;
     t.child_frame_id = child;
     t.transform.translation.x = msg.pose.pose.position.x;

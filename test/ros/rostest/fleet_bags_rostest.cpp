@@ -205,7 +205,8 @@ TEST(FleetBagsRostest, StockUnitsGetQualifiedFramesAndTfBetweenRobots) {
   }
   // Each unit's body, from its odometry; the units' own /tf stayed out of the fleet's.
   for (const std::string& r : kRobots) {
-    EXPECT_TRUE(tf_buffer._frameExists(r + "/body")) << r;
+    EXPECT_TRUE(tf_buffer.canTransform(kRobots[0] + "/camera_init", r + "/body", ros::Time(0)))
+        << r << ": rviz in " << kRobots[0] << "'s frame could not place it";
   }
   EXPECT_FALSE(tf_buffer._frameExists("camera_init"));
   fs::remove_all(dir);
