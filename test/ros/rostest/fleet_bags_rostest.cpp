@@ -1,8 +1,8 @@
 // Integration test run by test/fleet_bags.test: stock FAST-LIO2 units whose bags were recorded
 // separately. The .test file launches what README "Your own FAST-LIO2 units and bags" tells a user
 // to: base_station.launch for alpha and bravo, and dtif.launch fleet:=true per unit. This node
-// simulates the tiny scene with dtif simulate --bag-layout fastlio (a bag per unit, both with
-// /cloud_registered, /Odometry, /tf in frames camera_init and body), plays each unit's bag
+// simulates a scene (~scene, tiny) with dtif simulate --bag-layout fastlio (a bag per unit, all
+// with /cloud_registered, /Odometry, /tf in frames camera_init and body), plays each unit's bag
 // with the README's remaps into the unit's namespace (no shared clock), and asserts that
 //  - while no bag plays, each unit warns naming the topic it waits on;
 //  - descriptors and loop closures carry robot-qualified frames (<robot>/camera_init);
@@ -38,8 +38,6 @@ using test::Inbox;
 using test::waitFor;
 namespace fs = std::filesystem;
 
-const std::vector<std::string> kRobots = {"alpha", "bravo"};
-
 // Dataset position of the submap of `robot` anchored at `stamp`, or -1.
 int findSubmap(const Dataset& ds, const std::string& robot, double stamp) {
   for (size_t i = 0; i < ds.submaps.size(); ++i) {
@@ -70,6 +68,12 @@ TEST(FleetBagsRostest, StockUnitsGetQualifiedFramesAndTfBetweenRobots) {
   spinner.start();
   double rate = 3.0;
   pnh.getParam("rate", rate);
+  // The scene (config/scenes/<scene>.yaml) and its robots, as the .test file launches them.
+  std::string scene = "tiny";
+  pnh.getParam("scene", scene);
+  std::vector<std::string> robots;
+  ASSERT_TRUE(pnh.getParam("robots", robots));
+  ASSERT_GE(robots.size(), 2u);
 
   Inbox<rosgraph_msgs::Log> log;
   ros::Subscriber log_sub = nh.subscribe("/rosout", 200, &Inbox<rosgraph_msgs::Log>::cb, &log);
@@ -78,7 +82,7 @@ TEST(FleetBagsRostest, StockUnitsGetQualifiedFramesAndTfBetweenRobots) {
   ros::Subscriber loop_sub =
       nh.subscribe("/loop_closures", 50, &Inbox<dtif::LoopClosure>::cb, &loops);
   std::vector<ros::Subscriber> desc_subs;
-  for (const std::string& r : kRobots) {
+  for (const std::string& r : robots) {
     desc_subs.push_back(
         nh.subscribe("/" + r + "/descriptor", 50, &Inbox<dtif::TrunkDescriptor>::cb, &descriptors));
   }
@@ -90,14 +94,17 @@ TEST(FleetBagsRostest, StockUnitsGetQualifiedFramesAndTfBetweenRobots) {
   const fs::path dir =
       fs::path(home ? home : "/tmp") / ("fleet_bags_rostest_" + std::to_string(getpid()));
   fs::remove_all(dir);
-  const std::string simulate = std::string(DTIF_TOOL) + " simulate " + DTIF_SCENES_DIR +
-                               "/tiny.yaml --out " + (dir / "dataset").string() +
-                               " --seed 1 --bag " + (dir / "tiny.bag").string() +
+  const std::string simulate = std::string(DTIF_TOOL) + " simulate " + DTIF_SCENES_DIR + "/" +
+                               scene + ".yaml --out " + (dir / "dataset").string() +
+                               " --seed 1 --bag " + (dir / "unit.bag").string() +
                                " --bag-layout fastlio > " + (dir.string() + ".log") + " 2>&1";
   ASSERT_EQ(std::system(simulate.c_str()), 0) << simulate;
   const Dataset ds = readDataset((dir / "dataset").string());
   ASSERT_FALSE(ds.T_W_S.empty());
-  for (const std::string& r : kRobots) ASSERT_TRUE(fs::exists(dir / ("tiny_" + r + ".bag"))) << r;
+  std::set<std::string> scene_robots;
+  for (const auto& sm : ds.submaps) scene_robots.insert(sm.robot);
+  ASSERT_EQ(scene_robots, std::set<std::string>(robots.begin(), robots.end()));
+  for (const std::string& r : robots) ASSERT_TRUE(fs::exists(dir / ("unit_" + r + ".bag"))) << r;
 
   // Nothing plays yet: each unit names the topics it waits on (after input_timeout_s, 10 s).
   auto warned = [&](const std::string& text) {
@@ -108,7 +115,7 @@ TEST(FleetBagsRostest, StockUnitsGetQualifiedFramesAndTfBetweenRobots) {
     }
     return false;
   };
-  for (const std::string& r : kRobots) {
+  for (const std::string& r : robots) {
     for (const std::string& topic : {"cloud_registered", "Odometry"}) {
       const std::string text = "waiting for /" + r + "/" + topic + ": no message in ";
       EXPECT_TRUE(waitFor([&] { return warned(text); }, 30.0)) << text;
@@ -124,15 +131,14 @@ TEST(FleetBagsRostest, StockUnitsGetQualifiedFramesAndTfBetweenRobots) {
 
   // Each unit's bag plays on its own, as recorded on the unit (no shared clock).
   std::vector<std::thread> players;
-  std::vector<int> status(kRobots.size(), -1);
-  for (size_t i = 0; i < kRobots.size(); ++i) {
-    const std::string cmd =
-        playCommand((dir / ("tiny_" + kRobots[i] + ".bag")).string(), kRobots[i], rate,
-                    (dir / ("play_" + kRobots[i] + ".log")).string());
+  std::vector<int> status(robots.size(), -1);
+  for (size_t i = 0; i < robots.size(); ++i) {
+    const std::string cmd = playCommand((dir / ("unit_" + robots[i] + ".bag")).string(), robots[i],
+                                        rate, (dir / ("play_" + robots[i] + ".log")).string());
     players.emplace_back([&status, i, cmd] { status[i] = std::system(cmd.c_str()); });
   }
   for (auto& p : players) p.join();
-  for (size_t i = 0; i < kRobots.size(); ++i) ASSERT_EQ(status[i], 0) << kRobots[i];
+  for (size_t i = 0; i < robots.size(); ++i) ASSERT_EQ(status[i], 0) << robots[i];
 
   // Every submap's descriptor, and the database has all valid ones.
   ros::ServiceClient size_srv =
@@ -181,7 +187,7 @@ TEST(FleetBagsRostest, StockUnitsGetQualifiedFramesAndTfBetweenRobots) {
       latest[std::minmax(lc->query_robot, lc->candidate_robot)] = lc;
     }
   }
-  ASSERT_FALSE(latest.empty()) << "no inter-robot loop on the tiny scene";
+  ASSERT_FALSE(latest.empty()) << "no inter-robot loop on " << scene;
 
   // TF between the odometry frames of each linked pair, against ground truth at the submaps of
   // their latest loop: it must put the query submap where it truly is in the candidate's
@@ -204,9 +210,9 @@ TEST(FleetBagsRostest, StockUnitsGetQualifiedFramesAndTfBetweenRobots) {
     EXPECT_LE(e.trans_m, 0.5) << fc << " <- " << fq;
   }
   // Each unit's body, from its odometry; the units' own /tf stayed out of the fleet's.
-  for (const std::string& r : kRobots) {
-    EXPECT_TRUE(tf_buffer.canTransform(kRobots[0] + "/camera_init", r + "/body", ros::Time(0)))
-        << r << ": rviz in " << kRobots[0] << "'s frame could not place it";
+  for (const std::string& r : robots) {
+    EXPECT_TRUE(tf_buffer.canTransform(robots[0] + "/camera_init", r + "/body", ros::Time(0)))
+        << r << ": rviz in " << robots[0] << "'s frame could not place it";
   }
   EXPECT_FALSE(tf_buffer._frameExists("camera_init"));
   fs::remove_all(dir);
