@@ -9,7 +9,9 @@
 # Usage: scripts/demo.sh [scene.yaml] (default: config/scenes/mixed.yaml)
 # Environment: DTIF_DEMO_RATE (bag replay rate, default 2), DTIF_DEMO_BAG_ARGS (more options of
 # dtif simulate, e.g. "--bag-max-points 4000" for a smaller bag of thinned clouds; by default the
-# bag holds every return, so the nodelets assemble the dataset's submaps).
+# bag holds every return, so the nodelets assemble the dataset's submaps; "--bag-layout fastlio", or
+# a scene with bag_layout: fastlio, gives a bag per robot with stock FAST-LIO2 names, each played
+# remapped into its robot's namespace as README "Your own FAST-LIO2 units and bags" tells).
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 SCENE="${1:-${DTIF_REPO}/config/scenes/mixed.yaml}"
@@ -34,7 +36,16 @@ else
     --bag "${OUT}/${NAME}.bag" ${DTIF_DEMO_BAG_ARGS:-}
   echo "${SIM_KEY}" > "${OUT}/simulated"
 fi
-echo "dtif demo: bag $(( $(stat -c %s "${OUT}/${NAME}.bag") / 1000000 )) MB"
+# The bags to play: one (/<robot>/... topics), or one per robot (fastlio layout, stock names).
+dtif_robots "${OUT}/dataset"
+if [ -f "${OUT}/${NAME}.bag" ]; then
+  BAGS=("${OUT}/${NAME}.bag")
+else
+  BAGS=()
+  for r in "${ROBOTS[@]}"; do BAGS+=("${OUT}/${NAME}_${r}.bag"); done
+fi
+echo "dtif demo: $(du -cb "${BAGS[@]}" | tail -1 | awk '{printf "%d", $1 / 1e6}') MB of bags:" \
+  "$(basename -a "${BAGS[@]}" | tr '\n' ' ')"
 rm -rf "${OUT}/eval" "${OUT}/ros"
 
 echo "dtif demo: 1. dtif eval on the dataset (results in ${OUT}/eval)"
@@ -42,7 +53,6 @@ echo "dtif demo: 1. dtif eval on the dataset (results in ${OUT}/eval)"
 
 # 2. The ROS nodelets on the bag: a private master (other roscores on this machine are left
 # alone); the script plays the bag itself so that the last submaps can finish before shutdown.
-dtif_robots "${OUT}/dataset"
 dtif_private_master
 LOG="${OUT}/ros/loops.csv"
 mkdir -p "${OUT}/ros"
@@ -73,7 +83,29 @@ fi
 # submap windows start at its first cloud received).
 DELAY_S=2
 t0=$(date +%s.%N)
-rosbag play --clock --quiet --delay "${DELAY_S}" --rate "${RATE}" "${OUT}/${NAME}.bag"
+if [ ${#BAGS[@]} -eq 1 ]; then
+  rosbag play --clock --quiet --delay "${DELAY_S}" --rate "${RATE}" "${BAGS[0]}"
+else
+  # A player per unit, its stock topics into the unit's namespace (its own /tf out of the way);
+  # the longest bag's player publishes the clock (the simulated units share a time base and
+  # start together, as synchronised units would).
+  CLOCK_I=0
+  for i in "${!BAGS[@]}"; do
+    if awk -v a="$(rosbag info -y -k duration "${BAGS[i]}")" \
+        -v b="$(rosbag info -y -k duration "${BAGS[CLOCK_I]}")" 'BEGIN { exit !(a > b) }'; then
+      CLOCK_I=${i}
+    fi
+  done
+  PLAYERS=()
+  for i in "${!ROBOTS[@]}"; do
+    r="${ROBOTS[i]}"
+    rosbag play $([ "${i}" -eq "${CLOCK_I}" ] && echo --clock) --quiet --delay "${DELAY_S}" --rate "${RATE}" \
+      "${BAGS[i]}" /cloud_registered:=/"${r}"/cloud_registered /Odometry:=/"${r}"/Odometry \
+      /tf:=/"${r}"/fastlio_tf &
+    PLAYERS+=($!)
+  done
+  wait "${PLAYERS[@]}"
+fi
 t1=$(date +%s.%N)
 # The last submaps are still being processed: wait until the log has been quiet for 5 s.
 for _ in $(seq 1 60); do
@@ -83,7 +115,7 @@ done
 kill -INT "${LAUNCH_PID}" 2>/dev/null || true
 wait "${LAUNCH_PID}" 2>/dev/null || true
 trap - EXIT
-BAG_S="$(rosbag info -y -k duration "${OUT}/${NAME}.bag")"
+BAG_S="$(rosbag info -y -k duration "${BAGS[${CLOCK_I:-0}]}")"
 awk -v b="${BAG_S}" -v t0="${t0}" -v t1="${t1}" -v r="${RATE}" -v d="${DELAY_S}" 'BEGIN {
   printf "dtif demo: played %.1f s of bag in %.1f s of wall time (rate %s)\n", b, t1 - t0 - d, r }'
 grep -E "WARN|ERROR|FATAL" "${OUT}/ros/roslaunch.log" | head -5 || true

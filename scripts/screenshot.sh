@@ -50,9 +50,9 @@ p_o = [a + b for a, b in zip(rot(q_os, p_s), t_os)]        # ... in O1
 print("{X: %.1f, Y: %.1f, Z: %.1f}" % tuple(p_o))
 PY
 )"
-# The shipped rviz config with the scene's robots in place of robot1..3, submap clouds on.
-sed -e "s#robot1#${ROBOTS[0]}#g" -e "s#robot2#${ROBOTS[1]:-robot2}#g" \
-  -e "s#robot3#${ROBOTS[2]:-robot3}#g" -e '/PointCloud2/,/Topic/s/Enabled: false/Enabled: true/' \
+# The shipped rviz config (any number of robots; the fixed frame comes from the launch file) with
+# the submap clouds on.
+sed -e '/PointCloud2/,/Topic/s/Enabled: false/Enabled: true/' \
   -e "s#Focal Point: .*#Focal Point: ${FOCUS}#" \
   "${DTIF_REPO}/rviz/dtif.rviz" > "${SHOT}/demo.rviz"
 

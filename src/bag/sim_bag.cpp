@@ -53,11 +53,20 @@ std::string BagParams::validate() const {
   if (node.empty() || node.find('/') != std::string::npos) e += "node must be a plain name\n";
   if (chunk_bytes == 0 || chunk_bytes > (1u << 30)) e += "chunk_bytes must be in (0, 1 GiB]\n";
   if (compression != "none" && compression != "lz4") e += "compression must be none or lz4\n";
+  if (layout != kLayoutNamespaced && layout != kLayoutFastlio) {
+    e += "layout must be " + std::string(kLayoutNamespaced) + " or " + kLayoutFastlio + "\n";
+  }
   return e;
 }
 
 std::string odomFrame(const std::string& robot) { return robot + "/odom"; }
 std::string bodyFrame(const std::string& robot) { return robot + "/base_link"; }
+
+std::string unitBagPath(const std::string& path, const std::string& robot) {
+  std::filesystem::path p(path);
+  const std::string stem = p.extension() == ".bag" ? p.stem().string() : p.filename().string();
+  return (p.parent_path() / (stem + "_" + robot + ".bag")).string();
+}
 
 void voxelFilter(const std::vector<Eigen::Vector3f>& points, const std::vector<float>& intensity,
                  double voxel_m, std::vector<Eigen::Vector3f>* points_out,
@@ -192,54 +201,96 @@ void fillPointCloud2(const std::vector<Eigen::Vector3f>& points,
 }  // namespace
 
 struct BagFrameSink::Writer {
-  struct Robot {  // its topics' connection headers and sequence numbers
+  // One output file: written as tmp_path, renamed to path by close().
+  struct File {
+    std::string path, tmp_path;
+    rosbag::Bag bag;
+    bool open = false;  // until close()
+  };
+  struct Robot {  // its topics' connection headers, sequence numbers and file
     boost::shared_ptr<ros::M_string> odometry, tf, cloud;
     uint32_t odometry_seq = 0, cloud_seq = 0;
+    std::string odom_frame, body_frame;
+    File* file = nullptr;
   };
 
-  std::string path, tmp_path;
-  rosbag::Bag bag;
-  bool open = false;  // until close()
+  std::string path;  // as given: the bag, or the name the per-unit bags derive from
+  BagParams params;
+  bool open = false;                                   // until close()
+  std::map<std::string, std::unique_ptr<File>> files;  // by robot; "" in the namespaced layout
   std::map<std::string, Robot> robots;
 
   ~Writer() {
-    if (!open) return;
-    try {  // abandoned (not closed): finish the file only to remove it
-      bag.close();
-    } catch (const std::exception&) {
+    for (auto& [name, f] : files) {
+      if (!f->open) continue;
+      try {  // abandoned (not closed): finish the file only to remove it
+        f->bag.close();
+      } catch (const std::exception&) {
+      }
+      std::error_code ec;
+      std::filesystem::remove(f->tmp_path, ec);
     }
-    std::error_code ec;
-    std::filesystem::remove(tmp_path, ec);
+  }
+
+  bool fastlio() const { return params.layout == kLayoutFastlio; }
+
+  // Creates `file_path`.tmp; throws RosbagError naming it.
+  File* create(const std::string& key, const std::string& file_path) {
+    auto f = std::make_unique<File>();
+    f->path = file_path;
+    f->tmp_path = file_path + ".tmp";
+    try {
+      f->bag.open(f->tmp_path, rosbag::bagmode::Write);
+    } catch (const rosbag::BagException& e) {
+      throw bag::RosbagError(f->tmp_path + ": cannot create: " + e.what());
+    }
+    f->open = true;
+    f->bag.setChunkThreshold(params.chunk_bytes);
+    f->bag.setCompression(params.compression == "lz4" ? rosbag::compression::LZ4
+                                                      : rosbag::compression::Uncompressed);
+    return (files[key] = std::move(f)).get();
   }
 
   // t [s] as ros::Time (as ros::Time::fromSec); throws RosbagError naming the file outside it.
-  ros::Time time(double t) const {
+  static ros::Time time(double t, const File& f) {
     if (!std::isfinite(t) || t < 0.0 || t >= 4294967295.0) {
-      throw bag::RosbagError(tmp_path + ": time " + std::to_string(t) +
+      throw bag::RosbagError(f.tmp_path + ": time " + std::to_string(t) +
                              " s is outside the range of ros::Time");
     }
     return ros::Time().fromSec(t);
   }
 
-  Robot& robot(const std::string& name, const std::string& node) {
+  // A robot's names: /<robot>/... in the shared bag, or a stock unit's in a bag of its own
+  // (FAST-LIO2's laserMapping node: absolute /Odometry, /cloud_registered; camera_init, body).
+  Robot& robot(const std::string& name) {
     const auto [it, added] = robots.try_emplace(name);
-    if (added) {
-      const std::string ns = "/" + name, callerid = ns + "/" + node;
-      it->second.odometry = connectionHeader<nav_msgs::Odometry>(ns + "/Odometry", callerid);
-      it->second.tf = connectionHeader<tf2_msgs::TFMessage>("/tf", callerid);
-      it->second.cloud =
-          connectionHeader<sensor_msgs::PointCloud2>(ns + "/cloud_registered", callerid);
-    }
-    return it->second;
+    Robot& r = it->second;
+    if (!added) return r;
+    const std::string ns = fastlio() ? "" : "/" + name;
+    const std::string callerid = fastlio() ? "/laserMapping" : ns + "/" + params.node;
+    r.odometry = connectionHeader<nav_msgs::Odometry>(ns + "/Odometry", callerid);
+    r.tf = connectionHeader<tf2_msgs::TFMessage>("/tf", callerid);
+    r.cloud = connectionHeader<sensor_msgs::PointCloud2>(ns + "/cloud_registered", callerid);
+    r.odom_frame = fastlio() ? "camera_init" : odomFrame(name);
+    r.body_frame = fastlio() ? "body" : bodyFrame(name);
+    r.file = fastlio() ? create(name, unitBagPath(path, name)) : files.at("").get();
+    return r;
   }
 
   template <class Msg>
-  void write(const boost::shared_ptr<ros::M_string>& connection, ros::Time t, const Msg& msg) {
+  static void write(File& f, const boost::shared_ptr<ros::M_string>& connection, ros::Time t,
+                    const Msg& msg) {
     try {
-      bag.write(connection->at("topic"), t, msg, connection);
+      f.bag.write(connection->at("topic"), t, msg, connection);
     } catch (const rosbag::BagException& e) {
-      throw bag::RosbagError(tmp_path + ": cannot write: " + e.what());
+      throw bag::RosbagError(f.tmp_path + ": cannot write: " + e.what());
     }
+  }
+
+  uint64_t bytes() const {
+    uint64_t n = 0;
+    for (const auto& [name, f] : files) n += f->bag.getSize();
+    return n;
   }
 };
 
@@ -248,37 +299,38 @@ BagFrameSink::BagFrameSink(const std::string& path, const BagParams& params)
   const std::string problems = params.validate();
   if (!problems.empty()) throw bag::RosbagError(path + ": invalid bag parameters:\n" + problems);
   writer_->path = path;
-  writer_->tmp_path = path + ".tmp";
-  try {
-    writer_->bag.open(writer_->tmp_path, rosbag::bagmode::Write);
-  } catch (const rosbag::BagException& e) {
-    throw bag::RosbagError(writer_->tmp_path + ": cannot create: " + e.what());
-  }
+  writer_->params = params;
   writer_->open = true;
-  writer_->bag.setChunkThreshold(params.chunk_bytes);
-  writer_->bag.setCompression(params.compression == "lz4" ? rosbag::compression::LZ4
-                                                          : rosbag::compression::Uncompressed);
+  // The per-unit bags are created with their robot's first frame.
+  if (!writer_->fastlio()) writer_->create("", path);
 }
 
 BagFrameSink::~BagFrameSink() = default;
+
+std::vector<std::string> BagFrameSink::paths() const {
+  std::vector<std::string> out;
+  for (const auto& [name, f] : writer_->files) out.push_back(f->path);
+  return out;
+}
 
 void BagFrameSink::onFrame(const Frame& frame) {
   Timer timer(&stats_.write_seconds);
   Writer& w = *writer_;
   if (!w.open) throw bag::RosbagError(w.path + ": write after close");
-  Writer::Robot& robot = w.robot(frame.robot, params_.node);
-  const ros::Time stamp = w.time(frame.stamp);
-  const ros::Time cloud_time = w.time(frame.stamp + params_.cloud_delay_s);
+  Writer::Robot& robot = w.robot(frame.robot);
+  Writer::File& file = *robot.file;
+  const ros::Time stamp = Writer::time(frame.stamp, file);
+  const ros::Time cloud_time = Writer::time(frame.stamp + params_.cloud_delay_s, file);
 
   // FAST-LIO2 publishes Odometry first, then cloud_registered (laserMapping.cpp); twist and
   // covariances stay zero, as FAST-LIO2 leaves them.
   nav_msgs::Odometry odom;
   odom.header.seq = robot.odometry_seq++;
   odom.header.stamp = stamp;
-  odom.header.frame_id = odomFrame(frame.robot);
-  odom.child_frame_id = bodyFrame(frame.robot);
+  odom.header.frame_id = robot.odom_frame;
+  odom.child_frame_id = robot.body_frame;
   setPose(frame.T_O_B, &odom.pose.pose.position, &odom.pose.pose.orientation);
-  w.write(robot.odometry, stamp, odom);
+  Writer::write(file, robot.odometry, stamp, odom);
 
   tf2_msgs::TFMessage tf;
   tf.transforms.resize(1);
@@ -287,7 +339,7 @@ void BagFrameSink::onFrame(const Frame& frame) {
   t.header.seq = 0;  // tf2_ros::TransformBroadcaster leaves it 0
   t.child_frame_id = odom.child_frame_id;
   setPose(frame.T_O_B, &t.transform.translation, &t.transform.rotation);
-  w.write(robot.tf, stamp, tf);
+  Writer::write(file, robot.tf, stamp, tf);
 
   std::vector<Eigen::Vector3f> points;
   std::vector<float> intensity;
@@ -297,13 +349,13 @@ void BagFrameSink::onFrame(const Frame& frame) {
   cloud.header.stamp = stamp;
   cloud.header.frame_id = odom.header.frame_id;
   fillPointCloud2(points, intensity, &cloud);
-  w.write(robot.cloud, cloud_time, cloud);
+  Writer::write(file, robot.cloud, cloud_time, cloud);
 
   ++stats_.frames;
   stats_.messages += 3;
   stats_.points_in += frame.points.size();
   stats_.points_out += points.size();
-  stats_.bytes = w.bag.getSize();
+  stats_.bytes = w.bytes();
 }
 
 void BagFrameSink::close() {
@@ -311,19 +363,25 @@ void BagFrameSink::close() {
   Writer& w = *writer_;
   if (!w.open) throw bag::RosbagError(w.path + ": already closed");
   w.open = false;
-  std::error_code ec;
-  try {
-    w.bag.close();
-  } catch (const rosbag::BagException& e) {
-    std::filesystem::remove(w.tmp_path, ec);
-    throw bag::RosbagError(w.tmp_path + ": cannot write: " + e.what());
-  }
-  stats_.bytes = std::filesystem::file_size(w.tmp_path, ec);
-  std::filesystem::rename(w.tmp_path, w.path, ec);
-  if (ec) {
-    const std::string what = ec.message();
-    std::filesystem::remove(w.tmp_path, ec);
-    throw bag::RosbagError(w.path + ": cannot rename " + w.tmp_path + " to it: " + what);
+  stats_.bytes = 0;
+  // Each file finished and renamed in turn; on an error the files not yet renamed are removed
+  // (the Writer's destructor), so no bag is left half-written.
+  for (auto& [name, f] : w.files) {
+    std::error_code ec;
+    f->open = false;
+    try {
+      f->bag.close();
+    } catch (const rosbag::BagException& e) {
+      std::filesystem::remove(f->tmp_path, ec);
+      throw bag::RosbagError(f->tmp_path + ": cannot write: " + e.what());
+    }
+    stats_.bytes += std::filesystem::file_size(f->tmp_path, ec);
+    std::filesystem::rename(f->tmp_path, f->path, ec);
+    if (ec) {
+      const std::string what = ec.message();
+      std::filesystem::remove(f->tmp_path, ec);
+      throw bag::RosbagError(f->path + ": cannot rename " + f->tmp_path + " to it: " + what);
+    }
   }
 }
 

@@ -27,6 +27,7 @@
 #include "dtif/core/timing.h"
 #include "dtif/io/dataset.h"
 #include "dtif/ros/conversions.h"
+#include "dtif/ros/frames.h"
 #include "dtif/ros/markers.h"
 #include "dtif/ros/msgs.h"
 #include "dtif/ros/node_params.h"
@@ -78,9 +79,11 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       const std::string topic = robot + "/" + node_.descriptor_topic;
       subs_.push_back(nh.subscribe<dtif::TrunkDescriptor>(
           topic, 50,
-          boost::bind(&LoopClosureNodelet::onDescriptor, this, boost::placeholders::_1, robot)));
+          boost::bind(&LoopClosureNodelet::onDescriptor, this, boost::placeholders::_1, robot,
+                      nh.resolveName(topic))));
       NODELET_INFO("subscribed to %s", nh.resolveName(topic).c_str());
     }
+    watchInputs(nh);
     save_srv_ = pnh.advertiseService("save_database", &LoopClosureNodelet::onSave, this);
     load_srv_ = pnh.advertiseService("load_database", &LoopClosureNodelet::onLoad, this);
     size_srv_ = pnh.advertiseService("database_size", &LoopClosureNodelet::onSize, this);
@@ -112,12 +115,28 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       if (node_.queue_size < 1) problems += "queue_size must be >= 1\n";
       if (!(node_.tf_rate_hz >= 0.0)) problems += "tf_rate_hz must be >= 0\n";
       if (!(node_.marker_period_s >= 0.0)) problems += "marker_period_s must be >= 0\n";
+      if (!(node_.input_timeout_s >= 0.0)) problems += "input_timeout_s must be >= 0\n";
       if (!problems.empty()) throw ParamError(pnh.getNamespace() + ": " + problems);
     } catch (const ParamError& e) {
       NODELET_FATAL("%s", e.what());
       throw;
     }
     return det;
+  }
+
+  // A periodic warning, naming the resolved topic, while a robot's descriptors do not come.
+  void watchInputs(ros::NodeHandle& nh) {
+    if (node_.input_timeout_s <= 0.0) return;
+    input_watch_ = std::make_unique<ros_glue::InputWatch>(node_.input_timeout_s);
+    const double now = ros::WallTime::now().toSec();
+    for (const ros::Subscriber& sub : subs_) input_watch_->watch(sub.getTopic(), now);
+    input_timer_ = nh.createWallTimer(
+        ros::WallDuration(node_.input_timeout_s), [this](const ros::WallTimerEvent&) {
+          const double t = ros::WallTime::now().toSec();
+          for (const auto& s : input_watch_->silent(t)) {
+            NODELET_WARN("%s", ros_glue::InputWatch::describe(s).c_str());
+          }
+        });
   }
 
   // ~loop_log, when set: truncated, header first; failing to open it is fatal.
@@ -138,7 +157,9 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     if (auto markers = latest_loop_markers_.all()) marker_pub_.publish(markers);
   }
 
-  void onDescriptor(const dtif::TrunkDescriptor::ConstPtr& msg, const std::string& robot) {
+  void onDescriptor(const dtif::TrunkDescriptor::ConstPtr& msg, const std::string& robot,
+                    const std::string& topic) {
+    if (input_watch_) input_watch_->seen(topic, ros::WallTime::now().toSec());
     if (msg->robot != robot) {
       NODELET_WARN_THROTTLE(5.0, "descriptor of robot '%s' on the topic of '%s': dropped",
                             msg->robot.c_str(), robot.c_str());
@@ -201,7 +222,9 @@ class LoopClosureNodelet : public nodelet::Nodelet {
                             static_cast<long>(msg.submap_id), error.c_str());
       return false;
     }
-    meta->odom_frame = msg.header.frame_id;
+    // Keyed by robot: a sender that did not qualify its frame (every stock FAST-LIO2 unit says
+    // camera_init) still gets a frame of its own.
+    meta->odom_frame = ros_glue::robotFrame(msg.robot, msg.header.frame_id);
     if (!d->valid) {
       NODELET_DEBUG("descriptor %s/%ld is invalid (%s): not queried, not inserted",
                     d->robot.c_str(), static_cast<long>(d->submap_id), d->invalid_reason.c_str());
@@ -244,10 +267,16 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     return true;
   }
 
-  // An inter-robot loop between two known, different odometry frames links them (db_mutex_).
+  // An inter-robot loop links the two robots' odometry frames (db_mutex_).
   void linkOdometryFrames(const Loop& lc, const Meta& candidate, const Meta& query) {
     if (lc.candidate_robot == lc.query_robot || candidate.odom_frame.empty() ||
-        query.odom_frame.empty() || candidate.odom_frame == query.odom_frame) {
+        query.odom_frame.empty()) {
+      return;
+    }
+    if (candidate.odom_frame == query.odom_frame) {  // only when configured so (output_odom_frame)
+      NODELET_WARN_THROTTLE(30.0, "robots '%s' and '%s' both publish in frame '%s': no TF",
+                            lc.candidate_robot.c_str(), lc.query_robot.c_str(),
+                            query.odom_frame.c_str());
       return;
     }
     // T_Oc_Oq = T_Oc_Sc * T_c_q * inverse(T_Oq_Sq): the latest accepted estimate wins.
@@ -412,6 +441,8 @@ class LoopClosureNodelet : public nodelet::Nodelet {
   std::vector<ros::Subscriber> subs_;
   ros::ServiceServer save_srv_, load_srv_, size_srv_;
   ros::WallTimer tf_timer_;
+  std::unique_ptr<ros_glue::InputWatch> input_watch_;
+  ros::WallTimer input_timer_;
   std::ofstream loop_log_;  // worker thread only
 };
 

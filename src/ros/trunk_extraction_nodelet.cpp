@@ -7,6 +7,7 @@
 #include <ros/ros.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <tf2_ros/buffer.h>
+#include <tf2_ros/transform_broadcaster.h>
 #include <tf2_ros/transform_listener.h>
 #include <visualization_msgs/MarkerArray.h>
 
@@ -27,6 +28,7 @@
 #include "dtif/core/timing.h"
 #include "dtif/ros/conversions.h"
 #include "dtif/ros/frame_lock.h"
+#include "dtif/ros/frames.h"
 #include "dtif/ros/markers.h"
 #include "dtif/ros/msgs.h"
 #include "dtif/ros/node_params.h"
@@ -68,6 +70,7 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
       if (node_.queue_size < 1) problems += "queue_size must be >= 1\n";
       if (node_.marker_history < 0) problems += "marker_history must be >= 0\n";
       if (!(node_.marker_period_s >= 0.0)) problems += "marker_period_s must be >= 0\n";
+      if (!(node_.input_timeout_s >= 0.0)) problems += "input_timeout_s must be >= 0\n";
       if (node_.robot.empty()) {
         const std::string ns = nh.getNamespace();
         node_.robot = ns.substr(ns.find_last_of('/') + 1);
@@ -111,9 +114,52 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
           nh.createWallTimer(ros::WallDuration(node_.marker_period_s),
                              [this](const ros::WallTimerEvent&) { republishMarkers(); });
     }
+    watchInputs(nh);
     worker_ = std::thread(&TrunkExtractionNodelet::work, this);
     NODELET_INFO("robot '%s', input '%s', window %.1f s", node_.robot.c_str(), node_.input.c_str(),
                  assembler_params_.window_s);
+  }
+
+  // A periodic warning, naming the resolved topic, while an input stays silent (wall time: a
+  // unit whose front end is not running, or a bag not played, or a wrong remap).
+  void watchInputs(ros::NodeHandle& nh) {
+    if (node_.input_timeout_s <= 0.0) return;
+    input_watch_ = std::make_unique<ros_glue::InputWatch>(node_.input_timeout_s);
+    const double now = ros::WallTime::now().toSec();
+    for (const ros::Subscriber* sub : {&odom_sub_, &cloud_sub_, &submap_sub_}) {
+      if (*sub) input_watch_->watch(sub->getTopic(), now);
+    }
+    input_timer_ = nh.createWallTimer(
+        ros::WallDuration(node_.input_timeout_s), [this](const ros::WallTimerEvent&) {
+          const double t = ros::WallTime::now().toSec();
+          for (const auto& s : input_watch_->silent(t)) {
+            NODELET_WARN("%s", ros_glue::InputWatch::describe(s).c_str());
+          }
+        });
+  }
+
+  void noteInput(const ros::Subscriber& sub) {
+    if (input_watch_) input_watch_->seen(sub.getTopic(), ros::WallTime::now().toSec());
+  }
+
+  // TF output frame -> <robot>/<child_frame_id>, so rviz can show where each unit is. Skipped
+  // when the child is already the robot's (its source publishes that TF). Stamped on receipt, as
+  // the loop-closure nodelet stamps the TF between robots, so the two chain also when per-unit
+  // bags play without a shared clock (their stamps are then far from ROS time).
+  void publishBodyTf(const nav_msgs::Odometry& msg, const std::string& frame) {
+    if (!node_.publish_body_tf || msg.child_frame_id.empty()) return;
+    const std::string child = ros_glue::robotFrame(node_.robot, msg.child_frame_id);
+    if (child == msg.child_frame_id) return;
+    geometry_msgs::TransformStamped t;
+    t.header.stamp = ros::Time::now();
+    t.header.frame_id = frame;
+    t.child_frame_id = child;
+    t.transform.translation.x = msg.pose.pose.position.x;
+    t.transform.translation.y = msg.pose.pose.position.y;
+    t.transform.translation.z = msg.pose.pose.position.z;
+    t.transform.rotation = msg.pose.pose.orientation;
+    if (!tf_broadcaster_) tf_broadcaster_ = std::make_unique<tf2_ros::TransformBroadcaster>();
+    tf_broadcaster_->sendTransform(t);
   }
 
   // Checks the frame of a message against ~odom_frame (learnt from the first message if unset).
@@ -135,7 +181,12 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
                    before.c_str());
       assembler_->reset();  // nothing of the old frame mixes with the new one
     }
-    odom_frame_ = frame_lock_->frame();
+    if (frame_lock_->frame() != odom_frame_) {
+      odom_frame_ = frame_lock_->frame();
+      out_frame_ = ros_glue::outputOdomFrame(node_.robot, odom_frame_, node_.output_odom_frame);
+      NODELET_INFO("odometry frame '%s', published as '%s'", odom_frame_.c_str(),
+                   out_frame_.c_str());
+    }
     return true;
   }
 
@@ -151,18 +202,25 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
   }
 
   void onOdometry(const nav_msgs::Odometry::ConstPtr& msg) {
+    noteInput(odom_sub_);
     Pose T_O_B;
     std::string error;
     if (!ros_glue::fromMsg(msg->pose.pose, &T_O_B, &error)) {
       NODELET_WARN_THROTTLE(5.0, "Odometry: %s: dropped", error.c_str());
       return;
     }
-    std::lock_guard<std::mutex> lock(mutex_);
-    if (!acceptFrame(msg->header.frame_id, "Odometry")) return;
-    report(assembler_->addOdometry(msg->header.stamp.toSec(), T_O_B), "Odometry");
+    std::string frame;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (!acceptFrame(msg->header.frame_id, "Odometry")) return;
+      report(assembler_->addOdometry(msg->header.stamp.toSec(), T_O_B), "Odometry");
+      frame = out_frame_;
+    }
+    publishBodyTf(*msg, frame);
   }
 
   void onCloud(const sensor_msgs::PointCloud2::ConstPtr& msg) {
+    noteInput(cloud_sub_);
     Cloud cloud;
     size_t dropped = 0;
     std::string error;
@@ -179,12 +237,13 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
       std::lock_guard<std::mutex> lock(mutex_);
       if (!acceptFrame(msg->header.frame_id, "cloud_registered")) return;
       report(assembler_->addCloud(msg->header.stamp.toSec(), cloud, &done), "cloud_registered");
-      frame = odom_frame_;
+      frame = out_frame_;
     }
     if (done) enqueue(std::move(*done), frame);
   }
 
   void onSubmap(const sensor_msgs::PointCloud2::ConstPtr& msg) {
+    noteInput(submap_sub_);
     if (msg->header.frame_id.empty()) {
       NODELET_WARN_THROTTLE(5.0, "submap without frame_id: dropped");
       return;
@@ -229,7 +288,7 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
     }
     s.stamp = stamp;
     s.end_stamp = stamp;
-    enqueue(std::move(s), frame);
+    enqueue(std::move(s), ros_glue::outputOdomFrame(node_.robot, frame, node_.output_odom_frame));
   }
 
   void enqueue(ros_glue::AssembledSubmap s, const std::string& frame) {
@@ -307,10 +366,12 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
   TrunkExtractorParams extractor_params_;
   DescriptorParams descriptor_params_;
 
-  std::mutex mutex_;  // assembler_, odom_frame_, last_submap_stamp_, next_submap_id_, last_warning_
+  // assembler_, odom_frame_, out_frame_, last_submap_stamp_, next_submap_id_, last_warning_
+  std::mutex mutex_;
   std::unique_ptr<ros_glue::SubmapAssembler> assembler_;
   std::map<std::pair<std::string, int>, ros::WallTime> last_warning_;
-  std::string odom_frame_;
+  std::string odom_frame_;  // of the input
+  std::string out_frame_;   // published: robot-qualified (outputOdomFrame)
   std::unique_ptr<ros_glue::FrameLock> frame_lock_;  // created on the first message
   double last_submap_stamp_ = -1.0;
   int64_t next_submap_id_ = 0;
@@ -327,6 +388,9 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
 
   std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
+  std::unique_ptr<tf2_ros::TransformBroadcaster> tf_broadcaster_;  // Odometry callback only
+  std::unique_ptr<ros_glue::InputWatch> input_watch_;
+  ros::WallTimer input_timer_;
   ros::Publisher descriptor_pub_, trunks_pub_, cloud_pub_;
   ros::Subscriber odom_sub_, cloud_sub_, submap_sub_;
 };

@@ -282,6 +282,8 @@ std::string SceneParams::validate() const {
   checkOdometry(odometry, &e);
   checkSubmap(submap, sensor, &e);
   checkRobots(robots, plot, stems, &e);
+  check(bag_layout == "namespaced" || bag_layout == "fastlio",
+        "bag_layout must be namespaced or fastlio", &e);
   return e.str();
 }
 
@@ -305,8 +307,8 @@ YAML::Node loadSceneRoot(const std::string& path) {
   }
   if (!root.IsMap()) throw ParamError(path + ": the scene must be a YAML map");
   static const std::set<std::string> kTop = {
-      "name",       "description", "epoch_s", "plot",     "terrain", "stems", "trees",
-      "understory", "sensor",      "motion",  "odometry", "submap",  "robots"};
+      "name",       "description", "epoch_s", "plot",     "terrain", "stems",  "trees",
+      "understory", "sensor",      "motion",  "odometry", "submap",  "robots", "bag_layout"};
   for (const auto& kv : root) {
     const std::string key = kv.first.as<std::string>();
     if (!kTop.count(key)) throw ParamError(path + ": unknown key '" + key + "'");
@@ -360,8 +362,9 @@ SceneParams loadSceneYaml(const std::string& path) {
     if (root["name"]) s.name = root["name"].as<std::string>();
     if (root["description"]) s.description = root["description"].as<std::string>();
     if (root["epoch_s"]) s.epoch_s = root["epoch_s"].as<double>();
+    if (root["bag_layout"]) s.bag_layout = root["bag_layout"].as<std::string>();
   } catch (const YAML::Exception&) {
-    throw ParamError(path + ": name/description/epoch_s: wrong type");
+    throw ParamError(path + ": name/description/epoch_s/bag_layout: wrong type");
   }
   readSection(root, "plot", path, &s.plot);
   readSection(root, "terrain", path, &s.terrain);
@@ -411,7 +414,10 @@ std::string sceneToYaml(const SceneParams& s) {
     }
     out << YAML::EndSeq << YAML::EndMap;
   }
-  out << YAML::EndSeq << YAML::EndMap;
+  out << YAML::EndSeq;
+  // Only when set: a dataset of the default layout is written as before.
+  if (s.bag_layout != "namespaced") out << YAML::Key << "bag_layout" << YAML::Value << s.bag_layout;
+  out << YAML::EndMap;
   return std::string(out.c_str()) + "\n";
 }
 

@@ -83,6 +83,15 @@ void addSimulate(CLI::App* dtif, SimulateArgs* a) {
       ->check(CLI::Range(0, 10000000))
       ->capture_default_str()
       ->needs(bag);
+  cmd->add_option(
+         "--bag-layout", a->bag_layout,
+         "namespaced: one bag, /<robot>/cloud_registered, /<robot>/Odometry, frames "
+         "<robot>/odom, <robot>/base_link; fastlio: one bag per robot as recorded on a "
+         "stock FAST-LIO2 unit, <stem>_<robot>.bag with /cloud_registered, /Odometry, /tf, "
+         "frames camera_init, body (default: the scene's bag_layout, else namespaced)")
+      ->type_name("namespaced|fastlio")
+      ->check(CLI::IsMember({"namespaced", "fastlio"}))
+      ->needs(bag);
   cmd->add_option("--bag-compression", a->bag_params.compression,
                   "chunk compression of the bag: none, or lz4 (smaller, rosbag play reads it)")
       ->type_name("none|lz4")

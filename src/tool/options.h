@@ -24,6 +24,7 @@ struct SimulateArgs {
   int threads = 0;            ///< simulation threads (0: all cores)
   std::string bag;            ///< rosbag of the raw frames ("": none)
   sim::BagParams bag_params;  ///< what the bag holds (--bag-voxel, --bag-max-points)
+  std::string bag_layout;     ///< --bag-layout ("": the scene's bag_layout)
   bool quiet = false;         ///< no summary on stdout
 };
 

@@ -1,5 +1,6 @@
 // dtif simulate <scene.yaml> --out <dataset_dir> [--seed N] [--png <file>] [--threads N]
 //               [--bag <file.bag>] [--bag-voxel <m>] [--bag-max-points N]
+//               [--bag-layout namespaced|fastlio]
 // Simulates a forest survey (config/scenes/*.yaml) and writes it as a dataset (DATASET.md),
 // optionally also as a rosbag of the raw frames (sim_bag.h) for replay into the nodelets.
 #include <filesystem>
@@ -15,8 +16,9 @@
 namespace dtif::tool {
 
 int runSimulate(const SimulateArgs& a) {
-  const sim::BagParams& bag_params = a.bag_params;
   const sim::SceneParams scene = sim::loadSceneYaml(a.scene);
+  sim::BagParams bag_params = a.bag_params;
+  bag_params.layout = a.bag_layout.empty() ? scene.bag_layout : a.bag_layout;
   std::unique_ptr<sim::BagFrameSink> bag;
   if (!a.bag.empty()) {
     // Like --out, the bag's folder is created when missing.
@@ -59,6 +61,11 @@ int runSimulate(const SimulateArgs& a) {
       std::cout << "  bag " << a.bag << ": " << b.messages << " messages, " << b.bytes / 1e6
                 << " MB; cloud_registered (" << reduction.str() << ") kept " << b.points_out
                 << " of " << b.points_in << " points; written in " << b.write_seconds << " s\n";
+      if (bag_params.layout == sim::kLayoutFastlio) {
+        std::cout << "  layout fastlio (a bag per unit: /cloud_registered, /Odometry, /tf; "
+                     "frames camera_init, body):\n";
+        for (const std::string& p : bag->paths()) std::cout << "    " << p << "\n";
+      }
     }
   }
   return 0;

@@ -390,6 +390,65 @@ struct Replay {
   }
 };
 
+// The fastlio layout: a bag per robot, named from the path, each with a stock FAST-LIO2 unit's
+// names (the same on every unit) and the same messages otherwise.
+TEST(SimBag, FastlioLayoutWritesABagPerUnitWithStockNames) {
+  EXPECT_EQ(sim::unitBagPath("/d/run.bag", "alpha"), "/d/run_alpha.bag");
+  EXPECT_EQ(sim::unitBagPath("run", "alpha"), "run_alpha.bag");
+  sim::BagParams bad;
+  bad.layout = "flat";
+  EXPECT_NE(bad.validate().find("layout"), std::string::npos);
+
+  const fs::path dir = tempDir("fastlio");
+  sim::BagParams params;
+  params.layout = sim::kLayoutFastlio;
+  {  // abandoned: no bag, no temporary file
+    sim::BagFrameSink sink((dir / "run.bag").string(), params);
+    sink.onFrame(testFrame("alpha", 10.0));
+    EXPECT_TRUE(fs::exists(dir / "run_alpha.bag.tmp"));
+  }
+  EXPECT_TRUE(fs::is_empty(dir));
+
+  sim::BagFrameSink sink((dir / "run.bag").string(), params);
+  for (int k = 0; k < 3; ++k) {
+    sink.onFrame(testFrame("bravo", 10.0 + 0.1 * k));
+    sink.onFrame(testFrame("alpha", 10.0 + 0.1 * k));
+  }
+  sink.close();
+  EXPECT_EQ(sink.paths(), (std::vector<std::string>{(dir / "run_alpha.bag").string(),
+                                                    (dir / "run_bravo.bag").string()}));
+  EXPECT_FALSE(fs::exists(dir / "run.bag"));
+  EXPECT_EQ(sink.stats().bytes,
+            fs::file_size(dir / "run_alpha.bag") + fs::file_size(dir / "run_bravo.bag"));
+  for (const std::string robot : {"alpha", "bravo"}) {
+    rosbag::Bag b;
+    b.open((dir / ("run_" + robot + ".bag")).string(), rosbag::bagmode::Read);
+    rosbag::View view(b);
+    std::map<std::string, int> count;
+    for (const rosbag::ConnectionInfo* c : view.getConnections()) {
+      EXPECT_EQ(c->header->at("callerid"), "/laserMapping") << c->topic;
+    }
+    for (const rosbag::MessageInstance& m : view) {
+      ++count[m.getTopic()];
+      if (auto o = m.instantiate<nav_msgs::Odometry>()) {
+        EXPECT_EQ(o->header.frame_id, "camera_init");
+        EXPECT_EQ(o->child_frame_id, "body");
+        expectPose(o->pose.pose.position, o->pose.pose.orientation, testFrame(robot, 0).T_O_B);
+      } else if (auto c = m.instantiate<sensor_msgs::PointCloud2>()) {
+        EXPECT_EQ(c->header.frame_id, "camera_init");
+        EXPECT_EQ(c->width, 2u);
+      } else if (auto t = m.instantiate<tf2_msgs::TFMessage>()) {
+        ASSERT_EQ(t->transforms.size(), 1u);
+        EXPECT_EQ(t->transforms[0].header.frame_id, "camera_init");
+        EXPECT_EQ(t->transforms[0].child_frame_id, "body");
+      }
+    }
+    EXPECT_EQ(count,
+              (std::map<std::string, int>{{"/Odometry", 3}, {"/cloud_registered", 3}, {"/tf", 3}}))
+        << robot;
+  }
+}
+
 TEST(SimulateBag, FramesRoundTripAndAssembleIntoSubmaps) {
   sim::SceneParams scene =
       sim::loadSceneYaml(std::string(DTIF_SCENES_DIR) + "/tiny.yaml");  // a fast version of it:

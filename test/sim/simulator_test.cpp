@@ -122,6 +122,20 @@ TEST(SimulatorScenes, UnknownKeysAndBadValuesAreErrors) {
   expectError("robots: [{name: a, waypoints: [[1, 1], [5, 5]], speed: 3}]\n", "speed");
   expectError("robots: [{name: 'a b', waypoints: [[1, 1], [5, 5]]}]\n", "bad name");
   expectError("submap: {duration_s: 10.05}\n" + robots, "whole number of frames");
+  expectError("bag_layout: flat\n" + robots, "bag_layout");
+  expectError("bag_layout: [fastlio]\n" + robots, "bag_layout");
+}
+
+// bag_layout (dtif simulate --bag's default layout) is read, and written into dataset.yaml only
+// when set, so that the datasets of the other scenes stay as they were.
+TEST(SimulatorScenes, BagLayoutKey) {
+  const fs::path p = tempDir("bag_layout") / "scene.yaml";
+  std::ofstream(p) << "bag_layout: fastlio\nrobots: [{name: a, waypoints: [[1, 1], [5, 5]]}]\n";
+  const SceneParams s = loadSceneYaml(p.string());
+  EXPECT_EQ(s.bag_layout, "fastlio");
+  EXPECT_NE(sceneToYaml(s).find("bag_layout: fastlio"), std::string::npos);
+  EXPECT_EQ(tinyScene().bag_layout, "namespaced");
+  EXPECT_EQ(sceneToYaml(tinyScene()).find("bag_layout"), std::string::npos);
 }
 
 namespace {

@@ -136,6 +136,8 @@ TEST(CliTest, NumbersAreValidated) {
   expectUsageError(sim + "--bag-max-points 100", "--bag");
   expectUsageError(sim + "--bag b.bag --bag-compression zip", "--bag-compression");
   expectUsageError(sim + "--bag-compression lz4", "--bag");
+  expectUsageError(sim + "--bag b.bag --bag-layout flat", "--bag-layout");
+  expectUsageError(sim + "--bag-layout fastlio", "--bag");
   expectUsageError("bench d --out o --scaling-sizes 10,x", "--scaling-sizes");
   expectUsageError("bench d --out o --back-ends dtif,nope", "nope");
 }

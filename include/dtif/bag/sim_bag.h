@@ -4,7 +4,10 @@
 //   /<robot>/cloud_registered  sensor_msgs/PointCloud2, frame <robot>/odom, points in O
 //   /<robot>/Odometry          nav_msgs/Odometry, <robot>/odom <- <robot>/base_link, T_O_B
 //   /tf                        tf2_msgs/TFMessage, the same transform
-// published by /<robot>/dtif_simulate (BagParams::node).
+// published by /<robot>/dtif_simulate (BagParams::node). That is the default layout,
+// "namespaced"; layout "fastlio" writes instead one bag per robot as recorded on a stock FAST-LIO2
+// unit (<stem>_<robot>.bag, see unitBagPath): /cloud_registered (frame camera_init), /Odometry
+// (camera_init <- body) and /tf, published by /laserMapping, the same names on every unit.
 // All stamped with Frame::stamp. Written with rosbag_storage's rosbag::Bag and the generated
 // message types; this header stays free of ROS headers (the tool includes it).
 #pragma once
@@ -13,6 +16,7 @@
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "dtif/sim/simulator.h"
 
@@ -28,7 +32,16 @@ class RosbagError : public std::runtime_error {
 
 namespace dtif::sim {
 
+/// BagParams::layout values.
+inline constexpr const char* kLayoutNamespaced = "namespaced";
+inline constexpr const char* kLayoutFastlio = "fastlio";
+
 struct BagParams {
+  /// Topic and frame names, and files: "namespaced" (one bag, /<robot>/cloud_registered,
+  /// /<robot>/Odometry, frames <robot>/odom and <robot>/base_link) or "fastlio" (a bag per robot,
+  /// unitBagPath, with a stock FAST-LIO2 unit's names: /cloud_registered, /Odometry, camera_init,
+  /// body; node /laserMapping, BagParams::node unused).
+  std::string layout = kLayoutNamespaced;
   /// Per-frame centroid voxel filter of cloud_registered (as FAST-LIO2 publishes a downsampled
   /// scan unless dense_publish_en); 0 keeps every return (dense_publish_en), the default: the
   /// submaps TrunkExtractionNodelet assembles from the bag are then the dataset's (both are the
@@ -58,6 +71,10 @@ struct BagParams {
 std::string odomFrame(const std::string& robot);  ///< "<robot>/odom"
 std::string bodyFrame(const std::string& robot);  ///< "<robot>/base_link"
 
+/// The bag of one robot in the fastlio layout: `<dir>/<stem>_<robot>.bag` for path
+/// `<dir>/<stem>.bag` (a path without .bag: its whole file name is the stem).
+std::string unitBagPath(const std::string& path, const std::string& robot);
+
 /// Centroid voxel filter of one frame: points and intensities averaged per voxel, voxels in
 /// order of their first point; non-finite points dropped. voxel_m <= 0: no averaging.
 void voxelFilter(const std::vector<Eigen::Vector3f>& points, const std::vector<float>& intensity,
@@ -74,15 +91,16 @@ void thinEvenly(uint32_t max_points, std::vector<Eigen::Vector3f>* points,
 void cloudRegistered(const Frame& frame, const BagParams& params,
                      std::vector<Eigen::Vector3f>* points, std::vector<float>* intensity);
 
-/// FrameSink writing a bag. Writes `path`.tmp, renamed to `path` by close(); destroyed without
-/// close() (e.g. the simulation threw), it leaves no bag. Not thread-safe (the simulator
+/// FrameSink writing a bag (fastlio layout: a bag per robot, created with the robot's first frame).
+/// Writes each bag as `<its path>`.tmp, renamed by close(); destroyed without close() (e.g. the
+/// simulation threw), it leaves no bag. Not thread-safe (the simulator
 /// serialises onFrame calls).
 class BagFrameSink : public FrameSink {
  public:
   struct Stats {
     uint64_t frames = 0, messages = 0;
     uint64_t points_in = 0, points_out = 0;  ///< returns before / after voxel filter and thinning
-    uint64_t bytes = 0;                      ///< size of the bag file
+    uint64_t bytes = 0;                      ///< size of the bag files
     double write_seconds = 0.0;              ///< wall-clock time spent in onFrame and close [s]
   };
 
@@ -100,6 +118,8 @@ class BagFrameSink : public FrameSink {
   /// closed.
   void close();
   const Stats& stats() const { return stats_; }
+  /// The bags written (or being written), in robot name order for the fastlio layout.
+  std::vector<std::string> paths() const;
 
  private:
   struct Writer;  // rosbag::Bag and the connections, kept out of this header

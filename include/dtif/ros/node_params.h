@@ -14,6 +14,11 @@ struct TrunkExtractionNodeParams {
   std::string input = "odometry";     ///< "odometry": cloud_registered + Odometry; "submap"
   std::string robot;                  ///< robot name; empty: last element of the namespace
   std::string odom_frame;             ///< expected odometry frame; empty: take it from the input
+  /// Odometry frame of everything published (descriptors, markers, clouds, body TF); empty:
+  /// `<robot>/<input frame>` (ros_glue::robotFrame), so units sharing `camera_init` differ.
+  std::string output_odom_frame;
+  bool publish_body_tf = true;  ///< TF output_odom_frame -> `<robot>/<child_frame_id>` (Odometry)
+  double input_timeout_s = 10.0;  ///< warn while an input topic is silent this long; 0: never [s]
   int first_submap_id = 0;            ///< id of the first submap (raise it after a restart)
   int queue_size = 2;                 ///< submaps waiting for extraction; the oldest is dropped
   bool publish_submap_cloud = false;  ///< publish the assembled submap on `submap_cloud`
@@ -25,6 +30,9 @@ struct TrunkExtractionNodeParams {
     v("input", input);
     v("robot", robot);
     v("odom_frame", odom_frame);
+    v("output_odom_frame", output_odom_frame);
+    v("publish_body_tf", publish_body_tf);
+    v("input_timeout_s", input_timeout_s);
     v("first_submap_id", first_submap_id);
     v("queue_size", queue_size);
     v("publish_submap_cloud", publish_submap_cloud);
@@ -44,6 +52,7 @@ struct LoopClosureNodeParams {
   int queue_size = 100;                         ///< descriptors waiting; the oldest is dropped
   std::string loop_log;                         ///< CSV of every query's result; empty: none
   double marker_period_s = 2.0;                 ///< latest loop's markers again (wall); 0: once [s]
+  double input_timeout_s = 30.0;  ///< warn while a robot's descriptor topic is silent; 0: never [s]
 
   template <class V>
   void visit(V& v) {
@@ -55,6 +64,7 @@ struct LoopClosureNodeParams {
     v("queue_size", queue_size);
     v("loop_log", loop_log);
     v("marker_period_s", marker_period_s);
+    v("input_timeout_s", input_timeout_s);
   }
 };
 

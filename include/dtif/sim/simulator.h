@@ -241,6 +241,9 @@ struct SceneParams {
   OdometryParams odometry;
   SubmapParams submap;
   std::vector<RobotRoute> robots;
+  /// Layout of `dtif simulate --bag` when --bag-layout is not given: "namespaced" (one bag,
+  /// /<robot>/...) or "fastlio" (a bag per robot with a stock FAST-LIO2 unit's names; sim_bag.h).
+  std::string bag_layout = "namespaced";
 
   /// Empty when valid, else the problems, one per line.
   std::string validate() const;
