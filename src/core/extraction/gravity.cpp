@@ -36,6 +36,7 @@ struct Shape {
   enum Kind { kPlate, kLine } kind;
   Eigen::Vector3d v;  // plate: normal; line: direction
   int64_t support;    // 2 m column of the cell
+  double h;           // height above the lowest cell of that column [m]
 };
 
 struct Moments {
@@ -52,6 +53,7 @@ std::vector<Shape> cellShapes(const Cloud& cloud, const Eigen::Matrix3d& R,
   std::unordered_map<int64_t, Moments> cells;
   const size_t stride =
       std::max<size_t>(1, cloud.size() / static_cast<size_t>(std::max(1, p.max_points)));
+  cells.reserve(std::min(cloud.size() / stride, size_t{1} << 20) / 2);
   const double inv = 1.0 / p.voxel_m;
   for (size_t i = 0; i < cloud.size(); i += stride) {
     const auto& q = cloud[i];
@@ -64,6 +66,18 @@ std::vector<Shape> cellShapes(const Cloud& cloud, const Eigen::Matrix3d& R,
     m.sum += x;
     m.sxx += x * x.transpose();
   }
+  // The lowest populated cell of each 2 m column: heights above it tell stems from canopy.
+  auto columnOf = [](const Eigen::Vector3d& mean) {
+    return packKey(static_cast<int64_t>(std::floor(mean.x() / kSupportCellM)),
+                   static_cast<int64_t>(std::floor(mean.y() / kSupportCellM)), 0);
+  };
+  std::unordered_map<int64_t, double> lowest;
+  for (const auto& [key, m] : cells) {
+    if (m.n < p.min_voxel_points) continue;
+    const Eigen::Vector3d mean = m.sum / m.n;
+    auto [it, fresh] = lowest.emplace(columnOf(mean), mean.z());
+    if (!fresh) it->second = std::min(it->second, mean.z());
+  }
   std::vector<std::pair<int64_t, Shape>> keyed;
   for (const auto& [key, m] : cells) {
     if (m.n < p.min_voxel_points) continue;
@@ -71,12 +85,12 @@ std::vector<Shape> cellShapes(const Cloud& cloud, const Eigen::Matrix3d& R,
     const Eigen::Matrix3d cov = m.sxx / m.n - mean * mean.transpose();
     const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov);
     const Eigen::Vector3d l = es.eigenvalues();  // ascending
-    const int64_t support = packKey(static_cast<int64_t>(std::floor(mean.x() / kSupportCellM)),
-                                    static_cast<int64_t>(std::floor(mean.y() / kSupportCellM)), 0);
+    const int64_t support = columnOf(mean);
+    const double h = mean.z() - lowest.at(support);
     if (l(2) >= kLinear * std::max(l(1), 1e-12)) {
-      keyed.push_back({key, {Shape::kLine, es.eigenvectors().col(2), support}});
+      keyed.push_back({key, {Shape::kLine, es.eigenvectors().col(2), support, h}});
     } else if (l(1) >= kPlanar * std::max(l(0), 1e-12)) {
-      keyed.push_back({key, {Shape::kPlate, es.eigenvectors().col(0), support}});
+      keyed.push_back({key, {Shape::kPlate, es.eigenvectors().col(0), support, h}});
     }
   }
   // Key order: the result does not depend on the hash map's iteration order.
@@ -121,7 +135,7 @@ UprightFit fitUpright(const std::vector<Shape>& shapes, Eigen::Vector3d up,
     double sw = 0.0;
     for (const Shape& s : shapes) {
       const double a = uprightAngle(s, up);
-      if (a >= band) continue;
+      if (a >= band || s.h < p.slab_min_h_m || s.h > p.slab_max_h_m) continue;
       const double w = tukeyWeight(a, c);
       M += w * (s.kind == Shape::kPlate
                     ? Eigen::Matrix3d(s.v * s.v.transpose())
@@ -134,6 +148,7 @@ UprightFit fitUpright(const std::vector<Shape>& shapes, Eigen::Vector3d up,
   std::unordered_set<int64_t> support;
   double sw = 0.0, swa2 = 0.0;
   for (const Shape& s : shapes) {
+    if (s.h < p.slab_min_h_m || s.h > p.slab_max_h_m) continue;
     const double a = uprightAngle(s, up);
     const double w = a < band ? tukeyWeight(a, p.tukey_deg * kDeg) : 0.0;
     if (w <= 0.0) continue;
@@ -176,6 +191,28 @@ double angleBetween(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
   return std::atan2(a.cross(b).norm(), a.dot(b));
 }
 
+// Cells cut along the current estimate `up` (in S), fitted by `fitter` (in the cut's frame), and
+// re-cut until the estimate moves less than kConvergedDeg: a cell cut obliquely through a stem
+// or the ground biases its shape towards the cell's own axes, a bias that shrinks with the
+// angle between them and gravity. Returns the fit with its up in S.
+template <class Fitter>
+UprightFit cutAndFit(const Cloud& cloud_S, Eigen::Vector3d up, const LevellingParams& params,
+                     const Fitter& fitter) {
+  constexpr int kMaxRecuts = 3;
+  constexpr double kConvergedDeg = 0.3;
+  UprightFit fit;
+  for (int cut = 0; cut < kMaxRecuts; ++cut) {
+    const Eigen::Matrix3d R_cut = levelRotation(up).toRotationMatrix();
+    fit = fitter(cellShapes(cloud_S, R_cut, params));
+    const Eigen::Vector3d next = R_cut.transpose() * fit.up;
+    const double moved = angleBetween(next, up);
+    up = next;
+    if (fit.support < params.min_support_cells || moved < kConvergedDeg * kDeg) break;
+  }
+  fit.up = up;
+  return fit;
+}
+
 }  // namespace
 
 std::string LevellingParams::validate() const {
@@ -191,41 +228,31 @@ std::string LevellingParams::validate() const {
   if (!(overlap_factor >= 1.0)) e << "overlap_factor must be >= 1; ";
   if (!(imu_sigma_deg > 0.0)) e << "imu_sigma_deg must be > 0; ";
   if (max_points < 1000) e << "max_points must be >= 1000; ";
+  if (!(min_tilt_deg >= 0.0)) e << "min_tilt_deg must be >= 0; ";
+  if (warmup_submaps < 1) e << "warmup_submaps must be >= 1; ";
+  if (observe_every < 1) e << "observe_every must be >= 1; ";
+  if (!(slab_min_h_m >= 0.0 && slab_min_h_m < slab_max_h_m)) {
+    e << "need 0 <= slab_min_h_m < slab_max_h_m; ";
+  }
   return e.str();
 }
 
 GravityObservation observeGravity(const Cloud& cloud_S, const Eigen::Vector3d& prior_S,
                                   const LevellingParams& params) {
   GravityObservation obs;
-  // Cells cut along the current estimate, re-cut until it moves less than kConvergedDeg (the
-  // cells' bias towards their own axes shrinks with the angle between them and gravity).
-  constexpr int kMaxRecuts = 4;
-  constexpr double kConvergedDeg = 0.02;
-  Eigen::Vector3d up = prior_S.normalized();
-  UprightFit fit;
-  std::vector<Shape> shapes;
-  Eigen::Matrix3d R_cut = Eigen::Matrix3d::Identity();  // the last cut's R_L_S
-  for (int cut = 0; cut < kMaxRecuts; ++cut) {
-    R_cut = levelRotation(up).toRotationMatrix();
-    shapes = cellShapes(cloud_S, R_cut, params);
-    fit = fitUpright(shapes, Eigen::Vector3d::UnitZ(), params);
-    const Eigen::Vector3d next = R_cut.transpose() * fit.up;
-    const double moved = angleBetween(next, up);
-    up = next;
-    if (fit.support < params.min_support_cells || moved < kConvergedDeg * kDeg) break;
-  }
-  fit.up = up;
+  const Eigen::Vector3d z = Eigen::Vector3d::UnitZ();
+  UprightFit fit = cutAndFit(cloud_S, prior_S.normalized(), params,
+                             [&](const std::vector<Shape>& s) { return fitUpright(s, z, params); });
   if (fit.support >= params.min_support_cells) {
     obs.sigma_deg = std::max(kMinSigmaDeg, fit.rms_rad / std::sqrt(fit.support) / kDeg);
   } else {
-    // Ground normals in the last cut's frame, back to S.
-    fit = fitGround(shapes, Eigen::Vector3d::UnitZ());
-    fit.up = R_cut.transpose() * fit.up;
+    fit = cutAndFit(cloud_S, prior_S.normalized(), params,
+                    [&](const std::vector<Shape>& s) { return fitGround(s, z); });
     if (fit.support < params.min_support_cells) return obs;
     obs.from_ground = true;
     obs.sigma_deg = params.ground_sigma_deg;
   }
-  if (angleBetween(fit.up, Eigen::Vector3d::UnitZ()) > params.max_tilt_deg * kDeg) return obs;
+  if (angleBetween(fit.up, z) > params.max_tilt_deg * kDeg) return obs;
   obs.ok = true;
   obs.up_S = fit.up;
   obs.support_cells = fit.support;
@@ -238,6 +265,10 @@ Eigen::Quaterniond levelRotation(const Eigen::Vector3d& up_S) {
 
 GravityObservation GravityEstimator::addSubmap(const Cloud& cloud_S,
                                                const Eigen::Quaterniond& R_O_S) {
+  const int seen = estimate_.seen++;
+  const bool settled =
+      estimate_.valid && estimate_.sigma_deg < 1.0 && estimate_.submaps >= params_.warmup_submaps;
+  if (settled && seen % std::max(1, params_.observe_every) != 0) return GravityObservation();
   const GravityObservation o = observeGravity(cloud_S, upInSubmap(R_O_S), params_);
   if (o.ok) {
     obs_.push_back({(R_O_S * o.up_S).normalized(), o.sigma_deg * kDeg, false});
@@ -259,7 +290,7 @@ Eigen::Vector3d GravityEstimator::upInSubmap(const Eigen::Quaterniond& R_O_S) co
 }
 
 Eigen::Quaterniond GravityEstimator::levelRotationOf(const Eigen::Quaterniond& R_O_S) const {
-  if (!estimate_.valid) return Eigen::Quaterniond::Identity();
+  if (!estimate_.applied) return Eigen::Quaterniond::Identity();
   return levelRotation(upInSubmap(R_O_S));
 }
 
@@ -297,6 +328,7 @@ void GravityEstimator::update() {
   const double scatter = n_used > 1 ? std::sqrt(swa2 / sw / n_eff) : 0.0;
   e.sigma_deg = std::max(internal, scatter) / kDeg;
   e.tilt_deg = angleBetween(g, Eigen::Vector3d::UnitZ()) / kDeg;
+  e.applied = e.tilt_deg >= params_.min_tilt_deg;
   e.submaps = e.imu = 0;
   for (const Obs& o : obs_) (o.imu ? e.imu : e.submaps)++;
 }

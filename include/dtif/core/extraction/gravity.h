@@ -20,11 +20,22 @@
 namespace dtif {
 
 struct LevellingParams {
-  bool enable = false;            ///< false: submaps are taken as gravity-aligned (no levelling)
-  double voxel_m = 0.3;           ///< cell of the local shape analysis [m]
+  bool enable = true;  ///< false: submaps are taken as gravity-aligned (no levelling)
+  /// A robot whose estimated tilt is below this is taken as level (R_L_S identity): a front end
+  /// that levels its odometry frame is better than the stems tell (its residual is a few tenths
+  /// of a degree, a submap's observation ~0.5 deg), and level data stays as it was [deg].
+  double min_tilt_deg = 2.0;
+  /// After this many observations of a robot (and an uncertainty below 1 deg)...
+  int warmup_submaps = 6;
+  /// ...only every this-many-th submap is observed (the tilt is constant for a run) [submaps].
+  int observe_every = 4;
+  double voxel_m = 0.6;           ///< cell of the local shape analysis [m]
   int min_voxel_points = 8;       ///< points a cell needs for its shape
   double band_deg = 25.0;         ///< upright structure: bark normals within this of horizontal,
                                   ///< thin stems within this of vertical, of the current up [deg]
+  double slab_min_h_m = 0.5;      ///< upright structure is taken from this height above the
+                                  ///< lowest cell of its 2 m column (ground below)... [m]
+  double slab_max_h_m = 6.0;      ///< ...up to this (crowns and foliage above) [m]
   double tukey_deg = 8.0;         ///< robust weight of a cell's angle to the up [deg]
   int iterations = 4;             ///< re-selections of the upright cells per submap
   int min_support_cells = 6;      ///< fewer 2 m cells with upright structure: ground is used
@@ -34,16 +45,21 @@ struct LevellingParams {
   /// independent ones in the running estimate's uncertainty.
   double overlap_factor = 3.0;
   double imu_sigma_deg = 0.5;  ///< default uncertainty of an IMU gravity vector [deg]
-  int max_points = 100000;     ///< evenly strided subsample of the submap for the shape analysis
+  int max_points = 400000;     ///< evenly strided subsample of the submap for the shape analysis
 
   std::string validate() const;
 
   template <class V>
   void visit(V& v) {
     v("enable", enable);
+    v("min_tilt_deg", min_tilt_deg);
+    v("warmup_submaps", warmup_submaps);
+    v("observe_every", observe_every);
     v("voxel_m", voxel_m);
     v("min_voxel_points", min_voxel_points);
     v("band_deg", band_deg);
+    v("slab_min_h_m", slab_min_h_m);
+    v("slab_max_h_m", slab_max_h_m);
     v("tukey_deg", tukey_deg);
     v("iterations", iterations);
     v("min_support_cells", min_support_cells);
@@ -79,7 +95,9 @@ struct GravityEstimate {
   double sigma_deg = 180.0;                         ///< 1-sigma uncertainty [deg]
   double tilt_deg = 0.0;                            ///< angle between up_O and O's z [deg]
   int submaps = 0;                                  ///< submap observations used
-  int imu = 0;                                      ///< IMU observations used
+  int seen = 0;                                     ///< submaps offered (observed or not)
+  bool applied = false;  ///< tilt_deg >= min_tilt_deg: submaps are levelled
+  int imu = 0;           ///< IMU observations used
 };
 
 /// Per-robot running gravity estimate in the odometry frame O. Not thread-safe.
@@ -88,7 +106,7 @@ class GravityEstimator {
   explicit GravityEstimator(const LevellingParams& params) : params_(params) {}
 
   /// Observes a submap (points in S, R_O_S its odometry attitude) and folds it in; returns the
-  /// observation (in S).
+  /// observation (in S; not ok when it failed or was skipped, see observe_every).
   GravityObservation addSubmap(const Cloud& cloud_S, const Eigen::Quaterniond& R_O_S);
   /// Folds in an IMU gravity direction: the mean accelerometer reading at rest expressed in O
   /// (it points up: specific force). sigma_deg <= 0: the params' imu_sigma_deg.
@@ -97,7 +115,7 @@ class GravityEstimator {
   const GravityEstimate& estimate() const { return estimate_; }
   /// Up in S for a submap of attitude R_O_S (S's z without an estimate).
   Eigen::Vector3d upInSubmap(const Eigen::Quaterniond& R_O_S) const;
-  /// R_L_S for a submap of attitude R_O_S (identity without an estimate).
+  /// R_L_S for a submap of attitude R_O_S (identity without an estimate or below min_tilt_deg).
   Eigen::Quaterniond levelRotationOf(const Eigen::Quaterniond& R_O_S) const;
 
  private:
