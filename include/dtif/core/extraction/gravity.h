@@ -45,7 +45,7 @@ struct LevellingParams {
   /// independent ones in the running estimate's uncertainty.
   double overlap_factor = 3.0;
   double imu_sigma_deg = 0.5;  ///< default uncertainty of an IMU gravity vector [deg]
-  int max_points = 400000;     ///< evenly strided subsample of the submap for the shape analysis
+  int max_points = 150000;     ///< evenly strided subsample of the submap for the shape analysis
 
   std::string validate() const;
 
