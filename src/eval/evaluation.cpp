@@ -19,6 +19,7 @@
 #include "dtif/core/database/loop_pair.h"
 #include "dtif/core/descriptor/describe.h"
 #include "dtif/core/descriptor/descriptor.h"
+#include "dtif/core/extraction/gravity.h"
 #include "dtif/core/extraction/trunk_extractor.h"
 #include "dtif/core/timing.h"
 
@@ -52,6 +53,13 @@ PoseError poseError(const Pose& T_gt, const Pose& T_est) {
 }
 
 std::unordered_set<int64_t> overlapCells(const Cloud& cloud_S, const Pose& T_W_S) {
+  const Eigen::Vector3d up_S = T_W_S.rotation().transpose() * Eigen::Vector3d::UnitZ();
+  if (std::acos(std::clamp(up_S.z(), -1.0, 1.0)) * kRadToDeg > kTruthLevelDeg) {
+    const Eigen::Quaterniond R_G_S = levelRotation(up_S);
+    Pose T_W_G = T_W_S;
+    T_W_G.linear() = T_W_S.rotation() * R_G_S.conjugate().toRotationMatrix();
+    return overlapCells(rotateCloud(cloud_S, R_G_S), T_W_G);
+  }
   std::unordered_set<int64_t> cells;
   for (const auto& [ix, iy] : trunkHeightCells(cloud_S, T_W_S, kCellM)) {
     cells.insert(packCell(ix, iy));
@@ -245,7 +253,7 @@ MissRow explainMiss(const Dataset& ds, const CellSets& cells,
   const bool ok = matchPair(q, c, params, &est, &ver).has_value();
   m.outcome = ok ? "accepted" : ver.reason();
   m.hypothesis_inliers = est.inliers_T.size();
-  if (est.ok) m.hypothesis_err = poseError(trueTcq(ds, i, best), est.T_c_q);
+  if (est.ok) m.hypothesis_err = poseError(trueTcq(ds, i, best), submapFramePose(q, c, est.T_c_q));
   m.ambiguity = ver.ambiguity;
   m.fit_ambiguity = ver.fit_ambiguity;
   m.pairs = static_cast<int>(ver.pairs.size());
@@ -348,11 +356,107 @@ EvalSummary summarizeRows(const std::vector<EvalRow>& rows, const std::string& d
   return s;
 }
 
+namespace {
+
+double angleDeg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+  return std::atan2(a.cross(b).norm(), a.dot(b)) * kRadToDeg;
+}
+
+// Levelling as the online system does it (Leveller: each robot's submap observed, then levelled
+// with the estimate after it), scored against the ground-truth attitude into *rows.
+Eigen::Quaterniond levelForEval(Leveller* leveller, const SubmapRecord& rec, const Cloud& cloud,
+                                const Pose& T_W_S, std::vector<LevellingRow>* rows) {
+  if (!leveller->enabled()) return Eigen::Quaterniond::Identity();
+  const Leveller::Result r =
+      leveller->level(rec.robot, cloud, Eigen::Quaterniond(rec.T_O_S.rotation()));
+  const Eigen::Vector3d z = Eigen::Vector3d::UnitZ();
+  const Eigen::Vector3d true_up_S = T_W_S.rotation().transpose() * z;
+  const Eigen::Vector3d used_up_S = r.R_L_S.conjugate() * z;
+  LevellingRow row;
+  row.submap = rec.id;
+  row.robot = rec.robot;
+  row.true_tilt_deg = angleDeg(true_up_S, z);
+  row.used_tilt_deg = angleDeg(used_up_S, z);
+  row.error_deg = angleDeg(used_up_S, true_up_S);
+  if (r.observation.ok) row.observation_error_deg = angleDeg(r.observation.up_S, true_up_S);
+  row.sigma_deg = r.estimate.valid ? r.estimate.sigma_deg : -1.0;
+  row.support_cells = r.observation.support_cells;
+  row.from_ground = r.observation.from_ground;
+  rows->push_back(row);
+  return r.R_L_S;
+}
+
+// The submap levelled by R_L_S and its ground-truth pose, for trunkDetection (trunks are in L).
+DetectionRow levelledDetection(const Cloud& cloud_S, const Eigen::Quaterniond& R_L_S,
+                               const Pose& T_W_S, const Trunks& trunks,
+                               const std::vector<StemRecord>& stems) {
+  if (R_L_S.coeffs() == Eigen::Quaterniond::Identity().coeffs()) {
+    return trunkDetection(cloud_S, T_W_S, trunks, stems);
+  }
+  Pose T_W_L = T_W_S;
+  T_W_L.linear() = T_W_S.rotation() * R_L_S.conjugate().toRotationMatrix();
+  return trunkDetection(rotateCloud(cloud_S, R_L_S), T_W_L, trunks, stems);
+}
+
+}  // namespace
+
+std::vector<LevellingSummary> summarizeLevelling(const std::vector<LevellingRow>& rows) {
+  std::vector<LevellingSummary> out;
+  for (const LevellingRow& r : rows) {
+    auto it = std::find_if(out.begin(), out.end(),
+                           [&](const LevellingSummary& s) { return s.robot == r.robot; });
+    if (it == out.end()) {
+      out.push_back(LevellingSummary{r.robot});
+      it = out.end() - 1;
+    }
+    ++it->submaps;
+    it->true_tilt_deg += r.true_tilt_deg;
+    it->mean_error_deg += r.error_deg;
+    it->max_error_deg = std::max(it->max_error_deg, r.error_deg);
+    it->last_error_deg = r.error_deg;
+    it->last_sigma_deg = r.sigma_deg;
+  }
+  for (LevellingSummary& s : out) {
+    s.true_tilt_deg /= static_cast<double>(s.submaps);
+    s.mean_error_deg /= static_cast<double>(s.submaps);
+  }
+  return out;
+}
+
+void writeLevellingCsv(const std::string& path, const std::vector<LevellingRow>& rows) {
+  std::ofstream os(path);
+  os << "submap,robot,true_tilt_deg,used_tilt_deg,error_deg,observation_error_deg,sigma_deg,"
+        "support_cells,from_ground\n";
+  os << std::setprecision(5);
+  for (const LevellingRow& r : rows) {
+    os << r.submap << ',' << r.robot << ',' << r.true_tilt_deg << ',' << r.used_tilt_deg << ','
+       << r.error_deg << ',' << r.observation_error_deg << ',' << r.sigma_deg << ','
+       << r.support_cells << ',' << int(r.from_ground) << '\n';
+  }
+  os.flush();
+  if (!os) throw DatasetError(path + ": write failed");
+}
+
+std::string formatLevelling(const std::vector<LevellingSummary>& s) {
+  std::ostringstream os;
+  os << std::fixed << std::setprecision(2)
+     << "| Robot | Submaps | True tilt | Levelling error mean | max | last | Reported sigma |\n"
+     << "|---|---|---|---|---|---|---|\n";
+  for (const LevellingSummary& r : s) {
+    os << "| " << r.robot << " | " << r.submaps << " | " << r.true_tilt_deg << " | "
+       << r.mean_error_deg << " | " << r.max_error_deg << " | " << r.last_error_deg << " | "
+       << r.last_sigma_deg << " |\n";
+  }
+  os << "(degrees; error = angle between the levelled frame's z and gravity, ground truth)\n";
+  return os.str();
+}
+
 EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const EvalParams& eval,
                          const std::function<void(size_t, size_t)>& progress) {
   checkGroundTruth(ds);
   EvalResult result;
   LoopDetector detector(params.loop);
+  Leveller leveller(params.levelling);
   CellSets cells;
   cells.reserve(ds.submaps.size());
   std::vector<std::shared_ptr<const Descriptor>> descs;  // every submap's, for explainMiss
@@ -368,16 +472,19 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
     EvalRow row;
     row.query = rec.id;
 
-    // 1. Descriptor (timed: desc).
+    // 1. Descriptor (timed: desc, levelling included).
     TrunkExtractionResult ext;
     DescribeTimings timings;
-    auto desc = std::make_shared<Descriptor>(describeCloud(*cloud, {rec.robot, rec.id, rec.stamp},
-                                                           params.trunk_extraction,
-                                                           params.descriptor, &timings, &ext));
-    row.t_desc_ms = timings.total_ms;
+    const auto t_level = std::chrono::steady_clock::now();
+    const Eigen::Quaterniond R_L_S = levelForEval(&leveller, rec, *cloud, T_W_q, &result.levelling);
+    const double level_ms = msSince(t_level);
+    auto desc = std::make_shared<Descriptor>(
+        describeLevelledCloud(*cloud, R_L_S, {rec.robot, rec.id, rec.stamp},
+                              params.trunk_extraction, params.descriptor, &timings, &ext));
+    row.t_desc_ms = timings.total_ms + (leveller.enabled() ? level_ms : 0.0);
     row.trunks = ext.trunks.size();
     if (!ds.stems.empty()) {
-      result.detection.push_back(trunkDetection(*cloud, T_W_q, ext.trunks, ds.stems));
+      result.detection.push_back(levelledDetection(*cloud, R_L_S, T_W_q, ext.trunks, ds.stems));
       result.detection.back().submap = rec.id;
     }
     row.invalid_reason = desc->invalid_reason;

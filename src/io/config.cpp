@@ -103,6 +103,7 @@ std::string DtifParams::validate() const {
     if (!msg.empty()) out += std::string(section) + ": " + msg + "\n";
   };
   add("trunk_extraction", trunk_extraction.validate());
+  add("levelling", levelling.validate());
   add("descriptor", descriptor.validate());
   add("matcher", loop.matcher.validate());
   add("pose", loop.pose.validate());
@@ -131,13 +132,14 @@ void loadParamsYaml(const std::string& path, DtifParams* p) {
   if (root.IsNull()) return;  // an empty file changes nothing
   if (!root.IsMap()) throw ParamError(path + ": expected a map of parameter sections");
   static const std::set<std::string> kSections = {
-      "trunk_extraction", "descriptor", "matcher", "pose", "verification", "database"};
+      "trunk_extraction", "levelling", "descriptor", "matcher", "pose", "verification", "database"};
   for (const auto& kv : root) {
     const std::string key = kv.first.as<std::string>();
     if (!kSections.count(key)) throw ParamError(path + ": unknown section '" + key + "'");
   }
   DtifParams next = *p;
   readSection(root, "trunk_extraction", path, &next.trunk_extraction);
+  readSection(root, "levelling", path, &next.levelling);
   readSection(root, "descriptor", path, &next.descriptor);
   readSection(root, "matcher", path, &next.loop.matcher);
   readSection(root, "pose", path, &next.loop.pose);
@@ -153,6 +155,7 @@ std::string paramsToYaml(const DtifParams& p) {
   out.SetDoublePrecision(12);
   out << YAML::BeginMap;
   writeSection(out, "trunk_extraction", p.trunk_extraction);
+  writeSection(out, "levelling", p.levelling);
   writeSection(out, "descriptor", p.descriptor);
   writeSection(out, "matcher", p.loop.matcher);
   writeSection(out, "pose", p.loop.pose);

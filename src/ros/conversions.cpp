@@ -59,6 +59,27 @@ bool fromMsg(const geometry_msgs::Pose& msg, Pose* T, std::string* error) {
   return true;
 }
 
+namespace {
+
+// All zeros (a sender from before the field) is no levelling; anything else must be a unit
+// quaternion, which is kept as sent (exactly identity stays "not levelled").
+bool levelRotationFromMsg(const geometry_msgs::Quaternion& m, Eigen::Quaterniond* q,
+                          std::string* error) {
+  if (m.x == 0.0 && m.y == 0.0 && m.z == 0.0 && m.w == 0.0) {
+    *q = Eigen::Quaterniond::Identity();
+    return true;
+  }
+  const Eigen::Quaterniond r(m.w, m.x, m.y, m.z);
+  if (!r.coeffs().allFinite() || std::abs(r.norm() - 1.0) > 1e-3) {
+    *error = "not a unit quaternion";
+    return false;
+  }
+  *q = std::abs(r.norm() - 1.0) > 0.0 ? r.normalized() : r;
+  return true;
+}
+
+}  // namespace
+
 dtif::TrunkDescriptor toMsg(const Descriptor& d, const Pose& T_O_S, const std::string& odom_frame) {
   dtif::TrunkDescriptor m;
   m.header.frame_id = odom_frame;
@@ -66,6 +87,11 @@ dtif::TrunkDescriptor toMsg(const Descriptor& d, const Pose& T_O_S, const std::s
   m.robot = d.robot;
   m.submap_id = d.submap_id;
   m.odom_pose = toMsg(T_O_S);
+  const Eigen::Quaterniond& q = d.level_rotation;
+  m.level_rotation.x = q.x();
+  m.level_rotation.y = q.y();
+  m.level_rotation.z = q.z();
+  m.level_rotation.w = q.w();
   m.trunks.reserve(d.trunks.size());
   for (const TrunkLandmark& t : d.trunks) {
     dtif::Trunk mt;
@@ -132,6 +158,9 @@ bool fromMsg(const dtif::TrunkDescriptor& msg, const DescriptorParams& params, D
   Pose T = Pose::Identity();
   std::string pose_error;
   if (!fromMsg(msg.odom_pose, &T, &pose_error)) return fail(error, "odom_pose: " + pose_error);
+  if (!levelRotationFromMsg(msg.level_rotation, &out.level_rotation, &problem)) {
+    return fail(error, "level_rotation: " + problem);
+  }
   if (T_O_S) *T_O_S = T;
   *d = std::move(out);
   return true;

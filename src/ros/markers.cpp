@@ -110,13 +110,20 @@ visualization_msgs::MarkerArray loopMarkers(const Descriptor& q, const Descripto
     clear.header.stamp = stamp;
     out.markers.push_back(clear);
   }
-  const Pose T_F_Sc = T_F_Sq * lc.T_c_q.inverse();
-  addCylinders(q, T_F_Sq, frame, "query/trunks", stamp, color(1.0f, 0.5f, 0.0f, 0.8f), &out);
-  addCylinders(c, T_F_Sc, frame, "candidate/trunks", stamp, color(0.3f, 0.3f, 1.0f, 0.8f), &out);
+  // Trunks are in each descriptor's levelled frame L (= S when not levelled).
+  auto levelledFrame = [](const Pose& T_F_S, const Descriptor& d) {
+    Pose T_F_L = T_F_S;
+    T_F_L.linear() = T_F_S.rotation() * d.level_rotation.conjugate().toRotationMatrix();
+    return T_F_L;
+  };
+  const Pose T_F_Lq = levelledFrame(T_F_Sq, q);
+  const Pose T_F_Lc = levelledFrame(T_F_Sq * lc.T_c_q.inverse(), c);
+  addCylinders(q, T_F_Lq, frame, "query/trunks", stamp, color(1.0f, 0.5f, 0.0f, 0.8f), &out);
+  addCylinders(c, T_F_Lc, frame, "candidate/trunks", stamp, color(0.3f, 0.3f, 1.0f, 0.8f), &out);
   out.markers.push_back(
-      edgeMarker(q, T_F_Sq, frame, "query/topology", 0, stamp, color(1.0f, 0.5f, 0.0f)));
+      edgeMarker(q, T_F_Lq, frame, "query/topology", 0, stamp, color(1.0f, 0.5f, 0.0f)));
   out.markers.push_back(
-      edgeMarker(c, T_F_Sc, frame, "candidate/topology", 0, stamp, color(0.3f, 0.3f, 1.0f)));
+      edgeMarker(c, T_F_Lc, frame, "candidate/topology", 0, stamp, color(0.3f, 0.3f, 1.0f)));
 
   auto pairs = [&](const std::vector<std::pair<int, int>>& ps, const std::string& ns,
                    const std_msgs::ColorRGBA& col, double width) {
@@ -129,8 +136,8 @@ visualization_msgs::MarkerArray loopMarkers(const Descriptor& q, const Descripto
         continue;
       }
       // Query vertex at 2.5 m, candidate vertex at 3.0 m so coincident pairs stay visible.
-      m.points.push_back(point(T_F_Sq * trunkPoint(q.trunks[p.first], 2.5)));
-      m.points.push_back(point(T_F_Sc * trunkPoint(c.trunks[p.second], 3.0)));
+      m.points.push_back(point(T_F_Lq * trunkPoint(q.trunks[p.first], 2.5)));
+      m.points.push_back(point(T_F_Lc * trunkPoint(c.trunks[p.second], 3.0)));
     }
     out.markers.push_back(m);
   };

@@ -1,5 +1,6 @@
-// dtif/TrunkExtractionNodelet: one per robot. Assembles gravity-aligned submaps (or takes
-// ready-made ones), extracts trunks and publishes the trunk-topology descriptor.
+// dtif/TrunkExtractionNodelet: one per robot. Assembles submaps (or takes ready-made ones),
+// levels them with the robot's gravity estimate (core Leveller), extracts trunks and publishes
+// the trunk-topology descriptor.
 #include <nav_msgs/Odometry.h>
 #include <nodelet/nodelet.h>
 #include <pcl/common/transforms.h>
@@ -24,6 +25,7 @@
 #include "dtif/core/descriptor/describe.h"
 #include "dtif/core/descriptor/descriptor.h"
 #include "dtif/core/extraction/point_bounds.h"
+#include "dtif/core/extraction/gravity.h"
 #include "dtif/core/extraction/trunk_extractor.h"
 #include "dtif/core/timing.h"
 #include "dtif/ros/conversions.h"
@@ -61,9 +63,10 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
       reader.readSection("", &assembler_params_);
       reader.readSection("trunk_extraction", &extractor_params_);
       reader.readSection("descriptor", &descriptor_params_);
+      reader.readSection("levelling", &levelling_params_);
       reader.checkNoUnknownKeys();
       std::string problems = assembler_params_.validate() + extractor_params_.validate() +
-                             descriptor_params_.validate();
+                             descriptor_params_.validate() + levelling_params_.validate();
       if (node_.input != "odometry" && node_.input != "submap") {
         problems += "input must be 'odometry' or 'submap', not '" + node_.input + "'\n";
       }
@@ -92,6 +95,7 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
     if (node_.input == "odometry" && assembler_params_.voxel_m > 0.0) {
       voxel_grid_ = std::make_unique<VoxelCentroidGrid>(assembler_params_.voxel_m);
     }
+    leveller_ = std::make_unique<Leveller>(levelling_params_);
     recent_markers_ =
         std::make_unique<ros_glue::RecentMarkers>(static_cast<size_t>(node_.marker_history));
     descriptor_pub_ = nh.advertise<dtif::TrunkDescriptor>("descriptor", 10);
@@ -321,11 +325,17 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
   void process(ros_glue::AssembledSubmap& s, const std::string& frame) {
     const auto t0 = std::chrono::steady_clock::now();
     if (voxel_grid_) ros_glue::voxelFilterSubmap(voxel_grid_.get(), s.cloud.get());
+    // Levelling (the odometry frame may be tilted, e.g. upstream FAST-LIO2's camera_init).
+    const Leveller::Result lev =
+        leveller_->level(node_.robot, *s.cloud, Eigen::Quaterniond(s.T_O_S.rotation()));
+    logLevelling(lev.estimate);
     TrunkExtractionResult ext;
-    const Descriptor d = describeCloud(*s.cloud, {node_.robot, s.id, s.stamp}, extractor_params_,
-                                       descriptor_params_, nullptr, &ext);
+    const Descriptor d = describeLevelledCloud(*s.cloud, lev.R_L_S, {node_.robot, s.id, s.stamp},
+                                               extractor_params_, descriptor_params_, nullptr, &ext);
     const std::string bounds = boundsWarning(ext.stats, extractor_params_);
     if (!bounds.empty()) NODELET_WARN("submap %ld: %s", static_cast<long>(s.id), bounds.c_str());
+    Pose T_O_L = s.T_O_S;  // trunks are in the levelled frame
+    T_O_L.linear() = s.T_O_S.rotation() * lev.R_L_S.conjugate().toRotationMatrix();
     const double ms = msSince(t0);
     NODELET_DEBUG("submap %ld: %zu points, %zu trunks, %zu faces, %.1f ms%s%s",
                   static_cast<long>(s.id), s.cloud->size(), d.trunks.size(), d.triangles.size(), ms,
@@ -338,7 +348,7 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
     // rviz use the latest transform to another robot's frame, which exists only after the first
     // loop between the two, i.e. after most submaps' stamps.
     visualization_msgs::MarkerArray markers = ros_glue::trunkMarkers(
-        d, s.T_O_S, frame, node_.robot + "/submap_" + std::to_string(s.id), ros::Time());
+        d, T_O_L, frame, node_.robot + "/submap_" + std::to_string(s.id), ros::Time());
     if (trunks_pub_.getNumSubscribers() > 0) {
       trunks_pub_.publish(boost::shared_ptr<const visualization_msgs::MarkerArray>(
           new visualization_msgs::MarkerArray(markers)));
@@ -355,6 +365,16 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
     }
   }
 
+  // The robot's gravity estimate, every 30 s (worker thread).
+  void logLevelling(const GravityEstimate& e) {
+    if (!leveller_->enabled() || !e.valid) return;
+    NODELET_INFO_THROTTLE(30.0,
+                          "gravity: odometry frame tilted %.2f deg (+- %.2f deg, %d submaps, %d "
+                          "IMU), levelling %s",
+                          e.tilt_deg, e.sigma_deg, e.submaps, e.imu,
+                          e.applied ? "applied" : "not needed (below min_tilt_deg)");
+  }
+
   // The trunk markers of the latest marker_history submaps, all again (timer thread).
   void republishMarkers() {
     if (trunks_pub_.getNumSubscribers() == 0) return;
@@ -365,6 +385,8 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
   ros_glue::SubmapAssemblerParams assembler_params_;
   TrunkExtractorParams extractor_params_;
   DescriptorParams descriptor_params_;
+  LevellingParams levelling_params_;
+  std::unique_ptr<Leveller> leveller_;  // worker thread only
 
   // assembler_, odom_frame_, out_frame_, last_submap_stamp_, next_submap_id_, last_warning_
   std::mutex mutex_;

@@ -181,6 +181,24 @@ void prepareFolder(const std::string& dir) {
   if (ec) throw DatasetError(dir + ": cannot create the folder: " + ec.message());
 }
 
+// The tilt of each robot's camera_init (only when some robot's is tilted, so that level
+// scenes describe themselves as before).
+std::string odometryFramesYaml(const Simulator& sim) {
+  bool tilted = false;
+  for (const Trajectory& tr : sim.trajectories()) tilted = tilted || tr.tilt_deg != 0.0;
+  if (!tilted) return "";
+  std::ostringstream y;
+  y << "  submap_frame_tilt: S keeps the z of its robot's odometry frame O (camera_init), tilted\n"
+    << "    from gravity as below; ground truth T_W_S holds the true attitude\n"
+    << "odometry_frames:  # camera_init per robot, as upstream FAST-LIO2 initialises it\n";
+  for (const Trajectory& tr : sim.trajectories()) {
+    y << "  " << tr.robot << ": {tilt_deg: " << tr.tilt_deg
+      << ", tilt_azimuth_deg: " << tr.tilt_azimuth_deg << ", up_in_O: [" << tr.up_O.x() << ", "
+      << tr.up_O.y() << ", " << tr.up_O.z() << "]}\n";
+  }
+  return y.str();
+}
+
 }  // namespace
 
 DatasetRunResult simulateDataset(const SceneParams& scene, uint64_t seed, const std::string& dir,
@@ -219,7 +237,7 @@ DatasetRunResult simulateDataset(const SceneParams& scene, uint64_t seed, const 
     << "    residual roll/pitch error stays in the points (T_W_S is not yaw-only)\n"
     << "  stems_xy: stem axis at 1.3 m above the base (stems lean); z_base: terrain at the base\n"
     << "  stems: trunks only (saplings, shrubs, logs and branches are clutter)\n"
-    << "stats:\n"
+    << odometryFramesYaml(sim) << "stats:\n"
     << "  stems: " << result.stats.stems << "\n"
     << "  saplings: " << result.stats.saplings << "\n"
     << "  shrubs: " << result.stats.shrubs << "\n"

@@ -201,6 +201,15 @@ void checkOdometry(const OdometryParams& odometry, std::ostringstream* errors) {
   check(odometry.tilt_time_s > 0, "odometry.tilt_time_s must be > 0", &e);
 }
 
+void checkFastLio(const FastLioParams& f, std::ostringstream* errors) {
+  std::ostringstream& e = *errors;
+  check(f.init_tilt_min_deg >= 0 && f.init_tilt_min_deg <= f.init_tilt_max_deg &&
+            f.init_tilt_max_deg <= 30,
+        "fastlio: need 0 <= init_tilt_min_deg <= init_tilt_max_deg <= 30", &e);
+  check(f.point_filter_num >= 1 && f.point_filter_num <= 100, "fastlio.point_filter_num: 1..100",
+        &e);
+}
+
 // A submap is a whole number of frames.
 void checkSubmap(const SubmapParams& submap, const SensorParams& sensor,
                  std::ostringstream* errors) {
@@ -253,6 +262,10 @@ void checkRobots(const std::vector<RobotRoute>& robots, const PlotParams& plot,
     // A route of coinciding waypoints has no length: the walk overran its one-point path.
     check(r.waypoints.size() < 2 || routeLength(r) >= 1.0,
           "robots." + r.name + ": waypoints coincide (the route is shorter than 1 m)", &e);
+    check(!r.tilt_deg || (*r.tilt_deg >= 0 && *r.tilt_deg <= 30),
+          "robots." + r.name + ".tilt_deg must be 0..30", &e);
+    check(!r.tilt_azimuth_deg || std::isfinite(*r.tilt_azimuth_deg),
+          "robots." + r.name + ".tilt_azimuth_deg must be a number", &e);
     if (stems.stem_map.empty()) {
       for (const auto& w : r.waypoints) {
         check(w.x() >= 0 && w.y() >= 0 && w.x() <= plot.size_x_m && w.y() <= plot.size_y_m,
@@ -280,6 +293,7 @@ std::string SceneParams::validate() const {
   checkSensor(sensor, &e);
   checkMotion(motion, &e);
   checkOdometry(odometry, &e);
+  checkFastLio(fastlio, &e);
   checkSubmap(submap, sensor, &e);
   checkRobots(robots, plot, stems, &e);
   check(bag_layout == "namespaced" || bag_layout == "fastlio",
@@ -308,7 +322,8 @@ YAML::Node loadSceneRoot(const std::string& path) {
   if (!root.IsMap()) throw ParamError(path + ": the scene must be a YAML map");
   static const std::set<std::string> kTop = {
       "name",       "description", "epoch_s", "plot",     "terrain", "stems",  "trees",
-      "understory", "sensor",      "motion",  "odometry", "submap",  "robots", "bag_layout"};
+      "understory", "sensor",      "motion",  "odometry", "fastlio", "submap", "robots",
+      "bag_layout"};
   for (const auto& kv : root) {
     const std::string key = kv.first.as<std::string>();
     if (!kTop.count(key)) throw ParamError(path + ": unknown key '" + key + "'");
@@ -321,7 +336,8 @@ RobotRoute readRobot(const YAML::Node& r, const std::string& where) {
   if (!r.IsMap()) throw ParamError(where + ": must be a map");
   for (const auto& kv : r) {
     const std::string key = kv.first.as<std::string>();
-    if (key != "name" && key != "waypoints" && key != "start_s") {
+    if (key != "name" && key != "waypoints" && key != "start_s" && key != "tilt_deg" &&
+        key != "tilt_azimuth_deg") {
       throw ParamError(where + ": unknown key '" + key + "'");
     }
   }
@@ -329,6 +345,8 @@ RobotRoute readRobot(const YAML::Node& r, const std::string& where) {
   try {
     route.name = r["name"].as<std::string>("");
     route.start_s = r["start_s"].as<double>(0.0);
+    if (r["tilt_deg"]) route.tilt_deg = r["tilt_deg"].as<double>();
+    if (r["tilt_azimuth_deg"]) route.tilt_azimuth_deg = r["tilt_azimuth_deg"].as<double>();
     for (const auto& w : r["waypoints"]) {
       const auto xy = w.as<std::vector<double>>();
       if (xy.size() != 2) throw ParamError(where + ": a waypoint must be [x, y]");
@@ -336,8 +354,8 @@ RobotRoute readRobot(const YAML::Node& r, const std::string& where) {
     }
   } catch (const YAML::Exception&) {
     throw ParamError(where +
-                     ": wrong type (name: string, start_s: number, "
-                     "waypoints: [[x, y], ...])");
+                     ": wrong type (name: string, start_s, tilt_deg, tilt_azimuth_deg: "
+                     "number, waypoints: [[x, y], ...])");
   }
   return route;
 }
@@ -374,6 +392,7 @@ SceneParams loadSceneYaml(const std::string& path) {
   readSection(root, "sensor", path, &s.sensor);
   readSection(root, "motion", path, &s.motion);
   readSection(root, "odometry", path, &s.odometry);
+  readSection(root, "fastlio", path, &s.fastlio);
   readSection(root, "submap", path, &s.submap);
   s.robots = readRobots(root, path);
   // The stem map travels with the scene: relative to the YAML's folder, not the working one.
@@ -403,11 +422,17 @@ std::string sceneToYaml(const SceneParams& s) {
   writeSection(&out, "sensor", s.sensor);
   writeSection(&out, "motion", s.motion);
   writeSection(&out, "odometry", s.odometry);
+  // Only when used, so that the description of a levelled scene stays as it was.
+  if (!s.fastlio.isDefault()) writeSection(&out, "fastlio", s.fastlio);
   writeSection(&out, "submap", s.submap);
   out << YAML::Key << "robots" << YAML::Value << YAML::BeginSeq;
   for (const auto& r : s.robots) {
     out << YAML::BeginMap << YAML::Key << "name" << YAML::Value << r.name;
     out << YAML::Key << "start_s" << YAML::Value << r.start_s;
+    if (r.tilt_deg) out << YAML::Key << "tilt_deg" << YAML::Value << *r.tilt_deg;
+    if (r.tilt_azimuth_deg) {
+      out << YAML::Key << "tilt_azimuth_deg" << YAML::Value << *r.tilt_azimuth_deg;
+    }
     out << YAML::Key << "waypoints" << YAML::Value << YAML::Flow << YAML::BeginSeq;
     for (const auto& w : r.waypoints) {
       out << YAML::Flow << YAML::BeginSeq << w.x() << w.y() << YAML::EndSeq;

@@ -224,6 +224,9 @@ class WindowScanner {
                  bool keep_points, WindowStreams* streams, Frame* frame, WindowScan* out) {
     frame->robot = tr.robot;
     frame->robot_index = robot;
+    // FAST-LIO2's preprocess: every point_filter_num-th valid return of the frame is kept.
+    const int filter_num = scene_.fastlio.point_filter_num;
+    int valid = 0;
     for (int sl = 0; sl < slices_per_frame_; ++sl) {
       const size_t i = static_cast<size_t>(f) * slices_per_frame_ + sl;
       const Pose& T_W_B = tr.T_W_B[i];
@@ -235,6 +238,7 @@ class WindowScanner {
         ++out->rays;
         if (!scanRay(T_W_B, T_O_B, k_pt, streams, &p_O, &intensity)) continue;
         ++out->returns;
+        if (++valid % filter_num != 0) continue;
         if (keep_points) {
           frame->points.push_back(p_O.cast<float>());
           frame->intensity.push_back(intensity);

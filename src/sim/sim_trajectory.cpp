@@ -266,8 +266,11 @@ class Walker {
 // (both per metre walked) and a slowly wandering roll/pitch error (Ornstein-Uhlenbeck).
 class DriftingOdometry {
  public:
-  // Draws the robot's drift rates and initial tilt from `rng`.
-  DriftingOdometry(const OdometryParams& op, double dt, std::mt19937_64& rng) : n01_(0.0, 1.0) {
+  // Draws the robot's drift rates and initial tilt from `rng`. `R_tilt` (identity: level) is
+  // camera_init's attitude relative to the robot's initial heading (FastLioParams).
+  DriftingOdometry(const OdometryParams& op, double dt, const Eigen::Matrix3d& R_tilt,
+                   std::mt19937_64& rng)
+      : n01_(0.0, 1.0), R_tilt_(R_tilt) {
     auto signedRate = [&](double lo, double hi) {
       return (uniform(rng, 0, 1) < 0.5 ? -1.0 : 1.0) * uniform(rng, lo, hi);
     };
@@ -284,11 +287,13 @@ class DriftingOdometry {
   }
 
   // The odometry pose T_O_B for the next true pose T_W_B with head yaw `yaw`. `first`: the
-  // odometry frame O (camera_init) starts there, gravity-aligned.
+  // odometry frame O (camera_init) starts there, gravity-aligned unless tilted.
   Pose step(const Pose& T_W_B, double yaw, bool first, std::mt19937_64& rng) {
     const Eigen::Vector3d p = T_W_B.translation();
     if (first) {
       T_W_O_.linear() = rotZ(yaw);
+      // Skipped when level, so that level scenes stay bit for bit as they were.
+      if (!R_tilt_.isIdentity(0.0)) T_W_O_.linear() = T_W_O_.linear() * R_tilt_;
       T_W_O_.translation() = p;
       p_est_ = p;
     } else {
@@ -311,6 +316,7 @@ class DriftingOdometry {
  private:
   // One stream for the initial tilt and every update: std::normal_distribution keeps a spare.
   std::normal_distribution<double> n01_;
+  Eigen::Matrix3d R_tilt_;
   Eigen::Vector3d drift_;
   double yaw_rate_ = 0.0;
   double tilt_r_ = 0.0, tilt_p_ = 0.0;
@@ -320,15 +326,41 @@ class DriftingOdometry {
   double dpsi_ = 0.0, dist_ = 0.0;
 };
 
+// camera_init's tilt of robot r: the route's own values, else drawn from the scene's range on
+// a stream of its own (so that a level scene draws nothing and stays as it was).
+void drawTilt(const SceneParams& scene, const RobotRoute& route, uint64_t seed, size_t r,
+              Trajectory* tr) {
+  std::mt19937_64 rng(seed * 1000003ULL + 7919ULL * (r + 1) + 0x7e1e7ULL);
+  const FastLioParams& f = scene.fastlio;
+  const bool draw = f.init_tilt_max_deg > 0.0;
+  const double tilt = draw ? uniform(rng, f.init_tilt_min_deg, f.init_tilt_max_deg) : 0.0;
+  const double azimuth = draw ? uniform(rng, 0.0, 360.0) : 0.0;
+  tr->tilt_deg = route.tilt_deg.value_or(tilt);
+  tr->tilt_azimuth_deg = route.tilt_azimuth_deg.value_or(azimuth);
+}
+
+// camera_init relative to the initial heading: z leans by tilt towards the azimuth.
+Eigen::Matrix3d tiltRotation(double tilt_deg, double azimuth_deg) {
+  if (tilt_deg == 0.0) return Eigen::Matrix3d::Identity();
+  const double a = azimuth_deg * kDeg;
+  return Eigen::AngleAxisd(tilt_deg * kDeg, Eigen::Vector3d(-std::sin(a), std::cos(a), 0.0))
+      .toRotationMatrix();
+}
+
 // Ground truth and odometry of one robot, sampled at kTrajectoryRateHz.
 Trajectory makeTrajectory(const World& world, const WalkGrid& grid, const SceneParams& scene,
-                          const RobotRoute& route, std::mt19937_64& rng) {
+                          const RobotRoute& route, uint64_t seed, size_t r) {
+  std::mt19937_64 rng(seed * 1000003ULL + 7919ULL * (r + 1));
   const double ds = 0.05;
   const PathSampler path(walkingPath(grid, route, ds), ds);
   Walker walker(world, scene.motion, path, rng);
   const double dt = 1.0 / kTrajectoryRateHz;
-  DriftingOdometry odometry(scene.odometry, dt, rng);
   Trajectory tr;
+  drawTilt(scene, route, seed, r, &tr);
+  const Eigen::Matrix3d R_tilt = tiltRotation(tr.tilt_deg, tr.tilt_azimuth_deg);
+  // Gravity's up seen from O: the initial heading's z through the tilt.
+  tr.up_O = R_tilt.transpose() * Eigen::Vector3d::UnitZ();
+  DriftingOdometry odometry(scene.odometry, dt, R_tilt, rng);
   tr.robot = route.name;
   tr.start_s = route.start_s;
   double s = 0.0, t = 0.0;
@@ -352,8 +384,7 @@ std::vector<Trajectory> makeTrajectories(const World& world, const SceneParams& 
   const WalkGrid grid(world, scene.motion.clearance_m);
   std::vector<Trajectory> trajectories;
   for (size_t r = 0; r < scene.robots.size(); ++r) {
-    std::mt19937_64 rng(seed * 1000003ULL + 7919ULL * (r + 1));
-    trajectories.push_back(makeTrajectory(world, grid, scene, scene.robots[r], rng));
+    trajectories.push_back(makeTrajectory(world, grid, scene, scene.robots[r], seed, r));
   }
   return trajectories;
 }

@@ -29,6 +29,17 @@ void writeEvalFiles(const std::string& out, const EvalResult& res, const std::st
   if (!t || !p) throw DatasetError(out + ": write failed");
 }
 
+// Levelling (when enabled): levelling.csv, and the per-robot errors on stdout and in table.md.
+void printLevelling(const std::filesystem::path& dir, const EvalResult& res) {
+  if (res.levelling.empty()) return;
+  writeLevellingCsv((dir / "levelling.csv").string(), res.levelling);
+  const std::string table = formatLevelling(summarizeLevelling(res.levelling));
+  std::cout << "levelling per robot (levelling.csv):\n" << table;
+  std::ofstream t(dir / "table.md", std::ios::app);
+  t << "\n" << table;
+  if (!t) throw DatasetError((dir / "table.md").string() + ": write failed");
+}
+
 int runEval(const EvalArgs& a) {
   DtifParams params = loadParams(a.configs);
   if (a.unit_weights) params.loop.pose.unit_weights = true;
@@ -51,6 +62,7 @@ int runEval(const EvalArgs& a) {
   const std::filesystem::path dir(a.out);
   writeMissesCsv((dir / "misses.csv").string(), res.misses);
   std::cout << "dataset " << ds.root << ": " << res.summary.submaps << " submaps\n" << table;
+  printLevelling(dir, res);
   if (!res.detection.empty()) {
     writeDetectionCsv((dir / "detection.csv").string(), res.detection);
     double pts = 0, vis = 0, tr = 0, on = 0, found = 0, seen = 0, r_sum = 0, z_sum = 0;

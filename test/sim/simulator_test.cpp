@@ -549,6 +549,76 @@ TEST(SimulatorStemMap, LoadsACsvStemMap) {
   }
 }
 
+// Upstream FAST-LIO2: camera_init tilted per robot. S keeps O's tilted z; T_W_S holds it; the
+// points still land on the trunks through T_W_S; point_filter_num keeps every Nth return.
+TEST(SimulatorFastLio, TiltedOdometryFrameAndPointFilter) {
+  SceneParams s = liteScene();
+  s.robots[0].tilt_deg = 12.0;
+  s.robots[0].tilt_azimuth_deg = 40.0;
+  s.fastlio.init_tilt_min_deg = 5.0;  // bravo draws its own
+  s.fastlio.init_tilt_max_deg = 15.0;
+  Simulator level(liteScene(), 5), tilted(s, 5);
+  EXPECT_DOUBLE_EQ(tilted.trajectories()[0].tilt_deg, 12.0);
+  const double bravo_tilt = tilted.trajectories()[1].tilt_deg;
+  EXPECT_GE(bravo_tilt, 5.0);
+  EXPECT_LE(bravo_tilt, 15.0);
+  for (const Trajectory& tr : tilted.trajectories()) {
+    EXPECT_NEAR(std::acos(tr.up_O.z()) / kDeg, tr.tilt_deg, 1e-9);
+  }
+  CollectSubmaps a, b;
+  level.run(nullptr, &a, 2);
+  tilted.run(nullptr, &b, 2);
+  ASSERT_EQ(a.submaps.size(), b.submaps.size());
+  for (const auto& [id, sm] : b.submaps) {
+    SCOPED_TRACE(id);
+    const Trajectory& tr = tilted.trajectories()[sm.robot_index];
+    // S's up is O's up (S turns about O's z only), up to the odometry's residual tilt.
+    const Eigen::Vector3d up_S = sm.T_W_S.linear().transpose() * Eigen::Vector3d::UnitZ();
+    const Eigen::Vector3d up_S_from_O = sm.T_O_S.linear().transpose() * tr.up_O;
+    EXPECT_LT(std::acos(std::clamp(up_S.dot(up_S_from_O), -1.0, 1.0)) / kDeg, 1.5);
+    EXPECT_NEAR(std::acos(up_S.z()) / kDeg, tr.tilt_deg, 1.5);
+    // The same returns in a tilted frame (voxelised along other axes): the same cloud in W.
+    const Submap& lv = a.submaps.at(id);
+    EXPECT_NEAR(static_cast<double>(sm.points.size()), static_cast<double>(lv.points.size()),
+                0.05 * static_cast<double>(lv.points.size()));
+    Eigen::Vector3d mean_t = Eigen::Vector3d::Zero(), mean_l = Eigen::Vector3d::Zero();
+    for (const auto& p : sm.points) mean_t += sm.T_W_S * p.cast<double>();
+    for (const auto& p : lv.points) mean_l += lv.T_W_S * p.cast<double>();
+    mean_t /= static_cast<double>(sm.points.size());
+    mean_l /= static_cast<double>(lv.points.size());
+    EXPECT_LT((mean_t - mean_l).norm(), 0.05);
+  }
+  // Every third return.
+  SceneParams f = liteScene();
+  f.fastlio.point_filter_num = 3;
+  CollectFrames all, third;
+  Simulator(liteScene(), 5).run(&all, nullptr, 1);
+  Simulator(f, 5).run(&third, nullptr, 1);
+  ASSERT_EQ(all.frames.size(), third.frames.size());
+  for (size_t i = 0; i < 40; ++i) {
+    EXPECT_EQ(third.frames[i].points.size(), all.frames[i].points.size() / 3);
+    if (third.frames[i].points.empty()) continue;
+    EXPECT_EQ(third.frames[i].points[0], all.frames[i].points[2]);  // the 3rd, 6th, ...
+  }
+}
+
+TEST(SimulatorFastLio, LevelScenesDrawNoTiltAndBadValuesAreErrors) {
+  for (const Trajectory& tr : Simulator(liteScene(), 5).trajectories()) {
+    EXPECT_EQ(tr.tilt_deg, 0.0);
+    EXPECT_EQ(tr.up_O, Eigen::Vector3d::UnitZ());
+  }
+  SceneParams s = liteScene();
+  s.fastlio.point_filter_num = 0;
+  EXPECT_NE(s.validate().find("point_filter_num"), std::string::npos);
+  s = liteScene();
+  s.fastlio.init_tilt_min_deg = 10;
+  s.fastlio.init_tilt_max_deg = 5;
+  EXPECT_NE(s.validate().find("init_tilt"), std::string::npos);
+  s = liteScene();
+  s.robots[0].tilt_deg = 45;
+  EXPECT_NE(s.validate().find("tilt_deg"), std::string::npos);
+}
+
 namespace dtif {
 namespace {
 

@@ -31,7 +31,12 @@ struct PoseError {
 PoseError poseError(const Pose& T_gt, const Pose& T_est);
 
 /// Occupied 1 m x 1 m cells in W of a submap's points 0.3-3.0 m above its local ground
-/// (DATASET.md), trunkHeightCells on every point. Cell keys pack (ix, iy).
+/// (DATASET.md), trunkHeightCells on every point. Cell keys pack (ix, iy). A submap frame
+/// tilted more than kTruthLevelDeg from gravity (upstream FAST-LIO2) is first levelled with
+/// its ground-truth attitude, so that "above the local ground" means what it means for a level
+/// one; level frames (up to the front end's residual) are taken as they are.
+std::unordered_set<int64_t> overlapCells(const Cloud& cloud_S, const Pose& T_W_S);
+constexpr double kTruthLevelDeg = 3.0;
 std::unordered_set<int64_t> overlapCells(const Cloud& cloud_S, const Pose& T_W_S);
 
 /// |A cap B| / min(|A|, |B|); 0 when either is empty.
@@ -103,8 +108,36 @@ struct MissRow {
   int ground_cells = 0;
 };
 
+/// Levelling of one submap (params `levelling`, gravity.h) against ground truth: an extra output
+/// of eval (levelling.csv), only when levelling is enabled.
+struct LevellingRow {
+  int64_t submap = -1;
+  std::string robot;
+  double true_tilt_deg = 0.0;  ///< S's z from gravity (ground truth T_W_S) [deg]
+  double used_tilt_deg = 0.0;  ///< tilt of S the levelling removed (R_L_S) [deg]
+  double error_deg = 0.0;      ///< levelled frame L's z from gravity: the levelling error [deg]
+  double observation_error_deg = -1.0;  ///< this submap's own observation vs truth; -1: none
+  double sigma_deg = 0.0;               ///< the estimate's reported uncertainty [deg]
+  int support_cells = 0;                ///< of the observation
+  bool from_ground = false;             ///< observation from ground normals (few stems)
+};
+
+/// Per robot: mean and max levelling error, the last submap's, the reported uncertainty.
+struct LevellingSummary {
+  std::string robot;
+  size_t submaps = 0;
+  double true_tilt_deg = 0.0;  ///< mean over the robot's submaps [deg]
+  double mean_error_deg = 0.0, max_error_deg = 0.0, last_error_deg = 0.0, last_sigma_deg = 0.0;
+};
+std::vector<LevellingSummary> summarizeLevelling(const std::vector<LevellingRow>& rows);
+/// levelling.csv: one row per LevellingRow. Throws DatasetError.
+void writeLevellingCsv(const std::string& path, const std::vector<LevellingRow>& rows);
+/// A text table of the per-robot summaries.
+std::string formatLevelling(const std::vector<LevellingSummary>& s);
+
 struct EvalResult {
   std::vector<EvalRow> rows;
+  std::vector<LevellingRow> levelling;  ///< per submap; empty unless levelling is enabled
   EvalSummary summary;
   std::vector<DetectionRow> detection;  ///< per submap; empty without stems.csv
   std::vector<MissRow> misses;          ///< queries with a true loop and no true positive

@@ -5,6 +5,7 @@
 
 #include "dtif/core/database/loop_detector.h"
 #include "dtif/core/descriptor/descriptor.h"
+#include "dtif/core/extraction/gravity.h"
 #include "dtif/core/extraction/trunk_extractor.h"
 #include "dtif/core/params.h"
 
@@ -12,6 +13,7 @@ namespace dtif {
 
 struct DtifParams {
   TrunkExtractorParams trunk_extraction;  ///< YAML section `trunk_extraction`
+  LevellingParams levelling;              ///< YAML section `levelling` (gravity.h)
   DescriptorParams descriptor;            ///< YAML section `descriptor`
   LoopDetectorParams loop;  ///< sections `matcher`, `pose`, `verification`, `database`
 

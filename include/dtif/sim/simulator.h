@@ -11,6 +11,7 @@
 #include <Eigen/Core>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -209,6 +210,31 @@ struct OdometryParams {
   }
 };
 
+/// How an upstream FAST-LIO2 (`mapping_mid360.launch`) differs from a levelled front end.
+/// Defaults reproduce the levelled front end exactly (no tilt, every return).
+struct FastLioParams {
+  /// camera_init = the IMU's attitude at start-up: each robot's odometry frame O is tilted from
+  /// gravity by an angle drawn uniformly in [init_tilt_min_deg, init_tilt_max_deg] (own random
+  /// stream per robot, so the other draws do not change), towards an azimuth drawn uniformly in
+  /// [0, 360) from the robot's initial heading. A robot's `tilt_deg` / `tilt_azimuth_deg`
+  /// override the draw. Constant for the run; the submaps' S and T_O_S are in the tilted O,
+  /// ground truth T_W_S holds the true attitude.
+  double init_tilt_min_deg = 0.0;  ///< [deg], 0..30
+  double init_tilt_max_deg = 0.0;  ///< [deg], init_tilt_min_deg..30
+  /// FAST-LIO2's preprocess keeps every Nth valid return of each frame (the MID-360 launch: 3),
+  /// before cloud_registered: in the bag and in the submaps alike. 1: every return.
+  int point_filter_num = 1;
+  bool isDefault() const {
+    return init_tilt_min_deg == 0.0 && init_tilt_max_deg == 0.0 && point_filter_num == 1;
+  }
+  template <class V>
+  void visit(V& v) {
+    v("init_tilt_min_deg", init_tilt_min_deg);
+    v("init_tilt_max_deg", init_tilt_max_deg);
+    v("point_filter_num", point_filter_num);
+  }
+};
+
 /// Submap assembly (what the dtif front end does with cloud_registered).
 struct SubmapParams {
   double duration_s = 10.0;  ///< time window of one submap [s]
@@ -225,6 +251,9 @@ struct RobotRoute {
   std::string name;                        ///< `[A-Za-z0-9_]+`
   std::vector<Eigen::Vector2d> waypoints;  ///< [m], at least 2
   double start_s = 0.0;                    ///< start time after the scene epoch [s]
+  /// Tilt of this robot's camera_init from gravity [deg] and the direction it leans towards,
+  /// from the initial heading, counter-clockwise [deg]; unset: drawn (FastLioParams).
+  std::optional<double> tilt_deg, tilt_azimuth_deg;
 };
 
 struct SceneParams {
@@ -239,6 +268,7 @@ struct SceneParams {
   SensorParams sensor;
   MotionParams motion;
   OdometryParams odometry;
+  FastLioParams fastlio;  ///< YAML section `fastlio`
   SubmapParams submap;
   std::vector<RobotRoute> robots;
   /// Layout of `dtif simulate --bag` when --bag-layout is not given: "namespaced" (one bag,
@@ -302,11 +332,15 @@ class World;
 /// Per-robot ground-truth and odometry trajectories, sampled at `kTrajectoryRateHz`.
 struct Trajectory {
   std::string robot;
-  double start_s = 0.0;          ///< scene time of sample 0 [s]
-  std::vector<Pose> T_W_B;       ///< ground truth
-  std::vector<Pose> T_O_B;       ///< drifting odometry
-  std::vector<double> distance;  ///< distance walked at each sample [m]
-  double duration() const;       ///< [s]
+  double start_s = 0.0;           ///< scene time of sample 0 [s]
+  std::vector<Pose> T_W_B;        ///< ground truth
+  std::vector<Pose> T_O_B;        ///< drifting odometry
+  std::vector<double> distance;   ///< distance walked at each sample [m]
+  double tilt_deg = 0.0;          ///< camera_init's tilt from gravity (FastLioParams) [deg]
+  double tilt_azimuth_deg = 0.0;  ///< towards which it leans, from the initial heading [deg]
+  /// Gravity's "up" in O (camera_init), unit: (0, 0, 1) when O is level.
+  Eigen::Vector3d up_O = Eigen::Vector3d::UnitZ();
+  double duration() const;  ///< [s]
 };
 constexpr double kTrajectoryRateHz = 100.0;
 

@@ -69,6 +69,19 @@ void voteFallback(const Descriptor& q, const Descriptor& c, const LoopDetectorPa
   }
 }
 
+/// A levelled pair's loop (estimated between the levelled frames) in the submaps' frames; the
+/// covariance's translation and rotation blocks turn with the candidate's frame.
+void toSubmapFrames(const Descriptor& q, const Descriptor& c, Loop* lc) {
+  if (!q.levelled() && !c.levelled()) return;
+  lc->T_c_q = submapFramePose(q, c, lc->T_c_q);
+  lc->T_hypothesis = submapFramePose(q, c, lc->T_hypothesis);
+  const Eigen::Matrix3d R = c.level_rotation.conjugate().toRotationMatrix();
+  Eigen::Matrix<double, 6, 6> J = Eigen::Matrix<double, 6, 6>::Zero();
+  J.topLeftCorner<3, 3>() = R;
+  J.bottomRightCorner<3, 3>() = R;
+  lc->covariance = J * lc->covariance * J.transpose();
+}
+
 /// The accepted loop of a verification, with its covariance.
 Loop makeLoop(const Descriptor& q, const Descriptor& c, const std::vector<Correspondence>& corrs,
               const PoseEstimate& est, const Verification& ver) {
@@ -110,10 +123,18 @@ Loop makeLoop(const Descriptor& q, const Descriptor& c, const std::vector<Corres
   lc.covariance(3, 3) = ver.tilt_fitted ? ver.roll_var : kRollPitchVar;
   lc.covariance(4, 4) = ver.tilt_fitted ? ver.pitch_var : kRollPitchVar;
   lc.covariance(5, 5) = std::max(lever2 > 0 ? s2 / lever2 : 1.0, kMinYawVar);
+  toSubmapFrames(q, c, &lc);
   return lc;
 }
 
 }  // namespace
+
+Pose submapFramePose(const Descriptor& q, const Descriptor& c, const Pose& T_Lc_Lq) {
+  Pose R_Lq_Sq = Pose::Identity(), R_Lc_Sc = Pose::Identity();
+  R_Lq_Sq.linear() = q.level_rotation.normalized().toRotationMatrix();
+  R_Lc_Sc.linear() = c.level_rotation.normalized().toRotationMatrix();
+  return R_Lc_Sc.inverse() * T_Lc_Lq * R_Lq_Sq;
+}
 
 std::optional<Loop> matchPair(const Descriptor& q, const Descriptor& c,
                               const LoopDetectorParams& params, PoseEstimate* est_out,

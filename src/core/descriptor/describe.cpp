@@ -24,4 +24,35 @@ Descriptor describeCloud(const Cloud& cloud_S, const SubmapKey& key,
   return d;
 }
 
+Cloud rotateCloud(const Cloud& cloud, const Eigen::Quaterniond& R) {
+  const Eigen::Matrix3f M = R.normalized().toRotationMatrix().cast<float>();
+  Cloud out;
+  out.resize(cloud.size());
+  for (size_t i = 0; i < cloud.size(); ++i) {
+    out[i].getVector3fMap() = M * cloud[i].getVector3fMap();
+  }
+  out.width = static_cast<uint32_t>(out.size());
+  out.height = 1;
+  out.is_dense = cloud.is_dense;
+  return out;
+}
+
+Descriptor describeLevelledCloud(const Cloud& cloud_S, const Eigen::Quaterniond& R_L_S,
+                                 const SubmapKey& key, const TrunkExtractorParams& extractor_params,
+                                 const DescriptorParams& descriptor_params,
+                                 DescribeTimings* timings, TrunkExtractionResult* extraction) {
+  const Eigen::Quaterniond identity = Eigen::Quaterniond::Identity();
+  if (R_L_S.coeffs() == identity.coeffs()) {
+    return describeCloud(cloud_S, key, extractor_params, descriptor_params, timings, extraction);
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  const Cloud cloud_L = rotateCloud(cloud_S, R_L_S);
+  const double rotate_ms = msSince(t0);
+  Descriptor d =
+      describeCloud(cloud_L, key, extractor_params, descriptor_params, timings, extraction);
+  if (timings) timings->total_ms += rotate_ms;
+  d.level_rotation = R_L_S.normalized();
+  return d;
+}
+
 }  // namespace dtif

@@ -291,7 +291,9 @@ Descriptor buildDescriptor(const Trunks& input, const DescriptorParams& params) 
 //            u32 n_faces; n x u16[3] canonical vertex indices;
 //            u8 n_edge_bins, bins x u8; u8 n_radius_bins, bins x u8  (value * 255, rounded);
 //            f32 footprint cell (0: none) [, i32 x0, y0; u16 width, height; ceil(w h / 8) bytes];
-//            u32 ground map bytes (0: none), encodeGroundMap's bytes
+//            u32 ground map bytes (0: none), encodeGroundMap's bytes;
+//            only with flags bit1: f32 qx, qy, qz, qw of the level rotation R_L_S
+//   (bit1 is new in version 3: files without it, older or level, read as before)
 std::vector<uint8_t> encodeDescriptor(const Descriptor& d) {
   // What a receiver would refuse is never written (a database file that fails to load).
   const std::string problem = checkDescriptor(d);
@@ -347,10 +349,14 @@ std::vector<uint8_t> encodeDescriptor(const Descriptor& d) {
   const std::vector<uint8_t> ground = encodeGroundMap(d.ground_map);
   w.put<uint32_t>(static_cast<uint32_t>(ground.size()));
   w.putBytes(ground);
+  if (d.levelled()) {
+    const Eigen::Quaterniond q = d.level_rotation.normalized();
+    for (double c : {q.x(), q.y(), q.z(), q.w()}) w.put<float>(static_cast<float>(c));
+  }
   Writer out;
   out.put<uint32_t>(kMagic);
   out.put<uint16_t>(kVersion);
-  out.put<uint16_t>(d.valid ? 1 : 0);
+  out.put<uint16_t>(static_cast<uint16_t>((d.valid ? 1 : 0) | (d.levelled() ? 2 : 0)));
   out.put<uint32_t>(static_cast<uint32_t>(w.bytes.size()));
   out.put<uint32_t>(fnv1a(w.bytes.data(), w.bytes.size()));
   out.putBytes(w.bytes);
@@ -442,6 +448,17 @@ void readGroundMap(Reader& r, GroundMap* map) {
   if (!problem.empty()) throw std::runtime_error(problem);
 }
 
+// The level rotation, a unit quaternion (float32).
+Eigen::Quaterniond readLevelRotation(Reader& r) {
+  double c[4];
+  for (double& x : c) x = r.get<float>();
+  const Eigen::Quaterniond q(c[3], c[0], c[1], c[2]);
+  if (!q.coeffs().allFinite() || std::abs(q.norm() - 1.0) > 1e-3) {
+    throw std::runtime_error("descriptor level rotation is not a unit quaternion");
+  }
+  return q.normalized();
+}
+
 }  // namespace
 
 Descriptor decodeDescriptor(const std::vector<uint8_t>& bytes, const DescriptorParams& params) {
@@ -458,6 +475,7 @@ Descriptor decodeDescriptor(const std::vector<uint8_t>& bytes, const DescriptorP
   readHistogram(r, &d.radius_hist);
   readFootprint(r, &d.footprint);
   readGroundMap(r, &d.ground_map);
+  if (flags & 2) d.level_rotation = readLevelRotation(r);
   if (r.remaining() != 0) throw std::runtime_error("descriptor has trailing bytes");
   d.valid = (flags & 1) != 0;
   const std::string problem = acceptReceivedDescriptor(&d, params);

@@ -44,7 +44,8 @@ struct LoopDetectorParams {
   std::string validate() const;
 };
 
-/// An accepted loop (q, c, T_c_q).
+/// An accepted loop (q, c, T_c_q), T_c_q and T_hypothesis in the submaps' own frames S (also
+/// when the descriptors were levelled), covariance too.
 struct Loop {
   std::string query_robot;
   int64_t query_id = -1;
@@ -102,6 +103,11 @@ constexpr uint64_t kMaxDatabaseBytes = uint64_t{1} << 30;
 /// opened), every entry valid, no (robot, submap id) twice, at most kMaxDatabaseEntries.
 /// Throws std::runtime_error naming the file and the problem.
 std::vector<std::shared_ptr<const Descriptor>> readDatabaseFile(const std::string& path);
+
+/// Pose estimation runs between the descriptors' levelled frames (Descriptor::level_rotation);
+/// loops are reported in the submaps' own frames: T_Sc_Sq = R_Lc_Sc^-1 * T_Lc_Lq * R_Lq_Sq.
+/// Identity rotations give T_Lc_Lq unchanged.
+Pose submapFramePose(const Descriptor& q, const Descriptor& c, const Pose& T_Lc_Lq);
 
 /// Sequential loop detector. Not thread-safe: callers serialise access. Descriptors are held
 /// by shared_ptr to const and may be shared with other owners.

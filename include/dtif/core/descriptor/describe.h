@@ -34,4 +34,16 @@ Descriptor describeCloud(const Cloud& cloud_S, const SubmapKey& key,
                          DescribeTimings* timings = nullptr,
                          TrunkExtractionResult* extraction = nullptr);
 
+/// describeCloud of the submap rotated by R_L_S first (levelling, extraction/gravity.h): trunks
+/// and descriptor in the levelled frame L, which the descriptor records (level_rotation). The
+/// rotation counts in the timings. Identity: exactly describeCloud.
+Descriptor describeLevelledCloud(const Cloud& cloud_S, const Eigen::Quaterniond& R_L_S,
+                                 const SubmapKey& key, const TrunkExtractorParams& extractor_params,
+                                 const DescriptorParams& descriptor_params,
+                                 DescribeTimings* timings = nullptr,
+                                 TrunkExtractionResult* extraction = nullptr);
+
+/// The cloud rotated by R (levelling: R_L_S).
+Cloud rotateCloud(const Cloud& cloud, const Eigen::Quaterniond& R);
+
 }  // namespace dtif

@@ -69,6 +69,13 @@ struct Descriptor {
   /// Lowest point per cell (from extraction, only when few stem bases were seen): fixes the
   /// elevation of a loop that no pair of seen bases fixes. Empty otherwise.
   GroundMap ground_map;
+  /// R_L_S: the levelling applied to the submap before extraction (gravity.h). Trunks,
+  /// footprint and ground map are in the levelled frame L; identity when the submap was taken
+  /// as gravity-aligned (then L = S).
+  Eigen::Quaterniond level_rotation = Eigen::Quaterniond::Identity();
+  bool levelled() const {
+    return level_rotation.coeffs() != Eigen::Quaterniond::Identity().coeffs();
+  }
 };
 
 /// Encodes one face canonically from trunk centres (Eq. 3.2) and radii (Eq. 3.3).
