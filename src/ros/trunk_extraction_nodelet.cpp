@@ -24,8 +24,8 @@
 
 #include "dtif/core/descriptor/describe.h"
 #include "dtif/core/descriptor/descriptor.h"
-#include "dtif/core/extraction/point_bounds.h"
 #include "dtif/core/extraction/gravity.h"
+#include "dtif/core/extraction/point_bounds.h"
 #include "dtif/core/extraction/trunk_extractor.h"
 #include "dtif/core/timing.h"
 #include "dtif/ros/conversions.h"
@@ -330,8 +330,9 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
         leveller_->level(node_.robot, *s.cloud, Eigen::Quaterniond(s.T_O_S.rotation()));
     logLevelling(lev.estimate);
     TrunkExtractionResult ext;
-    const Descriptor d = describeLevelledCloud(*s.cloud, lev.R_L_S, {node_.robot, s.id, s.stamp},
-                                               extractor_params_, descriptor_params_, nullptr, &ext);
+    const Descriptor d =
+        describeLevelledCloud(*s.cloud, lev.R_L_S, {node_.robot, s.id, s.stamp}, extractor_params_,
+                              descriptor_params_, nullptr, &ext);
     const std::string bounds = boundsWarning(ext.stats, extractor_params_);
     if (!bounds.empty()) NODELET_WARN("submap %ld: %s", static_cast<long>(s.id), bounds.c_str());
     Pose T_O_L = s.T_O_S;  // trunks are in the levelled frame
@@ -392,8 +393,8 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
   std::mutex mutex_;
   std::unique_ptr<ros_glue::SubmapAssembler> assembler_;
   std::map<std::pair<std::string, int>, ros::WallTime> last_warning_;
-  std::string odom_frame_;  // of the input
-  std::string out_frame_;   // published: robot-qualified (outputOdomFrame)
+  std::string odom_frame_;                           // of the input
+  std::string out_frame_;                            // published: robot-qualified (outputOdomFrame)
   std::unique_ptr<ros_glue::FrameLock> frame_lock_;  // created on the first message
   double last_submap_stamp_ = -1.0;
   int64_t next_submap_id_ = 0;
