@@ -3,16 +3,40 @@
 // byte picks TrunkDescriptor, LoopClosure or PointCloud2.
 #include <ros/serialization.h>
 
+#include <type_traits>
+
 #include "dtif/core/descriptor/validation.h"
 #include "dtif/ros/conversions.h"
 #include "dtif/ros/msgs.h"
 
 namespace {
 
+// roscpp's deserializer resizes a vector to its serialized count before it reads the elements
+// (ros/serialization.h), so a count of 4e9 in a short message allocates gigabytes inside roscpp
+// itself: upstream behaviour, not dtif's conversions, which this target is for. This stream
+// refuses any uint32 larger than the bytes left (every count; also large stamps, which the
+// conversions do not read).
+class BoundedIStream : public ros::serialization::IStream {
+ public:
+  using IStream::IStream;
+  template <typename T>
+  void next(T& t) {
+    ros::serialization::deserialize(*this, t);
+    if constexpr (std::is_same_v<T, uint32_t>) {
+      if (t > getLength()) throw ros::serialization::StreamOverrunException("count beyond input");
+    }
+  }
+  template <typename T>
+  BoundedIStream& operator>>(T& t) {
+    next(t);
+    return *this;
+  }
+};
+
 template <class Msg>
 bool deserialise(const uint8_t* data, size_t size, Msg* msg) {
   try {
-    ros::serialization::IStream in(const_cast<uint8_t*>(data), static_cast<uint32_t>(size));
+    BoundedIStream in(const_cast<uint8_t*>(data), static_cast<uint32_t>(size));
     ros::serialization::deserialize(in, *msg);
   } catch (const ros::Exception&) {  // runs past the end: the transport drops such messages
     return false;
