@@ -69,3 +69,24 @@ dtif_scene_dataset() {
     echo "${seed}" > "${dir}/seed"
   fi
 }
+
+# Builds the given targets in the sanitizer workspace (.ws-san) shared by scripts/sanitize.sh
+# and scripts/fuzz.sh: clang, -O1, AddressSanitizer + UndefinedBehaviorSanitizer, libFuzzer's
+# coverage instrumentation (harmless for the unit tests), the fuzz targets enabled. The build
+# log is .ws-san/build.log, printed when the build fails (then exits).
+DTIF_SAN_WS="${DTIF_SAN_WS:-${DTIF_REPO}/.ws-san}"
+dtif_san_build() {
+  local flags="-O1 -g -fno-omit-frame-pointer -fsanitize=address,undefined,fuzzer-no-link"
+  flags+=" -fno-sanitize-recover=all"
+  bash "${DTIF_REPO}/scripts/install_deps.sh"
+  mkdir -p "${DTIF_SAN_WS}/src"
+  [ -e "${DTIF_SAN_WS}/src/dtif" ] || ln -s "${DTIF_REPO}" "${DTIF_SAN_WS}/src/dtif"
+  # A build type of its own: Release's -O3 -DNDEBUG would override the flags (asserts stay on).
+  (cd "${DTIF_SAN_WS}" && CC="${DTIF_SAN_CC:-clang}" CXX="${DTIF_SAN_CXX:-clang++}" \
+    catkin_make -j"${DTIF_JOBS}" -DCMAKE_BUILD_TYPE=Sanitize -DDTIF_FUZZ=ON \
+    -DCMAKE_C_FLAGS_SANITIZE="${flags}" -DCMAKE_CXX_FLAGS_SANITIZE="${flags}" \
+    -DCMAKE_EXE_LINKER_FLAGS_SANITIZE="-fsanitize=address,undefined" \
+    -DCMAKE_SHARED_LINKER_FLAGS_SANITIZE="-fsanitize=address,undefined" \
+    -DPYTHON_EXECUTABLE=/usr/bin/python3 -DPython3_EXECUTABLE=/usr/bin/python3 "$@" \
+    > "${DTIF_SAN_WS}/build.log" 2>&1) || { tail -60 "${DTIF_SAN_WS}/build.log"; exit 1; }
+}

@@ -6,6 +6,7 @@ set -euo pipefail
 
 PKGS=(
   build-essential cmake clang-format
+  clang libclang-rt-14-dev
   ros-core-dev catkin libnodeletlib-dev libnodelet-dev libnodeletlib-tools
   libpcl-ros-dev libpcl-conversions-dev libpcl-dev libcgal-dev libeigen3-dev
   libtf2-ros-dev libtf2-eigen-dev librosbag-dev python3-rosbag python3-rostest python3-roslaunch

@@ -3,14 +3,16 @@
 #include <algorithm>
 #include <cmath>
 
+#include "dtif/core/cells.h"
+
 namespace dtif {
 
 VoxelCentroidGrid::VoxelCentroidGrid(double voxel_m) : inv_(1.0 / voxel_m) { clear(); }
 
 void VoxelCentroidGrid::add(const Eigen::Vector3f& p) {
-  const int64_t x = static_cast<int64_t>(std::floor(p.x() * inv_)) + (1 << 20);
-  const int64_t y = static_cast<int64_t>(std::floor(p.y() * inv_)) + (1 << 20);
-  const int64_t z = static_cast<int64_t>(std::floor(p.z() * inv_)) + (1 << 20);
+  const int64_t x = cellIndex(p.x() * inv_) + (1 << 20);
+  const int64_t y = cellIndex(p.y() * inv_) + (1 << 20);
+  const int64_t z = cellIndex(p.z() * inv_) + (1 << 20);
   if (x < 0 || y < 0 || z < 0 || x >= (1 << 21) || y >= (1 << 21) || z >= (1 << 21)) return;
   const uint64_t key = (static_cast<uint64_t>(x) << 42) | (static_cast<uint64_t>(y) << 21) |
                        static_cast<uint64_t>(z);

@@ -15,6 +15,7 @@
 #include <tuple>
 #include <unordered_map>
 
+#include "dtif/core/cells.h"
 #include "dtif/core/database/loop_detector.h"
 #include "dtif/core/database/loop_pair.h"
 #include "dtif/core/descriptor/describe.h"
@@ -29,8 +30,6 @@ namespace {
 
 constexpr double kRadToDeg = 180.0 / M_PI;
 constexpr double kCellM = 1.0;  // overlap cell (DATASET.md)
-
-int64_t packCell(int64_t ix, int64_t iy) { return (ix << 32) ^ (iy & 0xffffffffLL); }
 
 }  // namespace
 
@@ -89,7 +88,7 @@ DetectionRow trunkDetection(const Cloud& cloud_S, const Pose& T_W_S, const Trunk
   };
   std::vector<S> local;
   std::unordered_map<int64_t, std::vector<int>> grid;
-  auto cellOf = [](double v) { return static_cast<int64_t>(std::floor(v)); };
+  auto cellOf = [](double v) { return cellIndex(v); };
   for (const StemRecord& st : stems) {
     const Eigen::Vector3d b = T_S_W * Eigen::Vector3d(st.x, st.y, st.z_base);
     if (b.x() < minx - 1 || b.x() > maxx + 1 || b.y() < miny - 1 || b.y() > maxy + 1) continue;

@@ -3,6 +3,8 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <cmath>
+#include <limits>
 #include <set>
 #include <sstream>
 #include <type_traits>
@@ -28,9 +30,12 @@ class YamlReader {
       if constexpr (std::is_same_v<T, bool>) {
         value = v.as<bool>();
       } else if constexpr (std::is_integral_v<T>) {
-        // Reject 2.5 for an integer instead of truncating it.
+        // Reject 2.5 for an integer instead of truncating it, and 2e34 before the cast (out of
+        // range is undefined behaviour; fuzz_config found it).
         const double d = v.as<double>();
-        if (d != static_cast<double>(static_cast<T>(d))) throw YAML::BadConversion(v.Mark());
+        const double hi = std::ldexp(1.0, std::numeric_limits<T>::digits);
+        const double lo = std::is_signed_v<T> ? -hi : 0.0;
+        if (!(d >= lo && d < hi) || d != std::floor(d)) throw YAML::BadConversion(v.Mark());
         value = static_cast<T>(d);
       } else {
         value = v.as<T>();

@@ -355,7 +355,7 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
           new visualization_msgs::MarkerArray(markers)));
     }
     recent_markers_->add(std::move(markers));
-    if (node_.publish_submap_cloud && cloud_pub_.getNumSubscribers() > 0) {
+    if (node_.publish_submap_cloud && cloud_pub_.getNumSubscribers() > 0 && !s.cloud->empty()) {
       // In the odometry frame, so rviz needs no extra TF for the submap frame.
       Cloud cloud_O;
       pcl::transformPointCloud(*s.cloud, cloud_O, s.T_O_S.matrix().cast<float>());

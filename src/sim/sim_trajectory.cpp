@@ -61,7 +61,9 @@ class WalkGrid {
   // A* (8-connected, octile heuristic), returns cell centres from a to b.
   std::vector<Eigen::Vector2d> plan(const Eigen::Vector2d& a, const Eigen::Vector2d& b) const {
     auto [ai, aj] = nearestFree(ci(a.x()), cj(a.y()));
-    auto [bi, bj] = nearestFree(ci(b.x()), cj(b.y()));
+    // Not a structured binding: the heuristic lambda captures it (C++17 clang refuses that).
+    const auto goal_cell = nearestFree(ci(b.x()), cj(b.y()));
+    const int bi = goal_cell.first, bj = goal_cell.second;
     const size_t n = cost_.size();
     std::vector<float> g(n, 1e30f);
     std::vector<int32_t> parent(n, -1);

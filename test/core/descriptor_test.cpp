@@ -278,7 +278,7 @@ TEST(DescriptorValidation, CheckNamesEachProblem) {
     std::function<void(Descriptor&)> corrupt;
   };
   const std::vector<Case> cases = {
-      {"more than 65535 trunks (faces index uint16)",
+      {"65536 trunks: more than kMaxDescriptorTrunks (2000)",
        [](Descriptor& d) { d.trunks.resize(65536, d.trunks[0]); }},
       {"trunk 3 is not finite or has a negative radius",
        [](Descriptor& d) { d.trunks[3].r = kNaNf; }},
@@ -290,7 +290,7 @@ TEST(DescriptorValidation, CheckNamesEachProblem) {
        [](Descriptor& d) { d.triangles[4].v[1] = static_cast<int>(d.trunks.size()); }},
       {"face 0 indexes a missing trunk", [](Descriptor& d) { d.triangles[0].v[2] = -1; }},
       {"face 2 repeats a vertex", [](Descriptor& d) { d.triangles[2].v[2] = d.triangles[2].v[0]; }},
-      {"edge histogram has more than 255 bins",
+      {"edge histogram has 256 bins: more than kMaxHistogramBins (64)",
        [](Descriptor& d) { d.edge_hist.assign(256, 1.0f / 256); }},
       {"edge histogram is not finite or negative", [](Descriptor& d) { d.edge_hist[1] = kNaNf; }},
       {"radius histogram is not finite or negative",

@@ -297,3 +297,33 @@ TEST(Misses, NameTheBestTrueCandidateAndWhyItWasMissed) {
 
 }  // namespace
 }  // namespace dtif
+
+namespace dtif {
+namespace {
+
+// Issue #17 (UBSan): negative cells were packed by a left shift of a negative value, and 1e30 m
+// coordinates were cast to int64 (both undefined). The keys of ordinary cells are unchanged and
+// far points give saturated cells instead; scripts/sanitize.sh runs this under UBSan.
+TEST(Overlap, NegativeAndHugeCoordinatesAreDefined) {
+  const Cloud c = squareScene(10.0, -1.7);
+  const auto base = overlapCells(c, makePose(-20.0, -30.0, 0, 0, 0, 0));  // negative cells
+  EXPECT_EQ(base.size(), 100u);
+  // Cell (-20, -30) has the key the old shift gave it.
+  const uint64_t hi = static_cast<uint64_t>(int64_t{-20}) << 32;
+  const uint64_t lo = static_cast<uint64_t>(int64_t{-30}) & 0xffffffffu;
+  EXPECT_EQ(base.count(static_cast<int64_t>(hi ^ lo)), 1u);
+  Cloud far = c;
+  for (const float v : {1e30f, -1e30f, 3e38f}) {
+    far.push_back(pcl::PointXYZ(v, v, 0.0f));
+    far.push_back(pcl::PointXYZ(v, v, 1.0f));
+  }
+  const auto cells = overlapCells(far, makePose(-20.0, -30.0, 0, 0, 0, 0));
+  EXPECT_GE(cells.size(), base.size());
+  for (const int64_t k : base) EXPECT_EQ(cells.count(k), 1u);
+  std::vector<StemRecord> stems = {{0, 1e30, -1e30, 0.0, 0.3}, {1, 2.0, 3.0, 0.0, 0.3}};
+  const DetectionRow d = trunkDetection(far, Pose::Identity(), Trunks(), stems);
+  EXPECT_EQ(d.points, far.size());
+}
+
+}  // namespace
+}  // namespace dtif

@@ -73,6 +73,9 @@ TEST(Config, ValuesBeyondTheBoundsAndFoldersAreRefusedByName) {
   expectParamError(writeTemp("cell", "trunk_extraction:\n  ground_cell_m: 0.01\n"),
                    {"ground_cell_m"});
   expectParamError(writeTemp("bins", "descriptor:\n  edge_hist_bins: 300\n"), {"edge_hist_bins"});
+  // fuzz_config: an integer key of 2e34 was cast to int (undefined behaviour).
+  expectParamError(writeTemp("huge_int", "descriptor:\n  min_trunks: 2e34\n"),
+                   {"descriptor.min_trunks", "integer"});
   const fs::path folder = fs::temp_directory_path() / "dtif_config_test_folder.yaml";
   fs::create_directories(folder);
   expectParamError(folder.string(), {folder.string().c_str(), "is a directory"});

@@ -281,3 +281,17 @@ TEST_F(DatasetTest, GarbageRowsFoldersAndHugeCountsAreRefusedByName) {
 
 }  // namespace
 }  // namespace dtif
+
+namespace dtif {
+namespace {
+
+// Issue #17 (UBSan): a cloud of 0 points passed a null reference into PCL's conversion.
+TEST_F(DatasetTest, ZeroPointPcdGivesAnEmptyCloud) {
+  writeFile("empty.pcd",
+            "VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 0\nHEIGHT 1\n"
+            "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 0\nDATA binary\n");
+  EXPECT_TRUE(loadPcd((dir_ / "empty.pcd").string())->empty());
+}
+
+}  // namespace
+}  // namespace dtif

@@ -295,9 +295,13 @@ Descriptor buildDescriptor(const Trunks& input, const DescriptorParams& params) 
 //            only with flags bit1: f32 qx, qy, qz, qw of the level rotation R_L_S
 //   (bit1 is new in version 3: files without it, older or level, read as before)
 std::vector<uint8_t> encodeDescriptor(const Descriptor& d) {
-  // What a receiver would refuse is never written (a database file that fails to load).
-  const std::string problem = checkDescriptor(d);
-  if (!problem.empty()) throw std::runtime_error("descriptor not encodable: " + problem);
+  // Beyond the bounds a receiver refuses is never written (docs/limits.md: a database file with
+  // 300 bins saved and then failed to load).
+  if (d.trunks.size() > kMaxDescriptorTrunks ||
+      d.triangles.size() > kMaxFacesPerTrunk * d.trunks.size() ||
+      d.edge_hist.size() > kMaxHistogramBins || d.radius_hist.size() > kMaxHistogramBins) {
+    throw std::runtime_error("descriptor not encodable: " + checkDescriptor(d));
+  }
   Writer w;
   w.putString(d.robot);
   w.put<int64_t>(d.submap_id);

@@ -6,6 +6,8 @@
 #include <limits>
 #include <unordered_map>
 
+#include "dtif/core/cells.h"
+
 namespace dtif {
 
 namespace {
@@ -18,13 +20,11 @@ constexpr double kGroundPct = 0.05;  // 5th percentile
 constexpr double kMinAboveM = 0.3;   // counted band above the local ground
 constexpr double kMaxAboveM = 3.0;
 
-int64_t packCell(int64_t ix, int64_t iy) { return (ix << 32) ^ (iy & 0xffffffffLL); }
-
 bool finite(const pcl::PointXYZ& p) {
   return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
 }
 
-int64_t tileOf(float v) { return static_cast<int64_t>(std::floor(v / kTileM)); }
+int64_t tileOf(float v) { return cellIndex(v / kTileM); }
 
 // The local-ground tiles of a cloud, by a dense index over its extent; a cloud spread over
 // kilometres (stray points) falls back to a hash map, so the result never depends on the
@@ -130,8 +130,7 @@ std::vector<std::pair<int64_t, int64_t>> trunkHeightCells(const Cloud& cloud_S, 
     const float h = p.z - ground[id];
     if (h < kMinAboveM || h > kMaxAboveM) continue;
     const Eigen::Vector3f w = T * Eigen::Vector3f(p.x, p.y, p.z);
-    const std::pair<int64_t, int64_t> cell(static_cast<int64_t>(std::floor(w.x() / cell_m)),
-                                           static_cast<int64_t>(std::floor(w.y() / cell_m)));
+    const std::pair<int64_t, int64_t> cell(cellIndex(w.x() / cell_m), cellIndex(w.y() / cell_m));
     if (out.empty() || out.back() != cell) out.push_back(cell);  // neighbours share cells
   }
   std::sort(out.begin(), out.end());
@@ -202,8 +201,7 @@ double footprintOverlap(const Footprint& q, const Footprint& c, const Pose& T_c_
       if (!((q.bits[static_cast<size_t>(k / 8)] >> (k % 8)) & 1u)) continue;
       const Eigen::Vector3d p_q((q.x0 + cx + 0.5) * q.cell_m, (q.y0 + cy + 0.5) * q.cell_m, 0.0);
       const Eigen::Vector3d p_c = T_c_q * p_q;
-      const auto ix = static_cast<int64_t>(std::floor(p_c.x() / c.cell_m));
-      const auto iy = static_cast<int64_t>(std::floor(p_c.y() / c.cell_m));
+      const int64_t ix = cellIndex(p_c.x() / c.cell_m), iy = cellIndex(p_c.y() / c.cell_m);
       shared += c.occupied(ix, iy);
     }
   }

@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <limits>
 
+#include "dtif/core/cells.h"
 #include "dtif/core/pose/rigid2d.h"
 
 namespace dtif {
@@ -146,7 +147,7 @@ class TrunkGrid {
   const Eigen::Vector2d& at(int j) const { return xy_[j]; }
 
  private:
-  int64_t cellOf(double v) const { return static_cast<int64_t>(std::floor(v / cell_)); }
+  int64_t cellOf(double v) const { return cellIndex(v / cell_); }
   double cell_;
   Eigen::Vector2d origin_ = Eigen::Vector2d::Zero();
   int64_t w_ = 0, h_ = 0;
