@@ -10,6 +10,7 @@
 #include <functional>
 #include <iomanip>
 #include <limits>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <tuple>
@@ -19,6 +20,7 @@
 #include "dtif/core/database/loop_pair.h"
 #include "dtif/core/descriptor/describe.h"
 #include "dtif/core/descriptor/descriptor.h"
+#include "dtif/core/descriptor/trunk_accumulator.h"
 #include "dtif/core/extraction/trunk_extractor.h"
 #include "dtif/core/timing.h"
 
@@ -263,6 +265,16 @@ void scoreAccepted(const Dataset& ds, const CellSets& cells, size_t i, size_t j,
   scoreAcceptedLoop(trueTcq(ds, i, j), T_c_q, cellOverlap(cells[i], cells[j]), eval, row);
 }
 
+// Step 1 through the robot's trunk accumulator (very sparse stands): as online, a submap may
+// only draw on earlier submaps of its own robot, chained by that robot's odometry.
+Descriptor describeQuery(const Cloud& cloud, const SubmapRecord& rec, const DtifParams& params,
+                         std::map<std::string, TrunkAccumulator>* accumulators,
+                         DescribeTimings* timings, TrunkExtractionResult* ext) {
+  auto it = accumulators->try_emplace(rec.robot, params.multi_submap).first;
+  return describeCloudAccumulated(cloud, {rec.robot, rec.id, rec.stamp}, rec.T_O_S, &it->second,
+                                  params.trunk_extraction, params.descriptor, timings, ext);
+}
+
 void checkGroundTruth(const Dataset& ds) {
   for (const auto& rec : ds.submaps) {
     if (!ds.T_W_S.count(rec.id)) {
@@ -356,6 +368,7 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
   CellSets cells;
   cells.reserve(ds.submaps.size());
   std::vector<std::shared_ptr<const Descriptor>> descs;  // every submap's, for explainMiss
+  std::map<std::string, TrunkAccumulator> accumulators;  // per robot (multi_submap)
   double bytes_sum = 0.0;
   const size_t n = ds.submaps.size();
 
@@ -371,9 +384,8 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
     // 1. Descriptor (timed: desc).
     TrunkExtractionResult ext;
     DescribeTimings timings;
-    auto desc = std::make_shared<Descriptor>(describeCloud(*cloud, {rec.robot, rec.id, rec.stamp},
-                                                           params.trunk_extraction,
-                                                           params.descriptor, &timings, &ext));
+    auto desc = std::make_shared<Descriptor>(
+        describeQuery(*cloud, rec, params, &accumulators, &timings, &ext));
     row.t_desc_ms = timings.total_ms;
     row.trunks = ext.trunks.size();
     if (!ds.stems.empty()) {

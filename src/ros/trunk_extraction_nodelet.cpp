@@ -22,6 +22,7 @@
 
 #include "dtif/core/descriptor/describe.h"
 #include "dtif/core/descriptor/descriptor.h"
+#include "dtif/core/descriptor/trunk_accumulator.h"
 #include "dtif/core/extraction/trunk_extractor.h"
 #include "dtif/core/timing.h"
 #include "dtif/ros/conversions.h"
@@ -57,9 +58,10 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
       reader.readSection("", &assembler_params_);
       reader.readSection("trunk_extraction", &extractor_params_);
       reader.readSection("descriptor", &descriptor_params_);
+      reader.readSection("multi_submap", &multi_submap_params_);
       reader.checkNoUnknownKeys();
       std::string problems = assembler_params_.validate() + extractor_params_.validate() +
-                             descriptor_params_.validate();
+                             descriptor_params_.validate() + multi_submap_params_.validate();
       if (node_.input != "odometry" && node_.input != "submap") {
         problems += "input must be 'odometry' or 'submap', not '" + node_.input + "'\n";
       }
@@ -87,6 +89,7 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
     if (node_.input == "odometry" && assembler_params_.voxel_m > 0.0) {
       voxel_grid_ = std::make_unique<VoxelCentroidGrid>(assembler_params_.voxel_m);
     }
+    setUpAccumulator();
     recent_markers_ =
         std::make_unique<ros_glue::RecentMarkers>(static_cast<size_t>(node_.marker_history));
     descriptor_pub_ = nh.advertise<dtif::TrunkDescriptor>("descriptor", 10);
@@ -112,6 +115,17 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
     worker_ = std::thread(&TrunkExtractionNodelet::work, this);
     NODELET_INFO("robot '%s', input '%s', window %.1f s", node_.robot.c_str(), node_.input.c_str(),
                  assembler_params_.window_s);
+  }
+
+  // The robot's multi-submap trunk sets chain submaps by T_O_S: without odometry (ready-made
+  // submaps and no ~odom_frame) there is no chain, so each submap keeps its own trunks.
+  void setUpAccumulator() {
+    MultiSubmapParams p = multi_submap_params_;
+    if (node_.input == "submap" && node_.odom_frame.empty() && p.min_trunks > 0) {
+      NODELET_INFO("multi_submap off: input 'submap' without odom_frame has no T_O_S to chain");
+      p.min_trunks = 0;
+    }
+    accumulator_ = std::make_unique<TrunkAccumulator>(p);
   }
 
   // Checks the frame of a message against ~odom_frame (learnt from the first message if unset).
@@ -252,12 +266,14 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
   void process(ros_glue::AssembledSubmap& s, const std::string& frame) {
     const auto t0 = std::chrono::steady_clock::now();
     if (voxel_grid_) ros_glue::voxelFilterSubmap(voxel_grid_.get(), s.cloud.get());
-    const Descriptor d = describeCloud(*s.cloud, {node_.robot, s.id, s.stamp}, extractor_params_,
-                                       descriptor_params_);
+    AccumulatedTrunks acc;
+    const Descriptor d = describeCloudAccumulated(*s.cloud, {node_.robot, s.id, s.stamp}, s.T_O_S,
+                                                  accumulator_.get(), extractor_params_,
+                                                  descriptor_params_, nullptr, nullptr, &acc);
     const double ms = msSince(t0);
-    NODELET_DEBUG("submap %ld: %zu points, %zu trunks, %zu faces, %.1f ms%s%s",
-                  static_cast<long>(s.id), s.cloud->size(), d.trunks.size(), d.triangles.size(), ms,
-                  d.valid ? "" : ", invalid: ", d.invalid_reason.c_str());
+    NODELET_DEBUG("submap %ld: %zu points, %zu trunks from %d submaps, %zu faces, %.1f ms%s%s",
+                  static_cast<long>(s.id), s.cloud->size(), d.trunks.size(), acc.submaps,
+                  d.triangles.size(), ms, d.valid ? "" : ", invalid: ", d.invalid_reason.c_str());
     boost::shared_ptr<dtif::TrunkDescriptor> msg(
         new dtif::TrunkDescriptor(ros_glue::toMsg(d, s.T_O_S, frame)));
     msg->data_end.fromSec(s.end_stamp);
@@ -293,6 +309,7 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
   ros_glue::SubmapAssemblerParams assembler_params_;
   TrunkExtractorParams extractor_params_;
   DescriptorParams descriptor_params_;
+  MultiSubmapParams multi_submap_params_;
 
   std::mutex mutex_;  // assembler_, odom_frame_, last_submap_stamp_, next_submap_id_, last_warning_
   std::unique_ptr<ros_glue::SubmapAssembler> assembler_;
@@ -307,6 +324,7 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
   bool stop_ = false;
   std::thread worker_;
   std::unique_ptr<VoxelCentroidGrid> voxel_grid_;  // worker thread only; null: no voxel filter
+  std::unique_ptr<TrunkAccumulator> accumulator_;  // worker thread only (after onInit)
 
   std::unique_ptr<ros_glue::RecentMarkers> recent_markers_;
   ros::WallTimer marker_timer_;
