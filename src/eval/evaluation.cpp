@@ -269,10 +269,11 @@ void scoreAccepted(const Dataset& ds, const CellSets& cells, size_t i, size_t j,
 // only draw on earlier submaps of its own robot, chained by that robot's odometry.
 Descriptor describeQuery(const Cloud& cloud, const SubmapRecord& rec, const DtifParams& params,
                          std::map<std::string, TrunkAccumulator>* accumulators,
-                         DescribeTimings* timings, TrunkExtractionResult* ext) {
+                         DescribeTimings* timings, TrunkExtractionResult* ext,
+                         AccumulatedTrunks* acc) {
   auto it = accumulators->try_emplace(rec.robot, params.multi_submap).first;
   return describeCloudAccumulated(cloud, {rec.robot, rec.id, rec.stamp}, rec.T_O_S, &it->second,
-                                  params.trunk_extraction, params.descriptor, timings, ext);
+                                  params.trunk_extraction, params.descriptor, timings, ext, acc);
 }
 
 void checkGroundTruth(const Dataset& ds) {
@@ -384,8 +385,11 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
     // 1. Descriptor (timed: desc).
     TrunkExtractionResult ext;
     DescribeTimings timings;
+    AccumulatedTrunks acc;
     auto desc = std::make_shared<Descriptor>(
-        describeQuery(*cloud, rec, params, &accumulators, &timings, &ext));
+        describeQuery(*cloud, rec, params, &accumulators, &timings, &ext, &acc));
+    row.described_trunks = desc->trunks.size();
+    row.described_submaps = acc.submaps;
     row.t_desc_ms = timings.total_ms;
     row.trunks = ext.trunks.size();
     if (!ds.stems.empty()) {

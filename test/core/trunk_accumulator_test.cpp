@@ -81,16 +81,27 @@ TEST(StemMerger, TwoStemsOfOneSubmapNeverMerge) {
   EXPECT_DOUBLE_EQ(s[0].x, 0.35);
 }
 
-TEST(TrunkAccumulator, EnoughOwnTrunksAreKeptAsTheyAre) {
+TEST(TrunkAccumulator, EnoughStableOwnTrunksAreKeptAsTheyAre) {
   MultiSubmapParams p;
-  p.min_trunks = 3;
+  p.min_trunks = 2;
   TrunkAccumulator acc(p);
-  const Trunks own = {trunk(1, 2, 0, 0.2), trunk(4, 1, 0, 0.1), trunk(-3, 2, 0, 0.01)};
-  acc.add(0.0, pose(0, 0, 0, 0), {trunk(1, 1, 0, 0.3)});
+  // The previous submap (at the origin of O) saw the two thick stems; the current one (5 m
+  // along x) sees them again, plus a one-off and a juvenile: its own trunks are kept, all four.
+  acc.add(0.0, pose(0, 0, 0, 0), {trunk(6, 2, 0, 0.2), trunk(9, 1, 0, 0.1)});
+  const Trunks own = {trunk(1, 2, 0, 0.2), trunk(4, 1, 0, 0.1), trunk(-3, 5, 0, 0.2),
+                      trunk(-3, 2, 0, 0.01)};
   const AccumulatedTrunks out = acc.add(10.0, pose(5, 0, 0, 0), own);
   EXPECT_EQ(out.submaps, 1);
   ASSERT_EQ(out.trunks.size(), own.size());
   for (size_t i = 0; i < own.size(); ++i) EXPECT_DOUBLE_EQ(out.trunks[i].x, own[i].x);
+
+  // One stable trunk short of min_trunks: the stable stems of both submaps instead.
+  p.min_trunks = 3;
+  TrunkAccumulator few(p);
+  few.add(0.0, pose(0, 0, 0, 0), {trunk(6, 2, 0, 0.2), trunk(9, 1, 0, 0.1)});
+  const AccumulatedTrunks ext = few.add(10.0, pose(5, 0, 0, 0), own);
+  EXPECT_EQ(ext.submaps, 2);
+  EXPECT_EQ(ext.trunks.size(), 2u);
 }
 
 TEST(TrunkAccumulator, ChainsTiltedOdometryIntoTheCurrentFrame) {
@@ -190,6 +201,24 @@ TEST(TrunkAccumulator, StopsAtTheTargetAndRespectsSpanLimits) {
   for (int k = 0; k < 6; ++k) out = one.add(10.0 * k, pose(5.0 * k, 0, 0, 0), seen);
   EXPECT_EQ(out.submaps, 2);
   EXPECT_EQ(one.history(), 1u);
+}
+
+TEST(TrunkAccumulator, OnlyTheSubmapsOwnBasesCountAsSeen) {
+  // The odometry's vertical drift makes a predecessor's base elevation a guess in S.
+  MultiSubmapParams p;
+  p.min_trunks = 8;
+  TrunkAccumulator acc(p);
+  acc.add(0.0, pose(0, 0, 0, 0), {trunk(6, 2, 0, 0.2), trunk(9, 1, 0, 0.2)});
+  const AccumulatedTrunks out = acc.add(10.0, pose(5, 0, 0, 0), {trunk(1, 2, 0, 0.2)});
+  ASSERT_EQ(out.trunks.size(), 1u);  // (9, 1) is seen once
+  EXPECT_TRUE(out.trunks[0].base_seen);
+  TrunkAccumulator later(p);
+  later.add(0.0, pose(0, 0, 0, 0), {trunk(6, 2, 0, 0.2)});
+  later.add(10.0, pose(1, 0, 0, 0), {trunk(5, 2, 0, 0.2)});
+  const AccumulatedTrunks old = later.add(20.0, pose(2, 0, 0, 0), {});
+  ASSERT_EQ(old.trunks.size(), 1u);  // seen by both predecessors, not by the submap itself
+  EXPECT_FALSE(old.trunks[0].base_seen);
+  EXPECT_NEAR(old.trunks[0].x, 4.0, 1e-12);
 }
 
 TEST(TrunkAccumulator, FirstSubmapAndDisabledKeepOwnTrunks) {

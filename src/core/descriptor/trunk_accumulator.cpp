@@ -71,7 +71,7 @@ Trunks StemMerger::stable(int min_observations, int max_source) const {
 AccumulatedTrunks TrunkAccumulator::add(double stamp, const Pose& T_O_S, const Trunks& trunks_S) {
   Entry current{stamp, T_O_S, trunks_S};
   AccumulatedTrunks out;
-  if (params_.min_trunks > 0 && static_cast<int>(trunks_S.size()) < params_.min_trunks) {
+  if (params_.min_trunks > 0) {
     out = accumulate(current);
   } else {
     out.trunks = trunks_S;
@@ -95,6 +95,10 @@ AccumulatedTrunks TrunkAccumulator::accumulate(const Entry& current) const {
       const Eigen::Vector3d p = T_S_k * Eigen::Vector3d(t.x, t.y, t.z);
       TrunkLandmark s = t;
       s.x = p.x(), s.y = p.y(), s.z = p.z();
+      // The odometry's vertical drift over a few submaps (0.1-0.3 m in 30 m) is as large as
+      // the elevation a seen base measures: only the submap's own bases fix t_z and the tilt;
+      // without them t_z comes from the submaps' own ground maps.
+      if (source > 0) s.base_seen = false;
       merger.add(s, source);
     }
   };
@@ -111,8 +115,12 @@ AccumulatedTrunks TrunkAccumulator::accumulate(const Entry& current) const {
     span.push_back(d);
     addSightings(it->trunks, T_S_k, static_cast<int>(span.size()));
   }
-  // No predecessor in reach (a robot's first submap): its own trunks, as without accumulation.
+  // No predecessor in reach (a robot's first submap), or enough of the submap's own trunks
+  // seen again by a predecessor (a stand dense enough for one submap): its own trunks, as
+  // without accumulation.
   if (span.empty()) return out;
+  out.stable_own = static_cast<int>(merger.stable(params_.min_observations, 0).size());
+  if (out.stable_own >= params_.min_trunks) return out;
   // As few predecessors as give target_trunks stable stems; stability is judged on all of them.
   const int n = static_cast<int>(span.size());
   for (int m = 0; m <= n; ++m) {
@@ -127,6 +135,31 @@ AccumulatedTrunks TrunkAccumulator::accumulate(const Entry& current) const {
   return out;
 }
 
+namespace {
+
+// The submap's ground map over its own trunks' box (what extractTrunks builds when few bases
+// are seen): an accumulated descriptor carries no seen base from its predecessors, so its
+// loops' elevation comes from the submaps' own bases or, failing those, from these maps.
+GroundMap groundMapOfCloud(const Cloud& cloud_S, const Trunks& own, const TrunkExtractorParams& p) {
+  if (!(p.ground_map_cell_m > 0.0) || own.empty()) return GroundMap();
+  std::vector<float> x, y, z;
+  x.reserve(cloud_S.size()), y.reserve(cloud_S.size()), z.reserve(cloud_S.size());
+  for (const auto& q : cloud_S) {
+    x.push_back(q.x), y.push_back(q.y), z.push_back(q.z);
+  }
+  Eigen::Vector2d lo(own[0].x, own[0].y), hi = lo;
+  for (const TrunkLandmark& t : own) {
+    lo = lo.cwiseMin(Eigen::Vector2d(t.x, t.y));
+    hi = hi.cwiseMax(Eigen::Vector2d(t.x, t.y));
+  }
+  const Eigen::Vector2d margin = Eigen::Vector2d::Constant(p.ground_map_margin_m);
+  return makeGroundMap(x.data(), y.data(), z.data(), x.size(), Eigen::Vector3d::Zero(), lo - margin,
+                       hi + margin, p.ground_map_cell_m, p.ground_map_z_step_m,
+                       static_cast<uint32_t>(p.ground_map_min_points));
+}
+
+}  // namespace
+
 Descriptor describeCloudAccumulated(const Cloud& cloud_S, const SubmapKey& key, const Pose& T_O_S,
                                     TrunkAccumulator* accumulator,
                                     const TrunkExtractorParams& extractor_params,
@@ -140,6 +173,9 @@ Descriptor describeCloudAccumulated(const Cloud& cloud_S, const SubmapKey& key, 
   Descriptor d = buildDescriptor(acc.trunks, descriptor_params);
   d.footprint = ext.footprint;
   d.ground_map = ext.ground_map;
+  if (acc.submaps > 1 && d.ground_map.empty()) {
+    d.ground_map = groundMapOfCloud(cloud_S, ext.trunks, extractor_params);
+  }
   if (timings) timings->total_ms = msSince(t0);
   d.robot = key.robot;
   d.submap_id = key.submap_id;

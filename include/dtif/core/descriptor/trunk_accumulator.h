@@ -22,20 +22,22 @@ namespace dtif {
 
 /// Parameters of the multi-submap trunk set (YAML section `multi_submap`).
 struct MultiSubmapParams {
-  /// A submap with fewer trunks of its own is extended by its predecessors; 0: never. The six
-  /// denser built-in scenes have >= 15 in almost every submap, so they are not affected.
-  int min_trunks = 8;
-  int target_trunks = 14;       ///< stop adding predecessors once this many stable trunks
-  int max_submaps = 6;          ///< predecessors at most
-  double max_span_m = 40.0;     ///< a predecessor's origin at most this far from S's origin [m]
-  double max_span_s = 60.0;     ///< a predecessor at most this much older [s]
+  /// A submap is extended by its predecessors when fewer than this many of its own trunks are
+  /// stable (at least min_radius_m, seen again by a predecessor within the span): counting all
+  /// of its trunks would not do, as open stands give dozens of one-off fits on juveniles and
+  /// shrubs. 0: never.
+  int min_trunks = 12;
+  int target_trunks = 20;       ///< stop adding predecessors once this many stable trunks
+  int max_submaps = 8;          ///< predecessors at most
+  double max_span_m = 50.0;     ///< a predecessor's origin at most this far from S's origin [m]
+  double max_span_s = 80.0;     ///< a predecessor at most this much older [s]
   double merge_radius_m = 0.5;  ///< sightings closer than this (in S) are one stem [m]
   /// A stem counts when seen in at least this many submaps (among S and every predecessor
   /// within the span): one-off fits on juveniles and shrubs do not.
   int min_observations = 2;
-  /// Sightings thinner than this are not accumulated: juveniles of 3-7 cm DBH (r <= 0.035 m,
-  /// fits a little larger) differ between visits, adult stems do not [m].
-  double min_radius_m = 0.05;
+  /// Sightings thinner than this are not accumulated: juveniles of 3-7 cm DBH (r <= 0.035 m;
+  /// their fits come out at 0.04-0.06 m) differ between visits, adult stems do not [m].
+  double min_radius_m = 0.06;
 
   std::string validate() const;
 
@@ -57,6 +59,9 @@ struct AccumulatedTrunks {
   Trunks trunks;        ///< in the submap's frame S
   int submaps = 1;      ///< submaps whose trunks were used (1: the submap's own trunks)
   double span_m = 0.0;  ///< farthest used predecessor's origin from S's origin [m]
+  /// The submap's own trunks that are stable (what min_trunks is compared with); -1 when not
+  /// counted (no predecessor in reach, or multi_submap off).
+  int stable_own = -1;
 };
 
 /// One robot's recent submaps and their trunks. Submaps must come in time order (older ones
@@ -66,8 +71,8 @@ class TrunkAccumulator {
   explicit TrunkAccumulator(const MultiSubmapParams& params) : params_(params) {}
 
   /// The trunks to describe the submap (stamp, T_O_S, its own trunks in S) with: its own when
-  /// it has at least min_trunks, else the stable stems of it and its predecessors, in S. The
-  /// submap is then remembered as a predecessor of the next ones.
+  /// at least min_trunks of them are stable, else the stable stems of it and its predecessors,
+  /// in S. The submap is then remembered as a predecessor of the next ones.
   AccumulatedTrunks add(double stamp, const Pose& T_O_S, const Trunks& trunks_S);
 
   size_t history() const { return history_.size(); }  ///< remembered predecessors
