@@ -26,7 +26,7 @@ struct MultiSubmapParams {
   /// stable (at least min_radius_m, seen again by a predecessor within the span): counting all
   /// of its trunks would not do, as open stands give dozens of one-off fits on juveniles and
   /// shrubs. 0: never.
-  int min_trunks = 12;
+  int min_trunks = 10;
   int target_trunks = 20;       ///< stop adding predecessors once this many stable trunks
   int max_submaps = 8;          ///< predecessors at most
   double max_span_m = 50.0;     ///< a predecessor's origin at most this far from S's origin [m]
