@@ -10,6 +10,7 @@
 #include <functional>
 #include <iomanip>
 #include <limits>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <tuple>
@@ -20,6 +21,7 @@
 #include "dtif/core/database/loop_pair.h"
 #include "dtif/core/descriptor/describe.h"
 #include "dtif/core/descriptor/descriptor.h"
+#include "dtif/core/descriptor/trunk_accumulator.h"
 #include "dtif/core/extraction/gravity.h"
 #include "dtif/core/extraction/trunk_extractor.h"
 #include "dtif/core/timing.h"
@@ -270,6 +272,19 @@ void scoreAccepted(const Dataset& ds, const CellSets& cells, size_t i, size_t j,
   scoreAcceptedLoop(trueTcq(ds, i, j), T_c_q, cellOverlap(cells[i], cells[j]), eval, row);
 }
 
+// Step 1 through the robot's trunk accumulator (very sparse stands): as online, a submap may
+// only draw on earlier submaps of its own robot, chained by that robot's odometry.
+Descriptor describeQuery(const Cloud& cloud, const Eigen::Quaterniond& R_L_S,
+                         const SubmapRecord& rec, const DtifParams& params,
+                         std::map<std::string, TrunkAccumulator>* accumulators,
+                         DescribeTimings* timings, TrunkExtractionResult* ext,
+                         AccumulatedTrunks* acc) {
+  auto it = accumulators->try_emplace(rec.robot, params.multi_submap).first;
+  return describeLevelledCloudAccumulated(cloud, R_L_S, {rec.robot, rec.id, rec.stamp}, rec.T_O_S,
+                                          &it->second, params.trunk_extraction, params.descriptor,
+                                          timings, ext, acc);
+}
+
 void checkGroundTruth(const Dataset& ds) {
   for (const auto& rec : ds.submaps) {
     if (!ds.T_W_S.count(rec.id)) {
@@ -459,6 +474,7 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
   CellSets cells;
   cells.reserve(ds.submaps.size());
   std::vector<std::shared_ptr<const Descriptor>> descs;  // every submap's, for explainMiss
+  std::map<std::string, TrunkAccumulator> accumulators;  // per robot (multi_submap)
   double bytes_sum = 0.0;
   const size_t n = ds.submaps.size();
 
@@ -477,9 +493,11 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
     const auto t_level = std::chrono::steady_clock::now();
     const Eigen::Quaterniond R_L_S = levelForEval(&leveller, rec, *cloud, T_W_q, &result.levelling);
     const double level_ms = msSince(t_level);
+    AccumulatedTrunks acc;
     auto desc = std::make_shared<Descriptor>(
-        describeLevelledCloud(*cloud, R_L_S, {rec.robot, rec.id, rec.stamp},
-                              params.trunk_extraction, params.descriptor, &timings, &ext));
+        describeQuery(*cloud, R_L_S, rec, params, &accumulators, &timings, &ext, &acc));
+    row.described_trunks = desc->trunks.size();
+    row.described_submaps = acc.submaps;
     row.t_desc_ms = timings.total_ms + (leveller.enabled() ? level_ms : 0.0);
     row.trunks = ext.trunks.size();
     if (!ds.stems.empty()) {

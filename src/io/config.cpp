@@ -110,6 +110,7 @@ std::string DtifParams::validate() const {
   add("trunk_extraction", trunk_extraction.validate());
   add("levelling", levelling.validate());
   add("descriptor", descriptor.validate());
+  add("multi_submap", multi_submap.validate());
   add("matcher", loop.matcher.validate());
   add("pose", loop.pose.validate());
   add("verification", loop.verification.validate());
@@ -136,8 +137,9 @@ void loadParamsYaml(const std::string& path, DtifParams* p) {
   }
   if (root.IsNull()) return;  // an empty file changes nothing
   if (!root.IsMap()) throw ParamError(path + ": expected a map of parameter sections");
-  static const std::set<std::string> kSections = {
-      "trunk_extraction", "levelling", "descriptor", "matcher", "pose", "verification", "database"};
+  static const std::set<std::string> kSections = {"trunk_extraction", "levelling", "descriptor",
+                                                  "multi_submap",     "matcher",   "pose",
+                                                  "verification",     "database"};
   for (const auto& kv : root) {
     const std::string key = kv.first.as<std::string>();
     if (!kSections.count(key)) throw ParamError(path + ": unknown section '" + key + "'");
@@ -146,6 +148,7 @@ void loadParamsYaml(const std::string& path, DtifParams* p) {
   readSection(root, "trunk_extraction", path, &next.trunk_extraction);
   readSection(root, "levelling", path, &next.levelling);
   readSection(root, "descriptor", path, &next.descriptor);
+  readSection(root, "multi_submap", path, &next.multi_submap);
   readSection(root, "matcher", path, &next.loop.matcher);
   readSection(root, "pose", path, &next.loop.pose);
   readSection(root, "verification", path, &next.loop.verification);
@@ -162,6 +165,7 @@ std::string paramsToYaml(const DtifParams& p) {
   writeSection(out, "trunk_extraction", p.trunk_extraction);
   writeSection(out, "levelling", p.levelling);
   writeSection(out, "descriptor", p.descriptor);
+  writeSection(out, "multi_submap", p.multi_submap);
   writeSection(out, "matcher", p.loop.matcher);
   writeSection(out, "pose", p.loop.pose);
   writeSection(out, "verification", p.loop.verification);

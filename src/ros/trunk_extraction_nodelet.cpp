@@ -24,6 +24,7 @@
 
 #include "dtif/core/descriptor/describe.h"
 #include "dtif/core/descriptor/descriptor.h"
+#include "dtif/core/descriptor/trunk_accumulator.h"
 #include "dtif/core/extraction/gravity.h"
 #include "dtif/core/extraction/point_bounds.h"
 #include "dtif/core/extraction/trunk_extractor.h"
@@ -64,9 +65,11 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
       reader.readSection("trunk_extraction", &extractor_params_);
       reader.readSection("descriptor", &descriptor_params_);
       reader.readSection("levelling", &levelling_params_);
+      reader.readSection("multi_submap", &multi_submap_params_);
       reader.checkNoUnknownKeys();
       std::string problems = assembler_params_.validate() + extractor_params_.validate() +
-                             descriptor_params_.validate() + levelling_params_.validate();
+                             descriptor_params_.validate() + levelling_params_.validate() +
+                             multi_submap_params_.validate();
       if (node_.input != "odometry" && node_.input != "submap") {
         problems += "input must be 'odometry' or 'submap', not '" + node_.input + "'\n";
       }
@@ -96,6 +99,7 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
       voxel_grid_ = std::make_unique<VoxelCentroidGrid>(assembler_params_.voxel_m);
     }
     leveller_ = std::make_unique<Leveller>(levelling_params_);
+    setUpAccumulator();
     recent_markers_ =
         std::make_unique<ros_glue::RecentMarkers>(static_cast<size_t>(node_.marker_history));
     descriptor_pub_ = nh.advertise<dtif::TrunkDescriptor>("descriptor", 10);
@@ -164,6 +168,17 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
     t.transform.rotation = msg.pose.pose.orientation;
     if (!tf_broadcaster_) tf_broadcaster_ = std::make_unique<tf2_ros::TransformBroadcaster>();
     tf_broadcaster_->sendTransform(t);
+  }
+
+  // The robot's multi-submap trunk sets chain submaps by T_O_S: without odometry (ready-made
+  // submaps and no ~odom_frame) there is no chain, so each submap keeps its own trunks.
+  void setUpAccumulator() {
+    MultiSubmapParams p = multi_submap_params_;
+    if (node_.input == "submap" && node_.odom_frame.empty() && p.min_trunks > 0) {
+      NODELET_INFO("multi_submap off: input 'submap' without odom_frame has no T_O_S to chain");
+      p.min_trunks = 0;
+    }
+    accumulator_ = std::make_unique<TrunkAccumulator>(p);
   }
 
   // Checks the frame of a message against ~odom_frame (learnt from the first message if unset).
@@ -330,17 +345,18 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
         leveller_->level(node_.robot, *s.cloud, Eigen::Quaterniond(s.T_O_S.rotation()));
     logLevelling(lev.estimate);
     TrunkExtractionResult ext;
-    const Descriptor d =
-        describeLevelledCloud(*s.cloud, lev.R_L_S, {node_.robot, s.id, s.stamp}, extractor_params_,
-                              descriptor_params_, nullptr, &ext);
+    AccumulatedTrunks acc;
+    const Descriptor d = describeLevelledCloudAccumulated(
+        *s.cloud, lev.R_L_S, {node_.robot, s.id, s.stamp}, s.T_O_S, accumulator_.get(),
+        extractor_params_, descriptor_params_, nullptr, &ext, &acc);
     const std::string bounds = boundsWarning(ext.stats, extractor_params_);
     if (!bounds.empty()) NODELET_WARN("submap %ld: %s", static_cast<long>(s.id), bounds.c_str());
     Pose T_O_L = s.T_O_S;  // trunks are in the levelled frame
     T_O_L.linear() = s.T_O_S.rotation() * lev.R_L_S.conjugate().toRotationMatrix();
     const double ms = msSince(t0);
-    NODELET_DEBUG("submap %ld: %zu points, %zu trunks, %zu faces, %.1f ms%s%s",
-                  static_cast<long>(s.id), s.cloud->size(), d.trunks.size(), d.triangles.size(), ms,
-                  d.valid ? "" : ", invalid: ", d.invalid_reason.c_str());
+    NODELET_DEBUG("submap %ld: %zu points, %zu trunks from %d submaps, %zu faces, %.1f ms%s%s",
+                  static_cast<long>(s.id), s.cloud->size(), d.trunks.size(), acc.submaps,
+                  d.triangles.size(), ms, d.valid ? "" : ", invalid: ", d.invalid_reason.c_str());
     boost::shared_ptr<dtif::TrunkDescriptor> msg(
         new dtif::TrunkDescriptor(ros_glue::toMsg(d, s.T_O_S, frame)));
     msg->data_end.fromSec(s.end_stamp);
@@ -388,6 +404,7 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
   DescriptorParams descriptor_params_;
   LevellingParams levelling_params_;
   std::unique_ptr<Leveller> leveller_;  // worker thread only
+  MultiSubmapParams multi_submap_params_;
 
   // assembler_, odom_frame_, out_frame_, last_submap_stamp_, next_submap_id_, last_warning_
   std::mutex mutex_;
@@ -405,6 +422,7 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
   bool stop_ = false;
   std::thread worker_;
   std::unique_ptr<VoxelCentroidGrid> voxel_grid_;  // worker thread only; null: no voxel filter
+  std::unique_ptr<TrunkAccumulator> accumulator_;  // worker thread only (after onInit)
 
   std::unique_ptr<ros_glue::RecentMarkers> recent_markers_;
   ros::WallTimer marker_timer_;

@@ -153,6 +153,13 @@ void checkUnderstory(const UnderstoryParams& understory, std::ostringstream* err
   check(understory.logs_per_ha <= 2000, "understory.logs_per_ha must be <= 2000", &e);
   check(understory.shrub_radius_m > 0, "understory.shrub_radius_m must be > 0", &e);
   check(understory.shrub_density > 0, "understory.shrub_density must be > 0", &e);
+  check(understory.sapling_dbh_min_m > 0 &&
+            understory.sapling_dbh_min_m <= understory.sapling_dbh_max_m,
+        "understory: sapling_dbh_min_m must be > 0 and <= sapling_dbh_max_m", &e);
+  check(understory.sapling_height_min_m > 0 &&
+            understory.sapling_height_min_m <= understory.sapling_height_max_m &&
+            understory.sapling_height_max_m <= 20,
+        "understory: sapling heights must be 0 < min <= max <= 20 m", &e);
 }
 
 void checkSensor(const SensorParams& sensor, std::ostringstream* errors) {

@@ -332,9 +332,11 @@ void World::addSaplings(const UnderstoryParams& up, const StemParams& sp, double
     s.sapling = true;
     s.base_xy = Eigen::Vector2d(uniform(rng, 0, plot_size_.x()), uniform(rng, 0, plot_size_.y()));
     s.z_base = terrainHeight(s.base_xy.x(), s.base_xy.y());
-    const double dbh = uniform(rng, 0.01, std::min(0.07, 0.9 * sp.dbh_min_m));
+    // Saplings stay below the trunks' smallest DBH.
+    const double dbh_max = std::min(up.sapling_dbh_max_m, 0.9 * sp.dbh_min_m);
+    const double dbh = uniform(rng, std::min(up.sapling_dbh_min_m, dbh_max), dbh_max);
     s.r_bh = 0.5 * dbh;
-    s.height = uniform(rng, 1.0, 5.0);
+    s.height = uniform(rng, up.sapling_height_min_m, up.sapling_height_max_m);
     s.taper = 0.3 * s.r_bh / s.height;
     const double lean = uniform(rng, 0, 2 * sp.lean_max_deg + 2) * kDeg;
     const double lean_dir = uniform(rng, -kPi, kPi);

@@ -40,6 +40,20 @@ void printLevelling(const std::filesystem::path& dir, const EvalResult& res) {
   if (!t) throw DatasetError((dir / "table.md").string() + ": write failed");
 }
 
+// How many submaps multi_submap described with their predecessors' stems (very sparse stands).
+void printMultiSubmap(const std::vector<EvalRow>& rows) {
+  size_t n = 0, trunks = 0, submaps = 0;
+  for (const EvalRow& r : rows) {
+    if (r.described_submaps <= 1) continue;
+    ++n, trunks += r.described_trunks, submaps += static_cast<size_t>(r.described_submaps);
+  }
+  if (n == 0) return;
+  const double k = 1.0 / static_cast<double>(n);
+  std::cout << std::fixed << std::setprecision(1) << "multi_submap: " << n << " of " << rows.size()
+            << " submaps described with earlier submaps' stems, " << static_cast<double>(trunks) * k
+            << " trunks from " << static_cast<double>(submaps) * k << " submaps on average\n";
+}
+
 int runEval(const EvalArgs& a) {
   DtifParams params = loadParams(a.configs);
   if (a.unit_weights) params.loop.pose.unit_weights = true;
@@ -63,6 +77,7 @@ int runEval(const EvalArgs& a) {
   writeMissesCsv((dir / "misses.csv").string(), res.misses);
   std::cout << "dataset " << ds.root << ": " << res.summary.submaps << " submaps\n" << table;
   printLevelling(dir, res);
+  printMultiSubmap(res.rows);
   if (!res.detection.empty()) {
     writeDetectionCsv((dir / "detection.csv").string(), res.detection);
     double pts = 0, vis = 0, tr = 0, on = 0, found = 0, seen = 0, r_sum = 0, z_sum = 0;

@@ -24,6 +24,7 @@ std::set<std::string> extractionKeys() {
   for (const auto& s : declaredKeys<TrunkExtractorParams>("trunk_extraction")) k.insert(s);
   for (const auto& s : declaredKeys<DescriptorParams>("descriptor")) k.insert(s);
   for (const auto& s : declaredKeys<LevellingParams>("levelling")) k.insert(s);
+  for (const auto& s : declaredKeys<MultiSubmapParams>("multi_submap")) k.insert(s);
   return k;
 }
 

@@ -56,8 +56,10 @@ struct EvalRow {
   double t_desc_ms = 0.0, t_loop_ms = 0.0, t_solver_ms = 0.0;
   std::optional<Pose> T_c_q_est;
   bool true_positive = false;
-  size_t trunks = 0;           ///< trunks extracted (extra, not in results.csv)
-  std::string invalid_reason;  ///< why the descriptor was excluded (extra)
+  size_t trunks = 0;            ///< trunks extracted (extra, not in results.csv)
+  size_t described_trunks = 0;  ///< trunks in the descriptor (extra; multi_submap may add)
+  int described_submaps = 1;    ///< submaps whose trunks it holds (extra; 1: its own only)
+  std::string invalid_reason;   ///< why the descriptor was excluded (extra)
 };
 
 struct EvalSummary {

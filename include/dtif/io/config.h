@@ -5,6 +5,7 @@
 
 #include "dtif/core/database/loop_detector.h"
 #include "dtif/core/descriptor/descriptor.h"
+#include "dtif/core/descriptor/trunk_accumulator.h"
 #include "dtif/core/extraction/gravity.h"
 #include "dtif/core/extraction/trunk_extractor.h"
 #include "dtif/core/params.h"
@@ -15,6 +16,7 @@ struct DtifParams {
   TrunkExtractorParams trunk_extraction;  ///< YAML section `trunk_extraction`
   LevellingParams levelling;              ///< YAML section `levelling` (gravity.h)
   DescriptorParams descriptor;            ///< YAML section `descriptor`
+  MultiSubmapParams multi_submap;         ///< YAML section `multi_submap` (very sparse stands)
   LoopDetectorParams loop;  ///< sections `matcher`, `pose`, `verification`, `database`
 
   /// Empty when every component validates, else the problems, one per line.

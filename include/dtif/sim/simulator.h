@@ -127,14 +127,25 @@ struct TreeParams {
 
 /// Clutter near the ground.
 struct UnderstoryParams {
-  double saplings_per_ha = 300.0;  ///< young trees below trunk size (DBH 1-7 cm) [1/ha]
-  double shrubs_per_ha = 300.0;    ///< shrubs (porous foliage volumes) [1/ha]
-  double shrub_radius_m = 0.8;     ///< mean shrub radius [m]
-  double shrub_density = 2.5;      ///< foliage attenuation inside a shrub [1/m]
-  double logs_per_ha = 20.0;       ///< fallen logs [1/ha]
+  double saplings_per_ha = 300.0;  ///< young trees below trunk size [1/ha]
+  /// Sapling DBH is uniform in [sapling_dbh_min_m, min(sapling_dbh_max_m, 0.9 stems.dbh_min_m)]
+  /// and height uniform in [sapling_height_min_m, sapling_height_max_m]. Juveniles of open
+  /// stands (DBH 3-7 cm, 3-8 m tall) reach the trunk slab and the circle-fit band.
+  double sapling_dbh_min_m = 0.01;    ///< [m]
+  double sapling_dbh_max_m = 0.07;    ///< [m]
+  double sapling_height_min_m = 1.0;  ///< [m]
+  double sapling_height_max_m = 5.0;  ///< [m]
+  double shrubs_per_ha = 300.0;       ///< shrubs (porous foliage volumes) [1/ha]
+  double shrub_radius_m = 0.8;        ///< mean shrub radius [m]
+  double shrub_density = 2.5;         ///< foliage attenuation inside a shrub [1/m]
+  double logs_per_ha = 20.0;          ///< fallen logs [1/ha]
   template <class V>
   void visit(V& v) {
     v("saplings_per_ha", saplings_per_ha);
+    v("sapling_dbh_min_m", sapling_dbh_min_m);
+    v("sapling_dbh_max_m", sapling_dbh_max_m);
+    v("sapling_height_min_m", sapling_height_min_m);
+    v("sapling_height_max_m", sapling_height_max_m);
     v("shrubs_per_ha", shrubs_per_ha);
     v("shrub_radius_m", shrub_radius_m);
     v("shrub_density", shrub_density);
