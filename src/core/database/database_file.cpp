@@ -1,5 +1,7 @@
 // The database file: save/load of every entry's encoded descriptor, atomically written and
 // checksummed.
+#include <Eigen/Geometry>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
@@ -14,23 +16,53 @@ namespace dtif {
 namespace {
 
 constexpr char kDbMagic[8] = {'D', 'T', 'I', 'F', 'D', 'B', '\0', '\0'};
-constexpr uint32_t kDbVersion = 1;
+// Version 2 adds each entry's odometry pose and frame; version 1 files still load.
+constexpr uint32_t kDbVersion = 2;
+constexpr uint32_t kDbVersionNoOdometry = 1;
 
 using detail::fnv1a;
+
+// Frame (length-prefixed; empty: unknown), translation, quaternion (x, y, z, w).
+void putOdometry(detail::ByteWriter& w, const EntryOdometry& o) {
+  w.putString(o.odom_frame);
+  const Eigen::Quaterniond q(o.T_O_S.rotation());
+  for (double v : {o.T_O_S.translation().x(), o.T_O_S.translation().y(), o.T_O_S.translation().z(),
+                   q.x(), q.y(), q.z(), q.w()}) {
+    w.put<double>(v);
+  }
+}
+
+EntryOdometry getOdometry(detail::ByteReader& r) {
+  EntryOdometry o;
+  o.odom_frame = r.getString();
+  double v[7];
+  for (double& x : v) x = r.get<double>();
+  const Eigen::Quaterniond q(v[6], v[3], v[4], v[5]);
+  for (double x : v) {
+    if (!std::isfinite(x)) throw std::runtime_error("odometry pose is not finite");
+  }
+  if (std::fabs(q.norm() - 1.0) > 1e-6) throw std::runtime_error("odometry rotation not unit");
+  o.T_O_S = Pose::Identity();
+  o.T_O_S.linear() = q.normalized().toRotationMatrix();
+  o.T_O_S.translation() = Eigen::Vector3d(v[0], v[1], v[2]);
+  return o;
+}
 
 }  // namespace
 
 // File layout: 8-byte magic, u32 version, u64 entry count, entries (u32 size + encoded
-// descriptor), u32 FNV-1a of everything before it.
+// descriptor + odometry record), u32 FNV-1a of everything before it. Version 1 entries have no
+// odometry record.
 void LoopDetector::save(const std::string& path) const {
   detail::ByteWriter w;
   w.bytes.assign(kDbMagic, kDbMagic + 8);
   w.put<uint32_t>(kDbVersion);
   w.put<uint64_t>(entries_.size());
-  for (const auto& d : entries_) {
-    const std::vector<uint8_t> e = encodeDescriptor(*d);
+  for (size_t i = 0; i < entries_.size(); ++i) {
+    const std::vector<uint8_t> e = encodeDescriptor(*entries_[i]);
     w.put<uint32_t>(static_cast<uint32_t>(e.size()));
     w.putBytes(e);
+    putOdometry(w, odometry_[i]);
   }
   w.put<uint32_t>(fnv1a(w.bytes.data(), w.bytes.size()));
   const std::vector<uint8_t>& buf = w.bytes;
@@ -65,14 +97,16 @@ void LoopDetector::load(const std::string& path) {
   // The body: everything between the magic and the checksum.
   detail::ByteReader r(buf.data() + 8, buf.size() - 8 - 4, "truncated");
   const uint32_t version = r.get<uint32_t>();
-  if (version != kDbVersion) {
-    fail("version " + std::to_string(version) + ", expected " + std::to_string(kDbVersion));
+  if (version != kDbVersion && version != kDbVersionNoOdometry) {
+    fail("version " + std::to_string(version) + ", expected " +
+         std::to_string(kDbVersionNoOdometry) + " or " + std::to_string(kDbVersion));
   }
   uint32_t stored_sum;
   std::memcpy(&stored_sum, buf.data() + buf.size() - 4, 4);
   if (fnv1a(buf.data(), buf.size() - 4) != stored_sum) fail("checksum mismatch");
   // Decode everything into a new list first; the database changes only when all of it is good.
   std::vector<std::shared_ptr<const Descriptor>> loaded;
+  std::vector<EntryOdometry> odometry;
   try {
     const uint64_t n = r.get<uint64_t>();
     // The loosest params: keep each descriptor's saved validity.
@@ -85,12 +119,14 @@ void LoopDetector::load(const std::string& path) {
       auto d = std::make_shared<Descriptor>(decodeDescriptor(e, loose));
       if (!d->valid) throw std::runtime_error("entry " + std::to_string(i) + " is not valid");
       loaded.push_back(std::move(d));
+      odometry.push_back(version >= kDbVersion ? getOdometry(r) : EntryOdometry{});
     }
     if (r.remaining() != 0) throw std::runtime_error("trailing bytes");
   } catch (const std::runtime_error& e) {
     fail(e.what());
   }
   entries_ = std::move(loaded);
+  odometry_ = std::move(odometry);
   triangles_.assign(entries_.size(), nullptr);
 }
 

@@ -44,6 +44,15 @@ struct LoopDetectorParams {
   std::string validate() const;
 };
 
+/// Where a database entry's submap lies in its robot's odometry frame. Saved with the database so
+/// that a later run that loads it can place the old submaps (relocalisation). Empty frame: not
+/// known (entries of version-1 files, or inserted without it).
+struct EntryOdometry {
+  std::string odom_frame;
+  Pose T_O_S = Pose::Identity();
+  bool known() const { return !odom_frame.empty(); }
+};
+
 /// An accepted loop (q, c, T_c_q).
 struct Loop {
   std::string query_robot;
@@ -100,24 +109,28 @@ class LoopDetector {
   /// Best verified loop of q against the database (same-robot recent entries excluded).
   std::optional<Loop> query(const Descriptor& q, QueryStats* stats = nullptr) const;
 
-  /// Inserts q; invalid descriptors are ignored (returns false).
-  bool insert(std::shared_ptr<const Descriptor> d);
+  /// Inserts q with its odometry pose (optional); invalid descriptors are ignored (returns false).
+  bool insert(std::shared_ptr<const Descriptor> d, const EntryOdometry& odometry = {});
 
   size_t size() const { return entries_.size(); }
   const std::vector<std::shared_ptr<const Descriptor>>& entries() const { return entries_; }
+  /// The odometry pose of entries()[i], as inserted or loaded.
+  const EntryOdometry& odometry(size_t i) const { return odometry_.at(i); }
   const LoopDetectorParams& params() const { return params_; }
   /// Replaces estimatePose by another solver on the same correspondences (empty: estimatePose).
   void setSolver(PoseSolver solver) { solver_ = std::move(solver); }
 
   /// Writes the database to path atomically (temporary file, then rename). Throws on failure.
   void save(const std::string& path) const;
-  /// Replaces the database by the file's content. Throws std::runtime_error (naming the file
-  /// and the problem) on a missing, corrupt or version-mismatched file; then nothing changes.
+  /// Replaces the database by the file's content (version 1 files: odometry unknown). Throws
+  /// std::runtime_error (naming the file and the problem) on a missing, corrupt or
+  /// version-mismatched file; then nothing changes.
   void load(const std::string& path);
 
  private:
   LoopDetectorParams params_;
   std::vector<std::shared_ptr<const Descriptor>> entries_;
+  std::vector<EntryOdometry> odometry_;  // parallel to entries_
   PoseSolver solver_;
   /// matchTriangles of each entry, computed when the entry is first matched and then reused
   /// (the neighbour triangles of a descriptor do not depend on the query).
