@@ -13,6 +13,7 @@ PKGS=(
   ros-std-msgs ros-nav-msgs ros-tf2-msgs libgtest-dev googletest rosbash
   python3-sensor-msgs python3-geometry-msgs python3-visualization-msgs python3-nav-msgs
   libyaml-cpp-dev nlohmann-json3-dev libpng-dev zlib1g-dev libcli11-dev librosbag-storage-dev
+  libceres-dev
 )
 
 PKGS+=("$@")
