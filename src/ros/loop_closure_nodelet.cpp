@@ -236,6 +236,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       index_[key] = d;
       meta_[key] = meta;
     }
+    if (q->lc) detector_->recordLoop(*q->lc);  // saved with the database (relocalisation)
     if (q->lc && q->candidate_meta) linkOdometryFrames(*q->lc, *q->candidate_meta, meta);
     return true;
   }

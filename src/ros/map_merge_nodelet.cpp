@@ -427,7 +427,8 @@ class MapMergeNodelet : public nodelet::Nodelet {
   // ---- Database of an earlier run: its submaps as chains of their own. ----
 
   // Replaces the merged map by the database's submaps whose odometry is known (version-2 files),
-  // one chain "<robot>@database" per robot. Loops of the new run then place the new robots.
+  // one chain "<robot>@database" per robot, and its loops. Loops of the new run against them then
+  // place the new robots in that map.
   bool loadDatabase(const std::string& path, std::string* message) {
     LoopDetector db{LoopDetectorParams{}};
     try {
@@ -457,8 +458,19 @@ class MapMergeNodelet : public nodelet::Nodelet {
       chains_[chain] = Chain{o.odom_frame, false};
       added += addToMerger(chain, d.robot, d.submap_id, d.stamp, o.T_O_S, d.trunks);
     }
+    // The earlier run's loops rebuild its map, so the new run lands in that map.
+    size_t loops = 0;
+    for (Loop lc : db.loops()) {
+      auto q = global_id_.find({lc.query_robot, lc.query_id});
+      auto c = global_id_.find({lc.candidate_robot, lc.candidate_id});
+      if (q == global_id_.end() || c == global_id_.end()) continue;
+      lc.query_id = q->second;
+      lc.candidate_id = c->second;
+      loops += merger_.addLoop(lc);
+    }
     dirty_ = true;
-    *message = "map: " + std::to_string(added) + " submaps of an earlier run from " + path +
+    *message = "map: " + std::to_string(added) + " submaps and " + std::to_string(loops) +
+               " loops of an earlier run from " + path +
                (unknown ? " (" + std::to_string(unknown) + " without odometry pose skipped)" : "");
     return true;
   }

@@ -1,5 +1,5 @@
-// The database file keeps each entry's odometry pose and frame (version 2) and still reads
-// version-1 files, whose entries come back with an unknown odometry pose.
+// The database file keeps each entry's odometry pose and frame and the accepted loops (version
+// 2) and still reads version-1 files, whose entries come back with an unknown odometry pose.
 #include <gtest/gtest.h>
 
 #include <cstring>
@@ -45,7 +45,7 @@ void put(std::vector<uint8_t>* b, T v) {
   b->insert(b->end(), x, x + sizeof(T));
 }
 
-TEST(DatabaseOdometry, RoundTripKeepsPoseAndFrame) {
+TEST(DatabaseOdometry, RoundTripKeepsPoseFrameAndLoops) {
   const std::vector<PairCase> cases = overlappingPairs(3, 4);
   LoopDetector db{LoopDetectorParams{}};
   for (size_t i = 0; i < cases.size(); ++i) {
@@ -55,6 +55,16 @@ TEST(DatabaseOdometry, RoundTripKeepsPoseAndFrame) {
     db.insert(std::make_shared<Descriptor>(cases[i].c), o);
   }
   db.insert(std::make_shared<Descriptor>(cases[0].q));  // odometry not given
+  Loop loop;
+  loop.query_robot = cases[0].q.robot;
+  loop.query_id = cases[0].q.submap_id;
+  loop.candidate_robot = cases[0].c.robot;
+  loop.candidate_id = cases[0].c.submap_id;
+  loop.T_c_q = cases[0].T_c_q;
+  loop.covariance(0, 1) = loop.covariance(1, 0) = 0.25;
+  loop.inliers = 9;
+  loop.score = 0.75;
+  db.recordLoop(loop);
   const std::string path = ::testing::TempDir() + "/dtif_db_odom.bin";
   db.save(path);
   LoopDetector other{LoopDetectorParams{}};
@@ -65,6 +75,16 @@ TEST(DatabaseOdometry, RoundTripKeepsPoseAndFrame) {
     EXPECT_EQ(other.odometry(i).known(), i < cases.size());
     EXPECT_LT((other.odometry(i).T_O_S.matrix() - db.odometry(i).T_O_S.matrix()).norm(), 1e-12);
   }
+  ASSERT_EQ(other.loops().size(), 1u);
+  const Loop& l = other.loops()[0];
+  EXPECT_EQ(l.query_robot, loop.query_robot);
+  EXPECT_EQ(l.query_id, loop.query_id);
+  EXPECT_EQ(l.candidate_robot, loop.candidate_robot);
+  EXPECT_EQ(l.candidate_id, loop.candidate_id);
+  EXPECT_LT((l.T_c_q.matrix() - loop.T_c_q.matrix()).norm(), 1e-12);
+  EXPECT_EQ(l.covariance, loop.covariance);
+  EXPECT_EQ(l.inliers, 9);
+  EXPECT_EQ(l.score, 0.75);
 }
 
 TEST(DatabaseOdometry, BadOdometryRecordIsRejectedAndLeavesDbUnchanged) {
@@ -77,11 +97,11 @@ TEST(DatabaseOdometry, BadOdometryRecordIsRejectedAndLeavesDbUnchanged) {
   db.save(path);
   std::vector<char> c = readBytes(path);
   std::vector<uint8_t> b(c.begin(), c.end());
-  // The last odometry value (quaternion w = 1) becomes 3: not a rotation. Re-checksummed, so
-  // only the record's own check can refuse it.
+  // The last odometry value (quaternion w = 1, before the loop count 0) becomes 3: not a
+  // rotation. Re-checksummed, so only the record's own check can refuse it.
   b.resize(b.size() - 4);
   const double three = 3.0;
-  std::memcpy(b.data() + b.size() - 8, &three, 8);
+  std::memcpy(b.data() + b.size() - 8 - 8, &three, 8);
   put<uint32_t>(&b, fnv1a(b));
   writeBytes(path, b);
   LoopDetector target{LoopDetectorParams{}};

@@ -16,7 +16,8 @@ namespace dtif {
 namespace {
 
 constexpr char kDbMagic[8] = {'D', 'T', 'I', 'F', 'D', 'B', '\0', '\0'};
-// Version 2 adds each entry's odometry pose and frame; version 1 files still load.
+// Version 2 adds each entry's odometry pose and frame and the accepted loops; version 1 files
+// still load.
 constexpr uint32_t kDbVersion = 2;
 constexpr uint32_t kDbVersionNoOdometry = 1;
 
@@ -48,11 +49,39 @@ EntryOdometry getOdometry(detail::ByteReader& r) {
   return o;
 }
 
+// Robots, ids, T_c_q (translation, quaternion x y z w), covariance, inliers, score.
+void putLoop(detail::ByteWriter& w, const Loop& l) {
+  w.putString(l.query_robot);
+  w.put<int64_t>(l.query_id);
+  w.putString(l.candidate_robot);
+  w.put<int64_t>(l.candidate_id);
+  EntryOdometry pose;
+  pose.T_O_S = l.T_c_q;
+  putOdometry(w, pose);  // an empty frame, then the pose
+  for (int i = 0; i < 36; ++i) w.put<double>(l.covariance(i / 6, i % 6));
+  w.put<int32_t>(l.inliers);
+  w.put<double>(l.score);
+}
+
+Loop getLoop(detail::ByteReader& r) {
+  Loop l;
+  l.query_robot = r.getString();
+  l.query_id = r.get<int64_t>();
+  l.candidate_robot = r.getString();
+  l.candidate_id = r.get<int64_t>();
+  l.T_c_q = getOdometry(r).T_O_S;
+  for (int i = 0; i < 36; ++i) l.covariance(i / 6, i % 6) = r.get<double>();
+  if (!l.covariance.allFinite()) throw std::runtime_error("loop covariance is not finite");
+  l.inliers = r.get<int32_t>();
+  l.score = r.get<double>();
+  return l;
+}
+
 }  // namespace
 
 // File layout: 8-byte magic, u32 version, u64 entry count, entries (u32 size + encoded
-// descriptor + odometry record), u32 FNV-1a of everything before it. Version 1 entries have no
-// odometry record.
+// descriptor + odometry record), u64 loop count, loops, u32 FNV-1a of everything before it.
+// Version 1 files have neither odometry records nor loops.
 void LoopDetector::save(const std::string& path) const {
   detail::ByteWriter w;
   w.bytes.assign(kDbMagic, kDbMagic + 8);
@@ -64,6 +93,8 @@ void LoopDetector::save(const std::string& path) const {
     w.putBytes(e);
     putOdometry(w, odometry_[i]);
   }
+  w.put<uint64_t>(loops_.size());
+  for (const Loop& l : loops_) putLoop(w, l);
   w.put<uint32_t>(fnv1a(w.bytes.data(), w.bytes.size()));
   const std::vector<uint8_t>& buf = w.bytes;
 
@@ -107,6 +138,7 @@ void LoopDetector::load(const std::string& path) {
   // Decode everything into a new list first; the database changes only when all of it is good.
   std::vector<std::shared_ptr<const Descriptor>> loaded;
   std::vector<EntryOdometry> odometry;
+  std::vector<Loop> loops;
   try {
     const uint64_t n = r.get<uint64_t>();
     // The loosest params: keep each descriptor's saved validity.
@@ -121,12 +153,17 @@ void LoopDetector::load(const std::string& path) {
       loaded.push_back(std::move(d));
       odometry.push_back(version >= kDbVersion ? getOdometry(r) : EntryOdometry{});
     }
+    if (version >= kDbVersion) {
+      const uint64_t m = r.get<uint64_t>();
+      for (uint64_t i = 0; i < m; ++i) loops.push_back(getLoop(r));
+    }
     if (r.remaining() != 0) throw std::runtime_error("trailing bytes");
   } catch (const std::runtime_error& e) {
     fail(e.what());
   }
   entries_ = std::move(loaded);
   odometry_ = std::move(odometry);
+  loops_ = std::move(loops);
   triangles_.assign(entries_.size(), nullptr);
 }
 

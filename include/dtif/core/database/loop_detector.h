@@ -116,13 +116,19 @@ class LoopDetector {
   const std::vector<std::shared_ptr<const Descriptor>>& entries() const { return entries_; }
   /// The odometry pose of entries()[i], as inserted or loaded.
   const EntryOdometry& odometry(size_t i) const { return odometry_.at(i); }
+  /// Keeps an accepted loop between entries, saved with the database (trunk pairs are not), so
+  /// that a later run that loads it can rebuild this run's map (relocalisation).
+  void recordLoop(const Loop& loop) { loops_.push_back(loop); }
+  /// The recorded loops, as recorded or loaded.
+  const std::vector<Loop>& loops() const { return loops_; }
   const LoopDetectorParams& params() const { return params_; }
   /// Replaces estimatePose by another solver on the same correspondences (empty: estimatePose).
   void setSolver(PoseSolver solver) { solver_ = std::move(solver); }
 
   /// Writes the database to path atomically (temporary file, then rename). Throws on failure.
   void save(const std::string& path) const;
-  /// Replaces the database by the file's content (version 1 files: odometry unknown). Throws
+  /// Replaces the database by the file's content (version 1 files: odometry unknown, no loops).
+  /// Throws
   /// std::runtime_error (naming the file and the problem) on a missing, corrupt or
   /// version-mismatched file; then nothing changes.
   void load(const std::string& path);
@@ -131,6 +137,7 @@ class LoopDetector {
   LoopDetectorParams params_;
   std::vector<std::shared_ptr<const Descriptor>> entries_;
   std::vector<EntryOdometry> odometry_;  // parallel to entries_
+  std::vector<Loop> loops_;
   PoseSolver solver_;
   /// matchTriangles of each entry, computed when the entry is first matched and then reused
   /// (the neighbour triangles of a descriptor do not depend on the query).
