@@ -322,24 +322,38 @@ struct MapMerger::Impl {
         problem.SetParameterBlockConstant(anchor.t.data());
       }
     }
+    std::vector<ceres::LossFunctionWrapper*> losses;
     for (const LoopRec& l : loops) {
       if (!l.used) continue;
+      losses.push_back(new ceres::LossFunctionWrapper(nullptr, ceres::TAKE_OWNERSHIP));
       problem.AddResidualBlock(
           RelativePoseCost::create(l.T_a_b.translation(), Eigen::Quaterniond(l.T_a_b.rotation()),
                                    diagonalSqrtInformation(l.sigmas)),
-          new ceres::CauchyLoss(p.robust_loss_scale), nodes[l.a].q.coeffs().data(),
-          nodes[l.a].t.data(), nodes[l.b].q.coeffs().data(), nodes[l.b].t.data());
+          losses.back(), nodes[l.a].q.coeffs().data(), nodes[l.a].t.data(),
+          nodes[l.b].q.coeffs().data(), nodes[l.b].t.data());
     }
     ceres::Solver::Options opt;
     opt.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
     opt.max_num_iterations = p.max_iterations;
     opt.num_threads = 1;
     opt.logging_type = ceres::SILENT;
-    ceres::Solver::Summary summary;
-    ceres::Solve(opt, &problem, &summary);
-    st.iterations = static_cast<int>(summary.iterations.size());
-    st.initial_cost = summary.initial_cost;
-    st.final_cost = summary.final_cost;
+    // Graduated robustness: a robust loss alone cannot pull a map that odometry has drifted by
+    // many sigmas (every loop looks like an outlier), so the first stage trusts the loops PCM
+    // kept (least squares; without PCM a wide Cauchy), the last uses robust_loss_scale.
+    const double s = p.robust_loss_scale;
+    const std::vector<double> stages =
+        p.pcm ? std::vector<double>{0.0, s} : std::vector<double>{10.0 * s, 3.0 * s, s};
+    for (size_t k = 0; k < stages.size(); ++k) {
+      for (ceres::LossFunctionWrapper* w : losses) {
+        w->Reset(stages[k] > 0.0 ? new ceres::CauchyLoss(stages[k]) : nullptr,
+                 ceres::TAKE_OWNERSHIP);
+      }
+      ceres::Solver::Summary summary;
+      ceres::Solve(opt, &problem, &summary);
+      st.iterations += static_cast<int>(summary.iterations.size());
+      if (k == 0) st.initial_cost = summary.initial_cost;
+      st.final_cost = summary.final_cost;
+    }
     return st;
   }
 

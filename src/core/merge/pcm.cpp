@@ -40,18 +40,30 @@ class CliqueSearch {
   std::vector<size_t> best_;
 };
 
+/// Grows a clique from the vertex of highest degree, each time adding the candidate with the
+/// most neighbours among the remaining candidates (ties: smallest index).
 std::vector<size_t> greedyClique(const ConsistencyGraph& g) {
-  std::vector<size_t> order(g.size());
-  std::iota(order.begin(), order.end(), 0);
-  std::vector<size_t> degree(g.size(), 0);
-  for (size_t i = 0; i < g.size(); ++i) degree[i] = std::count(g[i].begin(), g[i].end(), true);
-  std::stable_sort(order.begin(), order.end(),
-                   [&](size_t a, size_t b) { return degree[a] > degree[b]; });
+  std::vector<size_t> candidates(g.size());
+  std::iota(candidates.begin(), candidates.end(), 0);
   std::vector<size_t> clique;
-  for (size_t v : order) {
-    if (std::all_of(clique.begin(), clique.end(), [&](size_t u) { return g[u][v]; })) {
-      clique.push_back(v);
+  while (!candidates.empty()) {
+    size_t best = candidates.front(), best_deg = 0;
+    bool first = true;
+    for (size_t v : candidates) {
+      size_t deg = 0;
+      for (size_t u : candidates) deg += u != v && g[v][u];
+      if (first || deg > best_deg) {
+        best = v;
+        best_deg = deg;
+        first = false;
+      }
     }
+    clique.push_back(best);
+    std::vector<size_t> next;
+    for (size_t u : candidates) {
+      if (u != best && g[best][u]) next.push_back(u);
+    }
+    candidates.swap(next);
   }
   std::sort(clique.begin(), clique.end());
   return clique;

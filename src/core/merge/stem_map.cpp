@@ -78,7 +78,7 @@ Trunks fieldStemsAsTrunks(const std::vector<FieldStem>& field, const StemMapPara
     t.y = f.y;
     t.z = 0.0;
     t.r = f.dbh > 0.0 ? f.dbh / 2.0 : params.default_radius_m;
-    t.base_seen = false;
+    t.base_seen = true;  // the plot's plane: P has no elevation, z = 0 by definition
     out.push_back(t);
   }
   return out;
@@ -89,8 +89,8 @@ StemMapRegistration registerStemMap(const Trunks& stems, const std::vector<Field
   StemMapRegistration reg;
   Trunks flat = stems;  // P has no elevation: match on the horizontal layout only
   for (TrunkLandmark& t : flat) {
-    t.z = 0.0;
-    t.base_seen = false;
+    t.z = 0.0;  // both on one plane: verification sees t_z = 0 from every pair
+    t.base_seen = true;
   }
   const Trunks ftrunks = fieldStemsAsTrunks(field, params);
   const Descriptor q = buildDescriptor(flat, params.descriptor);

@@ -11,10 +11,11 @@
 namespace dtif {
 
 struct StemFusionParams {
-  double cluster_radius_m = 0.5;   ///< observations of one tree lie within this of its centre [m]
-  double radius_rel_tol = 0.5;     ///< |r - r_cluster| <= max(abs, rel * r_cluster) ...
-  double radius_abs_tol_m = 0.06;  ///< ... to join a cluster [m]
-  int min_observations = 1;        ///< fewer contributing submaps: dropped (false trunks)
+  double cluster_radius_m = 0.5;  ///< observations of one tree lie within this of its centre [m]
+  double radius_rel_tol = 1.0;    ///< |r - r_cluster| <= max(abs, rel * r_cluster) ...
+  double radius_abs_tol_m =
+      0.2;  ///< ... to join a cluster (loose: one submap's radius can be far off) [m]
+  int min_observations = 1;  ///< fewer contributing submaps: dropped (false trunks)
   std::string validate() const;
 };
 

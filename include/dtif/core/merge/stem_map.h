@@ -43,7 +43,7 @@ struct StemMapRegistration {
   double median_m = 0.0;  ///< median horizontal residual [m]
 };
 
-/// Field stems as trunks (z = 0, base not seen, r = dbh / 2 or the default).
+/// Field stems as trunks (z = 0 on the plot's plane, r = dbh / 2 or the default).
 Trunks fieldStemsAsTrunks(const std::vector<FieldStem>& field, const StemMapParams& params);
 
 /// Registers `stems` (any frame M, z up) to the field map: descriptor matching (matchPair) of
