@@ -18,11 +18,14 @@
 #include <cstdio>
 #include <deque>
 #include <filesystem>
+#include <fstream>
+#include <iomanip>
 #include <map>
 #include <memory>
 #include <mutex>
 #include <pluginlib/class_list_macros.hpp>
 #include <set>
+#include <sstream>
 #include <thread>
 
 #include "dtif/core/cloud.h"
@@ -574,7 +577,8 @@ class MapMergeNodelet : public nodelet::Nodelet {
       writeMergedPosesCsv((dir / "merged_poses.csv").string(), poses);
       writeMergedStemsCsv((dir / "merged_stems.csv").string(), merger_.stems());
       writeG2o((dir / "pose_graph.g2o").string(), poses, merger_.graphEdges());
-      res.files = {"merged_poses.csv", "merged_stems.csv", "pose_graph.g2o"};
+      writeSubmapIds((dir / "submap_ids.csv").string());
+      res.files = {"merged_poses.csv", "merged_stems.csv", "pose_graph.g2o", "submap_ids.csv"};
       const int c = componentOfFrame(node_.map_frame);
       if (Cloud::Ptr cloud = c >= 0 ? mergedCloud(c) : nullptr) {
         writePcdAtomically((dir / "merged_cloud.pcd").string(), *cloud);
@@ -588,6 +592,38 @@ class MapMergeNodelet : public nodelet::Nodelet {
       NODELET_ERROR("%s", res.message.c_str());
     }
     return true;
+  }
+
+  // submap_ids.csv: the merged map's ids (merged_poses.csv, pose_graph.g2o) as the robots' own
+  // submap ids and anchor stamps; chain is the merger's robot ("<robot>@database": loaded).
+  void writeSubmapIds(const std::string& path) const {
+    std::map<int64_t, std::pair<std::string, int64_t>> own;
+    for (const auto& [key, id] : global_id_) own[id] = key;
+    std::ostringstream out;
+    out << "id,chain,robot,submap_id,stamp\n" << std::setprecision(17);
+    for (const MergedPose& p : merger_.poses()) {
+      const auto& k = own.at(p.id);
+      out << p.id << ',' << p.robot << ',' << k.first << ',' << k.second << ','
+          << stamp_of_.at(p.id) << '\n';
+    }
+    writeTextAtomically(path, out.str());
+  }
+
+  static void writeTextAtomically(const std::string& path, const std::string& text) {
+    const std::string tmp = path + ".tmp";
+    {
+      std::ofstream f(tmp, std::ios::trunc);
+      f << text;
+      f.flush();
+      if (!f) {
+        std::remove(tmp.c_str());
+        throw std::runtime_error(tmp + ": write failed");
+      }
+    }
+    if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+      std::remove(tmp.c_str());
+      throw std::runtime_error(path + ": cannot rename " + tmp + " into place");
+    }
   }
 
   static void writePcdAtomically(const std::string& path, const Cloud& cloud) {
