@@ -109,7 +109,7 @@ echo
 echo "=== Merged map of ${NAME}: map merge nodelet on the bag (save_map: ${OUT}/ros/map) ==="
 if [ -f "${OUT}/ros/map/merged_poses.csv" ]; then
   /usr/bin/python3 "${DTIF_REPO}/scripts/score_ros_merge.py" "${OUT}/dataset" "${OUT}/ros/map"
-  grep -E "map_frames|loops_used|loops_rejected|solves|last_solve_ms" "${OUT}/ros/map_info.yaml" \
+  grep -E "loops_used|loops_rejected|solves|last_solve_ms|max_solve_ms" "${OUT}/ros/map_info.yaml" \
     | tr '\n' ' '
   echo
 else

@@ -1,31 +1,74 @@
 #!/usr/bin/env python3
 """Scores the map merge nodelet's saved map (save_map: merged_poses.csv, submap_ids.csv) against
-a dataset's ground truth, as DATASET.md's ATE but aligned in yaw and translation only (both the
-map frame and the world are z up, gravity), per robot and over all robots of each map frame.
+a dataset's ground truth, as DATASET.md's ATE (positions, best rigid alignment, no scale), over
+all robots of each map frame and per robot (each aligned alone, odometry alone beside it).
 Usage: score_ros_merge.py <dataset_dir> <map_dir>"""
 import csv
 import math
 import sys
 
 
+def best_rotation(h):
+    """Unit quaternion (w, x, y, z) of the rotation R maximising sum g . R e, from the
+    cross-covariance h[i][j] = sum e_i g_j (Horn 1987): the top eigenvector of a symmetric 4x4
+    matrix."""
+    (sxx, sxy, sxz), (syx, syy, syz), (szx, szy, szz) = h
+    n = [[sxx + syy + szz, syz - szy, szx - sxz, sxy - syx],
+         [syz - szy, sxx - syy - szz, sxy + syx, szx + sxz],
+         [szx - sxz, sxy + syx, -sxx + syy - szz, syz + szy],
+         [sxy - syx, szx + sxz, syz + szy, -sxx - syy + szz]]
+    return top_eigenvector(n)
+
+
+def top_eigenvector(a):
+    """Eigenvector of the largest eigenvalue of a symmetric matrix (cyclic Jacobi rotations)."""
+    k = len(a)
+    a = [row[:] for row in a]
+    v = [[float(i == j) for j in range(k)] for i in range(k)]
+    for _ in range(100):
+        off = sum(a[i][j] ** 2 for i in range(k) for j in range(k) if i != j)
+        if off < 1e-30:
+            break
+        for p in range(k):
+            for q in range(p + 1, k):
+                if abs(a[p][q]) < 1e-300:
+                    continue
+                theta = (a[q][q] - a[p][p]) / (2 * a[p][q])
+                t = math.copysign(1.0, theta) / (abs(theta) + math.sqrt(theta * theta + 1))
+                c = 1 / math.sqrt(t * t + 1)
+                s = t * c
+                for r in range(k):  # A <- A J
+                    arp, arq = a[r][p], a[r][q]
+                    a[r][p], a[r][q] = c * arp - s * arq, s * arp + c * arq
+                for r in range(k):  # A <- J^T A
+                    apr, aqr = a[p][r], a[q][r]
+                    a[p][r], a[q][r] = c * apr - s * aqr, s * apr + c * aqr
+                for r in range(k):
+                    vrp, vrq = v[r][p], v[r][q]
+                    v[r][p], v[r][q] = c * vrp - s * vrq, s * vrp + c * vrq
+    best = max(range(k), key=lambda i: a[i][i])
+    return [v[r][best] for r in range(k)]
+
+
+def rotate(q, v):
+    w, x, y, z = q
+    t = [2 * (y * v[2] - z * v[1]), 2 * (z * v[0] - x * v[2]), 2 * (x * v[1] - y * v[0])]
+    return [v[0] + w * t[0] + y * t[2] - z * t[1], v[1] + w * t[1] + z * t[0] - x * t[2],
+            v[2] + w * t[2] + x * t[1] - y * t[0]]
+
+
 def align_rms(est, gt):
-    """RMS residual [m] after the yaw + translation that best maps est onto gt."""
+    """RMS residual [m] after the rigid transform (no scale) that best maps est onto gt."""
     n = len(est)
     ce = [sum(p[i] for p in est) / n for i in range(3)]
     cg = [sum(p[i] for p in gt) / n for i in range(3)]
-    s_dot = s_cross = 0.0
-    for e, g in zip(est, gt):
-        ex, ey = e[0] - ce[0], e[1] - ce[1]
-        gx, gy = g[0] - cg[0], g[1] - cg[1]
-        s_dot += ex * gx + ey * gy
-        s_cross += ex * gy - ey * gx
-    yaw = math.atan2(s_cross, s_dot)
-    c, s = math.cos(yaw), math.sin(yaw)
+    h = [[sum((e[i] - ce[i]) * (g[j] - cg[j]) for e, g in zip(est, gt)) for j in range(3)]
+         for i in range(3)]
+    q = best_rotation(h)
     sq = 0.0
     for e, g in zip(est, gt):
-        ex, ey, ez = e[0] - ce[0], e[1] - ce[1], e[2] - ce[2]
-        r = (c * ex - s * ey + cg[0] - g[0], s * ex + c * ey + cg[1] - g[1], ez + cg[2] - g[2])
-        sq += sum(v * v for v in r)
+        r = rotate(q, [e[i] - ce[i] for i in range(3)])
+        sq += sum((r[i] + cg[i] - g[i]) ** 2 for i in range(3))
     return math.sqrt(sq / n)
 
 

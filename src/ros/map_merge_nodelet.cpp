@@ -201,6 +201,7 @@ class MapMergeNodelet : public nodelet::Nodelet {
     const auto t0 = std::chrono::steady_clock::now();
     const MergeSolveStats st = merger_.solve();
     last_solve_ms_ = msSince(t0);
+    max_solve_ms_ = std::max(max_solve_ms_, last_solve_ms_);
     ++solves_;
     loops_used_ = st.loops_used;
     loops_rejected_ = st.loops_rejected;
@@ -263,6 +264,7 @@ class MapMergeNodelet : public nodelet::Nodelet {
     global_id_[key] = next_global_id_;
     stamp_index_[{robot, stamp}] = next_global_id_;
     stamp_of_[next_global_id_] = stamp;
+    odom_of_[next_global_id_] = T_O_S;
     ++next_global_id_;
     return true;
   }
@@ -293,7 +295,6 @@ class MapMergeNodelet : public nodelet::Nodelet {
         NODELET_WARN_THROTTLE(5.0, "loop %s -> %s refused by the merge back end",
                               lc.query_robot.c_str(), lc.candidate_robot.c_str());
       }
-      ++loops_received_;
       it = pending_loops_.erase(it);
     }
     if (pending_loops_.size() > static_cast<size_t>(node_.queue_size)) {
@@ -312,17 +313,14 @@ class MapMergeNodelet : public nodelet::Nodelet {
                             robot.c_str(), msg.header.stamp.toSec());
       return;
     }
-    const std::optional<Pose> T_M_S = merger_.pose(it->second);
-    const std::optional<Pose> T_M_O = merger_.mapFromOdom(robot);
     Cloud cloud;
     std::string error;
-    if (!T_M_S || !T_M_O || !ros_glue::fromMsg(msg, &cloud, nullptr, &error)) {
-      NODELET_WARN_THROTTLE(5.0, "submap cloud of %s: %s: dropped", robot.c_str(),
-                            error.empty() ? "no pose" : error.c_str());
+    if (!ros_glue::fromMsg(msg, &cloud, nullptr, &error)) {
+      NODELET_WARN_THROTTLE(5.0, "submap cloud of %s: %s: dropped", robot.c_str(), error.c_str());
       return;
     }
-    // O -> S with the submap's odometry pose: T_S_O = inv(T_M_S) * T_M_O.
-    const Pose T_S_O = T_M_S->inverse() * *T_M_O;
+    // O -> S with the submap's own odometry pose.
+    const Pose T_S_O = odom_of_.at(it->second).inverse();
     Cloud::Ptr in_s(new Cloud);
     pcl::transformPointCloud(cloud, *in_s, T_S_O.matrix().cast<float>());
     clouds_[it->second] = voxelDown(in_s);
@@ -485,6 +483,7 @@ class MapMergeNodelet : public nodelet::Nodelet {
     global_id_.clear();
     stamp_index_.clear();
     stamp_of_.clear();
+    odom_of_.clear();
     clouds_.clear();
     pending_loops_.clear();
     component_frame_.clear();
@@ -521,6 +520,7 @@ class MapMergeNodelet : public nodelet::Nodelet {
     res.stems = static_cast<uint32_t>(stems_count_);
     res.solves = static_cast<uint32_t>(solves_);
     res.last_solve_ms = last_solve_ms_;
+    res.max_solve_ms = max_solve_ms_;
     {
       std::lock_guard<std::mutex> qlock(queue_mutex_);
       res.up_to_date = !dirty_ && descriptors_.empty() && loops_in_.empty() &&
@@ -650,14 +650,15 @@ class MapMergeNodelet : public nodelet::Nodelet {
   std::map<Key, int64_t> global_id_;                               // (robot, own id) -> merger id
   std::map<std::pair<std::string, double>, int64_t> stamp_index_;  // (robot, stamp) -> id
   std::map<int64_t, double> stamp_of_;                             // merger id -> anchor stamp
+  std::map<int64_t, Pose> odom_of_;                                // merger id -> T_O_S
   std::map<int64_t, Cloud::Ptr> clouds_;                           // merger id -> cloud in S
   std::deque<dtif::LoopClosure::ConstPtr> pending_loops_;
   std::map<int, std::string> component_frame_;
   int64_t next_global_id_ = 0;
   bool dirty_ = false;  // a database load wants a solve
-  size_t loops_used_ = 0, loops_rejected_ = 0, loops_received_ = 0, stems_count_ = 0;
+  size_t loops_used_ = 0, loops_rejected_ = 0, stems_count_ = 0;
   size_t solves_ = 0;
-  double last_solve_ms_ = 0.0;
+  double last_solve_ms_ = 0.0, max_solve_ms_ = 0.0;
 
   std::mutex queue_mutex_;  // the three queues, stop_
   std::condition_variable cv_;

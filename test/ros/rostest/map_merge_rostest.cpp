@@ -159,7 +159,8 @@ TEST(MapMergeRostest, EveryRobotsMapTfMatchesGroundTruth) {
   }
   std::cout << "merged, all robots: ATE " << test::rms(res) << " m; " << r.loops_used
             << " loops used, " << r.loops_rejected << " rejected, " << r.solves
-            << " solves, latest " << r.last_solve_ms << " ms\n";
+            << " solves, latest " << r.last_solve_ms << " ms, longest " << r.max_solve_ms
+            << " ms\n";
   EXPECT_LE(test::rms(res), kAteTolM);
 
   // TF map -> odometry frame places each robot's latest submap (where it is now) in the map,
