@@ -92,8 +92,9 @@ struct MapMerger::Impl {
     Vector6d s;
     const double xy = p.odom_sigma_xy_m + p.odom_sigma_xy_per_m * d;
     const double z = p.odom_sigma_z_m + p.odom_sigma_z_per_m * d;
-    const double rot = p.odom_sigma_rot_rad + p.odom_sigma_rot_per_m * d;
-    s << xy, xy, z, rot, rot, rot;
+    const double tilt = p.odom_sigma_tilt_rad + p.odom_sigma_tilt_per_m * d;
+    const double yaw = p.odom_sigma_rot_rad + p.odom_sigma_rot_per_m * d;
+    s << xy, xy, z, tilt, tilt, yaw;
     return s;
   }
 
@@ -429,11 +430,13 @@ struct MapMerger::Impl {
 
 std::string MergeParams::validate() const {
   std::ostringstream e;
-  for (double v : {odom_sigma_xy_m, odom_sigma_z_m, odom_sigma_rot_rad, loop_sigma_xy_min_m,
-                   loop_sigma_z_min_m, loop_sigma_rot_min_rad, robust_loss_scale, pcm_sigmas}) {
+  for (double v : {odom_sigma_xy_m, odom_sigma_z_m, odom_sigma_rot_rad, odom_sigma_tilt_rad,
+                   loop_sigma_xy_min_m, loop_sigma_z_min_m, loop_sigma_rot_min_rad,
+                   robust_loss_scale, pcm_sigmas}) {
     if (!(v > 0.0)) e << "merge sigmas, robust_loss_scale and pcm_sigmas must be > 0; ";
   }
-  for (double v : {odom_sigma_xy_per_m, odom_sigma_z_per_m, odom_sigma_rot_per_m}) {
+  for (double v :
+       {odom_sigma_xy_per_m, odom_sigma_z_per_m, odom_sigma_rot_per_m, odom_sigma_tilt_per_m}) {
     if (!(v >= 0.0)) e << "merge per-metre sigmas must be >= 0; ";
   }
   if (max_iterations < 1) e << "merge max_iterations must be >= 1; ";

@@ -71,11 +71,69 @@ class Clusterer {
     grid_[key(cell(cl.cx()), cell(cl.cy()))].push_back(best);
   }
 
-  const std::vector<Cluster>& clusters() const { return clusters_; }
+  /// Joins clusters whose centres are within the radius and that share no submap: one tree
+  /// split in two when its first observations came from poses a few decimetres apart.
+  void joinClose() {
+    bool changed = true;
+    while (changed) {
+      changed = false;
+      for (size_t c = 0; c < clusters_.size(); ++c) {
+        if (clusters_[c].members.empty()) continue;
+        const int d = closestDisjoint(static_cast<int>(c));
+        if (d < 0) continue;
+        unindex(static_cast<int>(c));
+        unindex(d);
+        Cluster& a = clusters_[c];
+        Cluster& b = clusters_[d];
+        a.sx += b.sx, a.sy += b.sy, a.sr += b.sr;
+        a.members.insert(a.members.end(), b.members.begin(), b.members.end());
+        a.submaps.insert(b.submaps.begin(), b.submaps.end());
+        b = Cluster{};
+        grid_[key(cell(a.cx()), cell(a.cy()))].push_back(static_cast<int>(c));
+        changed = true;
+      }
+    }
+  }
+
+  std::vector<Cluster> clusters() const {
+    std::vector<Cluster> out;
+    for (const Cluster& c : clusters_) {
+      if (!c.members.empty()) out.push_back(c);
+    }
+    return out;
+  }
 
  private:
   int64_t cell(double v) const { return static_cast<int64_t>(std::floor(v / p_.cluster_radius_m)); }
   static int64_t key(int64_t x, int64_t y) { return (x << 32) ^ (y & 0xffffffffLL); }
+  int closestDisjoint(int c) const {
+    const Cluster& a = clusters_[c];
+    int best = -1;
+    double best_d = p_.cluster_radius_m;
+    const int64_t gx = cell(a.cx()), gy = cell(a.cy());
+    for (int64_t dx = -1; dx <= 1; ++dx) {
+      for (int64_t dy = -1; dy <= 1; ++dy) {
+        auto it = grid_.find(key(gx + dx, gy + dy));
+        if (it == grid_.end()) continue;
+        for (int d : it->second) {
+          if (d == c) continue;
+          const Cluster& b = clusters_[d];
+          const double tol = std::max(p_.radius_abs_tol_m, p_.radius_rel_tol * a.cr());
+          if (std::fabs(a.cr() - b.cr()) > tol) continue;
+          const double dist = std::hypot(a.cx() - b.cx(), a.cy() - b.cy());
+          if (dist >= best_d) continue;
+          if (std::any_of(b.submaps.begin(), b.submaps.end(),
+                          [&](int64_t s) { return a.submaps.count(s) > 0; })) {
+            continue;
+          }
+          best_d = dist;
+          best = d;
+        }
+      }
+    }
+    return best;
+  }
+
   void unindex(int c) {
     auto& v = grid_[key(cell(clusters_[c].cx()), cell(clusters_[c].cy()))];
     v.erase(std::find(v.begin(), v.end(), c));
@@ -131,6 +189,7 @@ std::vector<MergedStem> fuseStems(const std::vector<StemObservation>& observatio
   for (const auto& [component, idx] : by_component) {
     Clusterer clusterer(observations, params);
     for (size_t i : idx) clusterer.add(i);
+    clusterer.joinClose();
     std::vector<MergedStem> stems;
     for (const Cluster& cl : clusterer.clusters()) {
       if (static_cast<int>(cl.submaps.size()) < params.min_observations) continue;

@@ -27,8 +27,13 @@ struct MergeParams {
   double odom_sigma_xy_per_m = 0.01;     ///< horizontal sigma per metre travelled [m/m]
   double odom_sigma_z_m = 0.02;          ///< vertical sigma floor [m]
   double odom_sigma_z_per_m = 0.005;     ///< vertical sigma per metre travelled [m/m]
-  double odom_sigma_rot_rad = 0.002;     ///< rotation sigma floor [rad]
-  double odom_sigma_rot_per_m = 0.0005;  ///< rotation sigma per metre travelled [rad/m]
+  double odom_sigma_rot_rad = 0.002;     ///< yaw sigma floor [rad]
+  double odom_sigma_rot_per_m = 0.0005;  ///< yaw sigma per metre travelled [rad/m]
+  /// Roll and pitch: lidar-inertial odometry sees gravity, so between consecutive submaps they
+  /// hardly drift (a tilted camera_init is the same tilt for every submap), while a loop's
+  /// roll/pitch from trunks is good to a few tenths of a degree only.
+  double odom_sigma_tilt_rad = 0.0005;    ///< roll/pitch sigma floor [rad]
+  double odom_sigma_tilt_per_m = 0.0001;  ///< roll/pitch sigma per metre travelled [rad/m]
   // Loop edges: the loop's covariance, with floors (a trunk-based covariance can be optimistic).
   double loop_sigma_xy_min_m = 0.05;      ///< [m]
   double loop_sigma_z_min_m = 0.05;       ///< [m]

@@ -39,9 +39,11 @@ struct MergedStem {
 };
 
 /// Clusters observations per component (greedy, nearest cluster centre within the radius and
-/// a similar radius, at most one observation per submap in a cluster) and fuses each cluster
-/// robustly (median position, base from seen bases when any, median radius). Deterministic:
-/// the output is ordered by component, then x, then y; stem ids follow that order.
+/// a similar radius, at most one observation per submap in a cluster; then clusters closer than
+/// the radius with no submap in common are joined) and fuses each cluster robustly: median
+/// position and radius, base from the observations whose base was seen when there are any.
+/// Deterministic: the output is ordered by component, then x, then y; stem ids follow that
+/// order.
 std::vector<MergedStem> fuseStems(const std::vector<StemObservation>& observations,
                                   const StemFusionParams& params);
 
