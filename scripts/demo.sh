@@ -4,7 +4,9 @@
 #  1. runs the offline evaluation protocol (dtif eval) on the dataset and prints its table;
 #  2. replays the bag through the ROS nodelets (roslaunch dtif demo_bag.launch, headless, all
 #     nodelets in one manager) and prints the loop closures they found against the dataset's
-#     ground truth (dtif score: eval's metrics), side by side with eval's, and their lag.
+#     ground truth (dtif score: eval's metrics), side by side with eval's, and their lag;
+#  3. prints the merged map of dtif merge (offline) and of the map merge nodelet (its save_map,
+#     scored by scripts/score_ros_merge.py: ATE per map frame and per robot, odometry beside).
 # Exits non-zero when a step fails or when the nodelets or dtif eval close no loop.
 # Usage: scripts/demo.sh [scene.yaml] (default: config/scenes/mixed.yaml)
 # Environment: DTIF_DEMO_RATE (bag replay rate, default 2), DTIF_DEMO_BAG_ARGS (more options of
@@ -46,10 +48,12 @@ else
 fi
 echo "dtif demo: $(du -cb "${BAGS[@]}" | tail -1 | awk '{printf "%d", $1 / 1e6}') MB of bags:" \
   "$(basename -a "${BAGS[@]}" | tr '\n' ' ')"
-rm -rf "${OUT}/eval" "${OUT}/ros"
+rm -rf "${OUT}/eval" "${OUT}/merge" "${OUT}/ros"
 
 echo "dtif demo: 1. dtif eval on the dataset (results in ${OUT}/eval)"
 "${DTIF_BIN}" eval "${OUT}/dataset" --out "${OUT}/eval" --quiet
+echo "dtif demo: 1b. dtif merge on the dataset (results in ${OUT}/merge)"
+"${DTIF_BIN}" merge "${OUT}/dataset" --out "${OUT}/merge" --quiet > "${OUT}/merge.txt"
 
 # 2. The ROS nodelets on the bag: a private master (other roscores on this machine are left
 # alone); the script plays the bag itself so that the last submaps can finish before shutdown.
@@ -112,6 +116,10 @@ for _ in $(seq 1 60); do
   [ $(( $(date +%s) - $(stat -c %Y "${LOG}") )) -ge 5 ] && break
   sleep 1
 done
+# The map merge nodelet's map (TF map -> odometry frames comes from the same solve).
+rosservice call /map_merge/get_map_info > "${OUT}/ros/map_info.yaml" 2>&1 || true
+rosservice call /map_merge/save_map "directory: '${OUT}/ros/map'" > "${OUT}/ros/save_map.log" 2>&1 \
+  || true
 kill -INT "${LAUNCH_PID}" 2>/dev/null || true
 wait "${LAUNCH_PID}" 2>/dev/null || true
 trap - EXIT
@@ -126,6 +134,20 @@ cat "${OUT}/eval/table.md"
 echo
 echo "=== ROS nodelets on ${NAME}.bag, scored against ground truth (dtif score) ==="
 "${DTIF_BIN}" score "${OUT}/dataset" --loops "${LOG}" --out "${OUT}/ros/score" --eval "${OUT}/eval"
+echo
+echo "=== Merged map of ${NAME}: dtif merge (offline, ${OUT}/merge) ==="
+cat "${OUT}/merge.txt"
+echo
+echo "=== Merged map of ${NAME}: map merge nodelet on the bag (save_map: ${OUT}/ros/map) ==="
+if [ -f "${OUT}/ros/map/merged_poses.csv" ]; then
+  /usr/bin/python3 "${DTIF_REPO}/scripts/score_ros_merge.py" "${OUT}/dataset" "${OUT}/ros/map"
+  grep -E "loops_used|loops_rejected|solves|last_solve_ms|max_solve_ms" "${OUT}/ros/map_info.yaml" \
+    | tr '\n' ' '
+  echo
+else
+  echo "dtif demo: the map merge nodelet saved no map ($(cat "${OUT}/ros/save_map.log"))" >&2
+  exit 1
+fi
 echo
 # A demo that closes no loop is a failed demo (.ci/run runs it): exit non-zero.
 accepted() { /usr/bin/python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["accepted"])' "$1"; }

@@ -11,9 +11,10 @@ PKGS=(
   libpcl-ros-dev libpcl-conversions-dev libpcl-dev libcgal-dev libeigen3-dev
   libtf2-ros-dev libtf2-eigen-dev librosbag-dev python3-rosbag python3-rostest python3-roslaunch
   python3-rostopic ros-message-generation ros-sensor-msgs ros-geometry-msgs ros-visualization-msgs
-  ros-std-msgs ros-nav-msgs ros-tf2-msgs libgtest-dev googletest rosbash
+  ros-std-msgs ros-nav-msgs ros-tf2-msgs libgtest-dev googletest rosbash libstd-srvs-dev python3-std-srvs
   python3-sensor-msgs python3-geometry-msgs python3-visualization-msgs python3-nav-msgs
   libyaml-cpp-dev nlohmann-json3-dev libpng-dev zlib1g-dev libcli11-dev librosbag-storage-dev
+  libceres-dev
 )
 
 PKGS+=("$@")

@@ -466,7 +466,8 @@ std::string formatLevelling(const std::vector<LevellingSummary>& s) {
 }
 
 EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const EvalParams& eval,
-                         const std::function<void(size_t, size_t)>& progress) {
+                         const std::function<void(size_t, size_t)>& progress,
+                         const QueryObserver& on_query) {
   checkGroundTruth(ds);
   EvalResult result;
   LoopDetector detector(params.loop);
@@ -530,6 +531,8 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
     if (row.has_loop && !row.true_positive) {
       result.misses.push_back(explainMiss(ds, cells, descs, i, qs, params.loop));
     }
+
+    if (on_query) on_query(*desc, loop);
 
     // 4. Insert q.
     detector.insert(desc);

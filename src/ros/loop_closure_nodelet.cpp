@@ -259,10 +259,14 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       auto m = meta_.find(c);
       if (m != meta_.end()) q->candidate_meta = m->second;
     }
-    if (detector_->insert(d)) {
+    EntryOdometry odometry;
+    odometry.odom_frame = meta.odom_frame;
+    odometry.T_O_S = meta.T_O_S;
+    if (detector_->insert(d, odometry)) {
       index_[key] = d;
       meta_[key] = meta;
     }
+    if (q->lc) detector_->recordLoop(*q->lc);  // saved with the database (relocalisation)
     if (q->lc && q->candidate_meta) linkOdometryFrames(*q->lc, *q->candidate_meta, meta);
     return true;
   }
@@ -357,21 +361,31 @@ class LoopClosureNodelet : public nodelet::Nodelet {
 
   bool loadDatabase(const std::string& path, std::string* message) {
     // Read and checked before the lock: a slow disk never stalls queries and inserts.
-    std::vector<std::shared_ptr<const Descriptor>> entries;
+    DatabaseContents contents;
     try {
-      entries = readDatabaseFile(path);  // throws on a bad file; the database is unchanged
+      contents = readDatabaseFile(path);  // throws on a bad file; the database is unchanged
     } catch (const std::exception& e) {
       *message = std::string("load failed, database unchanged: ") + e.what();
       return false;
     }
     std::lock_guard<std::mutex> lock(db_mutex_);
-    detector_->replaceEntries(std::move(entries));
+    detector_->replaceContents(std::move(contents));
+    // The file's odometry poses (version 2) place loops against the loaded run; entries of
+    // version-1 files have none: they keep what this run saw of them, or get no frame.
     index_.clear();
-    for (const auto& e : detector_->entries()) index_[Key(e->robot, e->submap_id)] = e;
-    // Odometry poses of loaded entries are unknown until they are seen again (no TF for them).
-    for (auto it = meta_.begin(); it != meta_.end();) {
-      it = index_.count(it->first) ? std::next(it) : meta_.erase(it);
+    std::map<Key, Meta> meta;
+    for (size_t i = 0; i < detector_->size(); ++i) {
+      const auto& e = detector_->entries()[i];
+      const Key key(e->robot, e->submap_id);
+      index_[key] = e;
+      const EntryOdometry& o = detector_->odometry(i);
+      if (o.known()) {
+        meta[key] = Meta{o.T_O_S, o.odom_frame};
+      } else if (meta_.count(key)) {
+        meta[key] = meta_[key];
+      }
     }
+    meta_ = std::move(meta);
     *message = "loaded " + std::to_string(detector_->size()) + " descriptors from " + path;
     return true;
   }

@@ -372,12 +372,14 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
     }
     recent_markers_->add(std::move(markers));
     if (node_.publish_submap_cloud && cloud_pub_.getNumSubscribers() > 0 && !s.cloud->empty()) {
-      // In the odometry frame, so rviz needs no extra TF for the submap frame.
+      // In the odometry frame, so rviz needs no extra TF for the submap frame; stamped with the
+      // submap's anchor time, as its descriptor, so the map merge places it on its submap.
       Cloud cloud_O;
       pcl::transformPointCloud(*s.cloud, cloud_O, s.T_O_S.matrix().cast<float>());
       boost::shared_ptr<sensor_msgs::PointCloud2> cloud(new sensor_msgs::PointCloud2);
       pcl::toROSMsg(cloud_O, *cloud);
       cloud->header.frame_id = frame;
+      cloud->header.stamp.fromSec(s.stamp);
       cloud_pub_.publish(boost::shared_ptr<const sensor_msgs::PointCloud2>(cloud));
     }
   }

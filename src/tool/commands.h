@@ -15,6 +15,7 @@ int runSimulate(const SimulateArgs& args);
 int runExtract(const ExtractArgs& args);
 int runRegister(const RegisterArgs& args);
 int runEval(const EvalArgs& args);
+int runMerge(const MergeArgs& args);
 int runBench(const BenchArgs& args);
 int runScore(const ScoreArgs& args);
 

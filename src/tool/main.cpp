@@ -1,4 +1,4 @@
-// dtif: the offline command-line tool (simulate, extract, register, eval, score, bench).
+// dtif: the offline command-line tool (simulate, extract, register, eval, merge, score, bench).
 // Exit status: 0 success (and --help, --version), 1 runtime error (`dtif <cmd>: <file>:
 // <problem>`), 2 bad usage (one line saying what is wrong, then where to find the usage).
 #include <CLI/CLI.hpp>
@@ -37,6 +37,7 @@ int runCommand(const std::string& cmd, const dtif::tool::CommandLine& cl) {
   if (cmd == "extract") return dtif::tool::runExtract(cl.extract);
   if (cmd == "register") return dtif::tool::runRegister(cl.reg);
   if (cmd == "eval") return dtif::tool::runEval(cl.eval);
+  if (cmd == "merge") return dtif::tool::runMerge(cl.merge);
   if (cmd == "score") return dtif::tool::runScore(cl.score);
   return dtif::tool::runBench(cl.bench);
 }

@@ -144,6 +144,31 @@ void addEval(CLI::App* dtif, EvalArgs* a) {
       ->type_name("<name>");
 }
 
+void addMerge(CLI::App* dtif, MergeArgs* a) {
+  CLI::App* cmd = dtif->add_subcommand(
+      "merge",
+      "Sequential loop closure (eval's protocol), then one merged map (DATASET.md, Merged map): "
+      "merged_poses.csv, merged_stems.csv, pose_graph.g2o, events.txt, summary.json; scored "
+      "against the ground truth when the dataset has it.");
+  cmd->add_option("dataset", a->dataset, "dataset folder (DATASET.md)")
+      ->type_name("<dataset_dir>")
+      ->required();
+  addOutDir(cmd, &a->out);
+  addConfig(cmd, &a->configs);
+  cmd->add_flag("--inject-false-loop", a->inject_false_loop,
+                "add one deliberately false inter-robot loop and report how much it moves the map");
+  cmd->add_flag("--no-pcm", a->no_pcm,
+                "keep every loop (no pairwise consistency check; the robust loss only)");
+  cmd->add_option("--stem-map", a->stem_map,
+                  "field stem map CSV (x,y[,dbh] in plot coordinates) to anchor the map to")
+      ->type_name("<stems.csv>")
+      ->check(CLI::ExistingFile);
+  cmd->add_option("--stem-map-plot", a->stem_map_plot,
+                  "use only the rows of this plot_id of the stem map")
+      ->type_name("<plot_id>");
+  cmd->add_flag("--quiet", a->quiet, "no progress on stderr");
+}
+
 void addScore(CLI::App* dtif, ScoreArgs* a) {
   CLI::App* cmd = dtif->add_subcommand(
       "score",
@@ -201,6 +226,7 @@ void addCommands(CLI::App* dtif, CommandLine* cl) {
   addExtract(dtif, &cl->extract);
   addRegister(dtif, &cl->reg);
   addEval(dtif, &cl->eval);
+  addMerge(dtif, &cl->merge);
   addScore(dtif, &cl->score);
   addBench(dtif, &cl->bench);
 }

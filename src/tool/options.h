@@ -52,6 +52,18 @@ struct EvalArgs {
   std::string method;                ///< method name in table.md ("": from the parameters)
 };
 
+/// dtif merge <dataset_dir> --out <dir> ...
+struct MergeArgs {
+  std::string dataset;               ///< dataset folder (DATASET.md)
+  std::string out;                   ///< output folder (created when missing)
+  std::vector<std::string> configs;  ///< parameter files, applied in order
+  bool inject_false_loop = false;    ///< add one false loop (robustness check)
+  bool no_pcm = false;               ///< keep every loop (ablation: robust loss only)
+  std::string stem_map;              ///< field stem map CSV x,y[,dbh] ("": none)
+  std::string stem_map_plot;         ///< its plot_id to use ("": all rows)
+  bool quiet = false;                ///< no progress on stderr
+};
+
 /// dtif score <dataset_dir> --loops <loop_log.csv> --out <dir> ...
 struct ScoreArgs {
   std::string dataset;               ///< dataset folder the nodelets ran on (its bag)
@@ -82,10 +94,11 @@ struct CommandLine {
   EvalArgs eval;
   ScoreArgs score;
   BenchArgs bench;
+  MergeArgs merge;
 };
 
-/// Adds the subcommands (simulate, extract, register, eval, score, bench) to dtif, each option
-/// bound to its field of *cl, and requires exactly one of them.
+/// Adds the subcommands (simulate, extract, register, eval, merge, score, bench) to dtif, each
+/// option bound to its field of *cl, and requires exactly one of them.
 void addCommands(CLI::App* dtif, CommandLine* cl);
 
 /// Default parameters overridden by every `--config` file given, in order.

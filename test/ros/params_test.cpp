@@ -9,6 +9,7 @@
 #include <string>
 
 #include "dtif/io/config.h"
+#include "dtif/ros/merge_params.h"
 #include "dtif/ros/node_params.h"
 #include "dtif/ros/submap_assembler.h"
 #include "dtif_test/test_config.h"
@@ -128,6 +129,29 @@ TEST(ShippedYaml, ComponentYamlsFitTheNodeletsThatLoadThem) {
     EXPECT_FALSE(keys.empty()) << f.first;
     for (const auto& k : keys) EXPECT_TRUE(f.second.count(k)) << f.first << ": unknown key " << k;
   }
+}
+
+// The map merge nodelet's YAML: only its declared keys, and its defaults as the struct's.
+TEST(ShippedYaml, MapMergeYamlShowsTheStructsDefaults) {
+  const std::string path = std::string(DTIF_SOURCE_DIR) + "/config/ros/map_merge_node.yaml";
+  YAML::Node root;
+  ASSERT_NO_THROW(root = YAML::LoadFile(path));
+  std::vector<std::string> keys;
+  flatten(root, "", &keys);
+  const std::vector<std::string> declared = declaredKeys<MapMergeNodeParams>("");
+  const std::set<std::string> known(declared.begin(), declared.end());
+  for (const auto& k : keys) EXPECT_TRUE(known.count(k)) << "unknown key " << k;
+  EXPECT_EQ(keys.size(), known.size()) << "a key is not documented in the YAML";
+  const MapMergeNodeParams d;
+  EXPECT_EQ(root["descriptor_topic"].as<std::string>(), d.descriptor_topic);
+  EXPECT_EQ(root["cloud_topic"].as<std::string>(), d.cloud_topic);
+  EXPECT_EQ(root["loop_topic"].as<std::string>(), d.loop_topic);
+  EXPECT_EQ(root["map_frame"].as<std::string>(), d.map_frame);
+  EXPECT_EQ(root["database_file"].as<std::string>(), d.database_file);
+  EXPECT_EQ(root["solve_period_s"].as<double>(), d.solve_period_s);
+  EXPECT_EQ(root["tf_rate_hz"].as<double>(), d.tf_rate_hz);
+  EXPECT_EQ(root["cloud_voxel_m"].as<double>(), d.cloud_voxel_m);
+  EXPECT_EQ(root["queue_size"].as<int>(), d.queue_size);
 }
 
 }  // namespace

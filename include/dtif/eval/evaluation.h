@@ -165,10 +165,15 @@ void scoreAcceptedLoop(const Pose& T_c_q_gt, const Pose& T_c_q_est, double overl
 EvalSummary summarizeRows(const std::vector<EvalRow>& rows, const std::string& dataset,
                           double bytes_sum);
 
-/// Runs the protocol. progress(i, n) is called after each submap. Throws DatasetError when
-/// ground truth is missing or a cloud cannot be read.
+/// Called by runEvaluation after each query with the submap's descriptor (its trunks) and the
+/// accepted loop, if any (what a back end such as `dtif merge` consumes).
+using QueryObserver = std::function<void(const Descriptor& desc, const std::optional<Loop>& loop)>;
+
+/// Runs the protocol. progress(i, n) is called after each submap, on_query (optional) after each
+/// query. Throws DatasetError when ground truth is missing or a cloud cannot be read.
 EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const EvalParams& eval,
-                         const std::function<void(size_t, size_t)>& progress = {});
+                         const std::function<void(size_t, size_t)>& progress = {},
+                         const QueryObserver& on_query = {});
 
 /// Scores an online run (the LoopClosureNodelet's loop log, e.g. on a bag of this dataset from
 /// dtif simulate) with runEvaluation's ground truth and metrics. Log rows are matched to the

@@ -3,8 +3,12 @@
 #pragma once
 
 #include <dtif/GetDatabaseSize.h>
+#include <dtif/GetMapInfo.h>
+#include <dtif/InventoryStem.h>
 #include <dtif/LoadDatabase.h>
 #include <dtif/LoopClosure.h>
 #include <dtif/SaveDatabase.h>
+#include <dtif/SaveMap.h>
+#include <dtif/StemInventory.h>
 #include <dtif/Trunk.h>
 #include <dtif/TrunkDescriptor.h>

@@ -1,5 +1,7 @@
 // The database file: save/load of every entry's encoded descriptor, atomically written and
 // checksummed; read with bounded size and checked entries (docs/limits.md).
+#include <Eigen/Geometry>
+#include <cmath>
 #include <cstring>
 #include <set>
 #include <stdexcept>
@@ -14,14 +16,71 @@ namespace dtif {
 namespace {
 
 constexpr char kDbMagic[8] = {'D', 'T', 'I', 'F', 'D', 'B', '\0', '\0'};
-constexpr uint32_t kDbVersion = 1;
+// Version 2 adds each entry's odometry pose and frame and the accepted loops; version 1 files
+// still load.
+constexpr uint32_t kDbVersion = 2;
+constexpr uint32_t kDbVersionNoOdometry = 1;
+
 constexpr size_t kEntryHeaderBytes = 4;
 
 using detail::fnv1a;
 
-// The body's entries (after magic and version, before the checksum); throws on the first
-// problem.
-std::vector<std::shared_ptr<const Descriptor>> readEntries(detail::ByteReader& r) {
+// Frame (length-prefixed; empty: unknown), translation, quaternion (x, y, z, w).
+void putOdometry(detail::ByteWriter& w, const EntryOdometry& o) {
+  w.putString(o.odom_frame);
+  const Eigen::Quaterniond q(o.T_O_S.rotation());
+  for (double v : {o.T_O_S.translation().x(), o.T_O_S.translation().y(), o.T_O_S.translation().z(),
+                   q.x(), q.y(), q.z(), q.w()}) {
+    w.put<double>(v);
+  }
+}
+
+EntryOdometry getOdometry(detail::ByteReader& r) {
+  EntryOdometry o;
+  o.odom_frame = r.getString();
+  double v[7];
+  for (double& x : v) x = r.get<double>();
+  const Eigen::Quaterniond q(v[6], v[3], v[4], v[5]);
+  for (double x : v) {
+    if (!std::isfinite(x)) throw std::runtime_error("odometry pose is not finite");
+  }
+  if (std::fabs(q.norm() - 1.0) > 1e-6) throw std::runtime_error("odometry rotation not unit");
+  o.T_O_S = Pose::Identity();
+  o.T_O_S.linear() = q.normalized().toRotationMatrix();
+  o.T_O_S.translation() = Eigen::Vector3d(v[0], v[1], v[2]);
+  return o;
+}
+
+// Robots, ids, T_c_q (translation, quaternion x y z w), covariance, inliers, score.
+void putLoop(detail::ByteWriter& w, const Loop& l) {
+  w.putString(l.query_robot);
+  w.put<int64_t>(l.query_id);
+  w.putString(l.candidate_robot);
+  w.put<int64_t>(l.candidate_id);
+  EntryOdometry pose;
+  pose.T_O_S = l.T_c_q;
+  putOdometry(w, pose);  // an empty frame, then the pose
+  for (int i = 0; i < 36; ++i) w.put<double>(l.covariance(i / 6, i % 6));
+  w.put<int32_t>(l.inliers);
+  w.put<double>(l.score);
+}
+
+Loop getLoop(detail::ByteReader& r) {
+  Loop l;
+  l.query_robot = r.getString();
+  l.query_id = r.get<int64_t>();
+  l.candidate_robot = r.getString();
+  l.candidate_id = r.get<int64_t>();
+  l.T_c_q = getOdometry(r).T_O_S;
+  for (int i = 0; i < 36; ++i) l.covariance(i / 6, i % 6) = r.get<double>();
+  if (!l.covariance.allFinite()) throw std::runtime_error("loop covariance is not finite");
+  l.inliers = r.get<int32_t>();
+  l.score = r.get<double>();
+  return l;
+}
+
+// The body (after magic and version, before the checksum); throws on the first problem.
+DatabaseContents readContents(detail::ByteReader& r, uint32_t version) {
   const uint64_t n = r.get<uint64_t>();
   // Bounded before anything is reserved: every entry takes at least its size field.
   if (n > kMaxDatabaseEntries) {
@@ -29,7 +88,7 @@ std::vector<std::shared_ptr<const Descriptor>> readEntries(detail::ByteReader& r
                              std::to_string(kMaxDatabaseEntries) + ")");
   }
   if (n > r.remaining() / kEntryHeaderBytes) throw std::runtime_error("entry count exceeds file");
-  std::vector<std::shared_ptr<const Descriptor>> loaded;
+  DatabaseContents c;
   std::set<std::pair<std::string, int64_t>> keys;
   // The loosest params: keep each descriptor's saved validity.
   const DescriptorParams loose = loosestDescriptorParams();
@@ -45,26 +104,37 @@ std::vector<std::shared_ptr<const Descriptor>> readEntries(detail::ByteReader& r
       throw std::runtime_error(entry + " repeats robot '" + d->robot + "' submap " +
                                std::to_string(d->submap_id));
     }
-    loaded.push_back(std::move(d));
+    c.entries.push_back(std::move(d));
+    c.odometry.push_back(version >= kDbVersion ? getOdometry(r) : EntryOdometry{});
+  }
+  if (version >= kDbVersion) {
+    const uint64_t m = r.get<uint64_t>();
+    // A loop takes far more than its two length fields: bounded by the bytes left.
+    if (m > r.remaining() / 8) throw std::runtime_error("loop count exceeds file");
+    for (uint64_t i = 0; i < m; ++i) c.loops.push_back(getLoop(r));
   }
   if (r.remaining() != 0) throw std::runtime_error("trailing bytes");
-  return loaded;
+  return c;
 }
 
 }  // namespace
 
 // File layout: 8-byte magic, u32 version, u64 entry count, entries (u32 size + encoded
-// descriptor), u32 FNV-1a of everything before it.
+// descriptor + odometry record), u64 loop count, loops, u32 FNV-1a of everything before it.
+// Version 1 files have neither odometry records nor loops.
 void LoopDetector::save(const std::string& path) const {
   detail::ByteWriter w;
   w.bytes.assign(kDbMagic, kDbMagic + 8);
   w.put<uint32_t>(kDbVersion);
   w.put<uint64_t>(entries_.size());
-  for (const auto& d : entries_) {
-    const std::vector<uint8_t> e = encodeDescriptor(*d);
+  for (size_t i = 0; i < entries_.size(); ++i) {
+    const std::vector<uint8_t> e = encodeDescriptor(*entries_[i]);
     w.put<uint32_t>(static_cast<uint32_t>(e.size()));
     w.putBytes(e);
+    putOdometry(w, odometry_[i]);
   }
+  w.put<uint64_t>(loops_.size());
+  for (const Loop& l : loops_) putLoop(w, l);
   w.put<uint32_t>(fnv1a(w.bytes.data(), w.bytes.size()));
   if (w.bytes.size() > kMaxDatabaseBytes) {
     throw std::runtime_error(path + ": database of " + std::to_string(w.bytes.size()) +
@@ -73,7 +143,7 @@ void LoopDetector::save(const std::string& path) const {
   writeFileAtomically(path, w.bytes);
 }
 
-std::vector<std::shared_ptr<const Descriptor>> readDatabaseFile(const std::string& path) {
+DatabaseContents readDatabaseFile(const std::string& path) {
   const std::vector<uint8_t> buf = readRegularFile(path, kMaxDatabaseBytes);
   auto fail = [&](const std::string& why) {
     throw std::runtime_error(path + ": not a valid dtif database: " + why);
@@ -82,24 +152,27 @@ std::vector<std::shared_ptr<const Descriptor>> readDatabaseFile(const std::strin
   // The body: everything between the magic and the checksum.
   detail::ByteReader r(buf.data() + 8, buf.size() - 8 - 4, "truncated");
   const uint32_t version = r.get<uint32_t>();
-  if (version != kDbVersion) {
-    fail("version " + std::to_string(version) + ", expected " + std::to_string(kDbVersion));
+  if (version != kDbVersion && version != kDbVersionNoOdometry) {
+    fail("version " + std::to_string(version) + ", expected " +
+         std::to_string(kDbVersionNoOdometry) + " or " + std::to_string(kDbVersion));
   }
   uint32_t stored_sum;
   std::memcpy(&stored_sum, buf.data() + buf.size() - 4, 4);
   if (fnv1a(buf.data(), buf.size() - 4) != stored_sum) fail("checksum mismatch");
   try {
-    return readEntries(r);
+    return readContents(r, version);
   } catch (const std::exception& e) {  // also length_error / bad_alloc: name the file
     fail(e.what());
   }
   return {};
 }
 
-void LoopDetector::load(const std::string& path) { replaceEntries(readDatabaseFile(path)); }
+void LoopDetector::load(const std::string& path) { replaceContents(readDatabaseFile(path)); }
 
-void LoopDetector::replaceEntries(std::vector<std::shared_ptr<const Descriptor>> entries) {
-  entries_ = std::move(entries);
+void LoopDetector::replaceContents(DatabaseContents contents) {
+  entries_ = std::move(contents.entries);
+  odometry_ = std::move(contents.odometry);
+  loops_ = std::move(contents.loops);
   triangles_.assign(entries_.size(), nullptr);
 }
 

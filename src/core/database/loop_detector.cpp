@@ -186,9 +186,10 @@ LoopDetector::LoopDetector(const LoopDetectorParams& params) : params_(params) {
   if (!err.empty()) throw std::invalid_argument("bad loop detector params: " + err);
 }
 
-bool LoopDetector::insert(std::shared_ptr<const Descriptor> d) {
+bool LoopDetector::insert(std::shared_ptr<const Descriptor> d, const EntryOdometry& odometry) {
   if (!d || !d->valid || entries_.size() >= kMaxDatabaseEntries) return false;
   entries_.push_back(std::move(d));
+  odometry_.push_back(odometry);
   triangles_.push_back(nullptr);
   return true;
 }

@@ -44,6 +44,15 @@ struct LoopDetectorParams {
   std::string validate() const;
 };
 
+/// Where a database entry's submap lies in its robot's odometry frame. Saved with the database so
+/// that a later run that loads it can place the old submaps (relocalisation). Empty frame: not
+/// known (entries of version-1 files, or inserted without it).
+struct EntryOdometry {
+  std::string odom_frame;
+  Pose T_O_S = Pose::Identity();
+  bool known() const { return !odom_frame.empty(); }
+};
+
 /// An accepted loop (q, c, T_c_q), T_c_q and T_hypothesis in the submaps' own frames S (also
 /// when the descriptors were levelled), covariance too.
 struct Loop {
@@ -98,11 +107,19 @@ std::optional<Loop> matchPair(const Descriptor& q, const Descriptor& c,
 constexpr size_t kMaxDatabaseEntries = 200000;
 constexpr uint64_t kMaxDatabaseBytes = uint64_t{1} << 30;
 
-/// The entries of a database file (LoopDetector::save's format), read without any lock held:
+/// What a database file holds: its entries, their odometry poses (pairwise; unknown in version-1
+/// files) and the accepted loops (none in version-1 files).
+struct DatabaseContents {
+  std::vector<std::shared_ptr<const Descriptor>> entries;
+  std::vector<EntryOdometry> odometry;
+  std::vector<Loop> loops;
+};
+
+/// The contents of a database file (LoopDetector::save's format), read without any lock held:
 /// a regular file of at most kMaxDatabaseBytes (a FIFO or a device is refused before it is
 /// opened), every entry valid, no (robot, submap id) twice, at most kMaxDatabaseEntries.
 /// Throws std::runtime_error naming the file and the problem.
-std::vector<std::shared_ptr<const Descriptor>> readDatabaseFile(const std::string& path);
+DatabaseContents readDatabaseFile(const std::string& path);
 
 /// Pose estimation runs between the descriptors' levelled frames (Descriptor::level_rotation);
 /// loops are reported in the submaps' own frames: T_Sc_Sq = R_Lc_Sc^-1 * T_Lc_Lq * R_Lq_Sq.
@@ -118,27 +135,38 @@ class LoopDetector {
   /// Best verified loop of q against the database (same-robot recent entries excluded).
   std::optional<Loop> query(const Descriptor& q, QueryStats* stats = nullptr) const;
 
-  /// Inserts q; invalid descriptors are ignored (returns false), as is any once the database
-  /// holds kMaxDatabaseEntries.
-  bool insert(std::shared_ptr<const Descriptor> d);
+  /// Inserts q with its odometry pose (optional); invalid descriptors are ignored (returns
+  /// false), as is any once the database holds kMaxDatabaseEntries.
+  bool insert(std::shared_ptr<const Descriptor> d, const EntryOdometry& odometry = {});
 
   size_t size() const { return entries_.size(); }
   const std::vector<std::shared_ptr<const Descriptor>>& entries() const { return entries_; }
+  /// The odometry pose of entries()[i], as inserted or loaded.
+  const EntryOdometry& odometry(size_t i) const { return odometry_.at(i); }
+  /// Keeps an accepted loop between entries, saved with the database (trunk pairs are not), so
+  /// that a later run that loads it can rebuild this run's map (relocalisation).
+  void recordLoop(const Loop& loop) { loops_.push_back(loop); }
+  /// The recorded loops, as recorded or loaded.
+  const std::vector<Loop>& loops() const { return loops_; }
   const LoopDetectorParams& params() const { return params_; }
   /// Replaces estimatePose by another solver on the same correspondences (empty: estimatePose).
   void setSolver(PoseSolver solver) { solver_ = std::move(solver); }
 
   /// Writes the database to path atomically (temporary file, then rename). Throws on failure.
   void save(const std::string& path) const;
-  /// Replaces the database by the file's content. Throws std::runtime_error (naming the file
-  /// and the problem) on a missing, corrupt or version-mismatched file; then nothing changes.
+  /// Replaces the database by the file's content (version 1 files: odometry unknown, no loops).
+  /// Throws
+  /// std::runtime_error (naming the file and the problem) on a missing, corrupt or
+  /// version-mismatched file; then nothing changes.
   void load(const std::string& path);
-  /// Replaces the database by entries (readDatabaseFile's; it checked them).
-  void replaceEntries(std::vector<std::shared_ptr<const Descriptor>> entries);
+  /// Replaces the database by a file's contents (readDatabaseFile's; it checked them).
+  void replaceContents(DatabaseContents contents);
 
  private:
   LoopDetectorParams params_;
   std::vector<std::shared_ptr<const Descriptor>> entries_;
+  std::vector<EntryOdometry> odometry_;  // parallel to entries_
+  std::vector<Loop> loops_;
   PoseSolver solver_;
   /// matchTriangles of each entry, computed when the entry is first matched and then reused
   /// (the neighbour triangles of a descriptor do not depend on the query).

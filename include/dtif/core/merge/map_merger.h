@@ -1,0 +1,154 @@
+// Map merging back end (issue #16): a pose graph over every robot's submap chain and every
+// accepted loop, solved with Ceres incrementally as loops arrive; pairwise-consistency (PCM)
+// outlier rejection; one gravity-aligned map frame M per connected component of robots; the
+// merged stem inventory; an optional field stem map as a fixed anchor. ROS-free.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "dtif/core/database/loop_detector.h"
+#include "dtif/core/merge/stem_inventory.h"
+#include "dtif/core/merge/stem_map.h"
+#include "dtif/core/types.h"
+
+namespace dtif {
+
+using Matrix6d = Eigen::Matrix<double, 6, 6>;
+
+struct MergeParams {
+  // Odometry edges: standard deviations grow with the distance travelled between submaps.
+  double odom_sigma_xy_m = 0.02;         ///< horizontal sigma of one edge, floor [m]
+  double odom_sigma_xy_per_m = 0.01;     ///< horizontal sigma per metre travelled [m/m]
+  double odom_sigma_z_m = 0.02;          ///< vertical sigma floor [m]
+  double odom_sigma_z_per_m = 0.005;     ///< vertical sigma per metre travelled [m/m]
+  double odom_sigma_rot_rad = 0.002;     ///< yaw sigma floor [rad]
+  double odom_sigma_rot_per_m = 0.0005;  ///< yaw sigma per metre travelled [rad/m]
+  /// Roll and pitch: lidar-inertial odometry sees gravity, so between consecutive submaps they
+  /// hardly drift (a tilted camera_init is the same tilt for every submap), while a loop's
+  /// roll/pitch from trunks is good to a few tenths of a degree only.
+  double odom_sigma_tilt_rad = 0.0005;    ///< roll/pitch sigma floor [rad]
+  double odom_sigma_tilt_per_m = 0.0001;  ///< roll/pitch sigma per metre travelled [rad/m]
+  // Loop edges: the loop's covariance, with floors (a trunk-based covariance can be optimistic).
+  double loop_sigma_xy_min_m = 0.05;      ///< [m]
+  double loop_sigma_z_min_m = 0.05;       ///< [m]
+  double loop_sigma_rot_min_rad = 0.005;  ///< [rad]
+  double robust_loss_scale = 3.0;         ///< Cauchy scale on loop residuals, in sigmas
+  // PCM: two loops of one robot pair are consistent when the cycle they close with the two
+  // odometry chains is within pcm_sigmas standard deviations (translation and rotation).
+  bool pcm = true;
+  double pcm_sigmas = 3.0;
+  int max_iterations = 30;  ///< Ceres iterations per solve
+  StemFusionParams stems;
+  StemMapParams stem_map;
+  std::string validate() const;
+};
+
+/// One submap of a robot's chain, in acquisition order per robot.
+struct MergeSubmap {
+  std::string robot;
+  int64_t id = -1;
+  double stamp = 0.0;             ///< [s]
+  Pose T_O_S = Pose::Identity();  ///< odometry pose
+  Trunks trunks;                  ///< in S (may be empty)
+};
+
+/// A robot changed component (joined another, or a rejected loop split it off): log it.
+struct MergeEvent {
+  std::string robot;
+  int from_component = -1;  ///< -1: the robot was new
+  int to_component = -1;
+  std::string text;  ///< one human-readable line
+};
+
+/// A submap's merged pose.
+struct MergedPose {
+  int64_t id = -1;
+  std::string robot;
+  int component = 0;
+  Pose T_M_S = Pose::Identity();
+};
+
+/// The back end's verdict on one loop.
+struct LoopVerdict {
+  int64_t query_id = -1, candidate_id = -1;
+  bool inter_robot = false;
+  bool used = false;             ///< in the maximum consistent set (PCM) and in the solve
+  double residual_sigmas = 0.0;  ///< whitened residual after the last solve
+};
+
+struct MergeSolveStats {
+  double pcm_ms = 0.0, solve_ms = 0.0;
+  int iterations = 0;
+  double initial_cost = 0.0, final_cost = 0.0;
+  size_t loops_used = 0, loops_rejected = 0;
+  int components = 0;
+};
+
+/// An edge of the pose graph (for export, e.g. g2o): T_from_to with its information matrix in
+/// (x, y, z, roll, pitch, yaw) order.
+struct MergeGraphEdge {
+  int64_t from = -1, to = -1;
+  Pose T_from_to = Pose::Identity();
+  Matrix6d information = Matrix6d::Identity();
+  bool loop = false;
+};
+
+class MapMerger {
+ public:
+  explicit MapMerger(const MergeParams& params = {});
+  ~MapMerger();
+  MapMerger(MapMerger&&) noexcept;
+  MapMerger& operator=(MapMerger&&) noexcept;
+
+  /// Appends a submap to its robot's chain (a new robot starts its own component). Throws
+  /// std::invalid_argument on a duplicate id or a non-finite pose.
+  void addSubmap(const MergeSubmap& submap);
+  /// Per-robot levelling rotation R_L_S (S into a gravity-aligned frame; identity by default)
+  /// used to make M z up. Applies from the next solve.
+  void setLevelling(const std::string& robot, const Eigen::Matrix3d& R_L_S);
+  /// Adds an accepted loop (both submaps must be known). Returns false (and ignores the loop)
+  /// when a submap is unknown or the pose is not finite.
+  bool addLoop(const Loop& loop);
+  /// A field stem map (plot frame P) as a fixed anchor: from the next solve on, component 0's M
+  /// is P when its stems register to it. Empty: no anchor.
+  void setStemMap(const std::vector<FieldStem>& field);
+
+  /// PCM over the loops, then a warm-started Ceres solve. Cheap when nothing changed.
+  MergeSolveStats solve();
+
+  /// Component changes since the last call.
+  std::vector<MergeEvent> takeEvents();
+
+  size_t submapCount() const;
+  std::vector<std::string> robots() const;
+  /// The component of a robot (0 = largest), -1 when unknown.
+  int component(const std::string& robot) const;
+  int componentCount() const;
+  /// T_M_S of a submap, nullopt when unknown.
+  std::optional<Pose> pose(int64_t id) const;
+  /// T_M_O: the robot's odometry frame in its component's M (TF map -> odom); nullopt when
+  /// unknown.
+  std::optional<Pose> mapFromOdom(const std::string& robot) const;
+  /// Every submap, in insertion order.
+  std::vector<MergedPose> poses() const;
+  std::vector<LoopVerdict> loops() const;
+  /// The merged stem inventory (one entry per physical tree), per component in its M.
+  std::vector<MergedStem> stems() const;
+  /// The field stem map registration of component 0 (ok = false when none or it failed).
+  StemMapRegistration stemMapRegistration() const;
+  /// The pose graph's edges (odometry and used loops), for export.
+  std::vector<MergeGraphEdge> graphEdges() const;
+  const MergeParams& params() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace dtif

@@ -1,0 +1,108 @@
+// `dtif merge` offline: the evaluation protocol's sequential loop closure feeding the map merger
+// (core/merge), and the merged map's scoring of DATASET.md ("Merged map", "How it is scored").
+#pragma once
+
+#include <functional>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "dtif/core/merge/map_merger.h"
+#include "dtif/eval/evaluation.h"
+#include "dtif/io/dataset.h"
+
+namespace dtif {
+
+/// What the sequential loop closure produced, in acquisition order.
+struct MergeInput {
+  std::vector<MergeSubmap> submaps;  ///< one per row of submaps.csv, with its trunks
+  /// Accepted loops; loop_after[k] = index into submaps of the query (the loop arrives then).
+  std::vector<Loop> loops;
+  std::vector<size_t> loop_after;
+  std::optional<EvalResult> eval;  ///< the protocol's scoring, when ground truth exists
+};
+
+/// Runs the evaluation protocol's sequential loop closure: runEvaluation (scored) when the
+/// dataset has ground truth, else the same steps unscored. Throws DatasetError.
+MergeInput collectMergeInput(const Dataset& ds, const DtifParams& params, const EvalParams& eval,
+                             const std::function<void(size_t, size_t)>& progress = {});
+
+/// A deliberately false loop for the robustness check: between the two submaps of different
+/// robots that are farthest apart (ground truth when present, else odometry), with the pose and
+/// covariance of a typical accepted loop and many inliers. nullopt with fewer than two robots.
+std::optional<Loop> makeFalseLoop(const Dataset& ds, const MergeInput& in);
+
+struct MergeRunStats {
+  size_t solves = 0;
+  double solve_ms_total = 0.0, solve_ms_max = 0.0;
+  MergeSolveStats last;
+};
+
+/// Feeds the submaps and loops into a merger in acquisition order, solving after each submap
+/// that brings a loop (incremental, as online), and once at the end. `false_loop` (optional) is
+/// added with the last loop. Events are appended to *events when given.
+MapMerger runMerger(const MergeInput& in, const MergeParams& params,
+                    const std::optional<Loop>& false_loop = std::nullopt,
+                    const std::vector<FieldStem>& stem_map = {},
+                    std::vector<MergeEvent>* events = nullptr, MergeRunStats* stats = nullptr);
+
+struct TrajectoryScore {
+  size_t submaps = 0;
+  double ate_m = 0.0;        ///< RMS position residual after the alignment [m]
+  double rot_rms_deg = 0.0;  ///< RMS rotation error after the alignment [deg]
+};
+
+struct StemScore {
+  size_t listed = 0;         ///< stems in the inventory (scored components)
+  size_t matched = 0;        ///< listed stems within match_radius of a true stem
+  size_t true_in_range = 0;  ///< true stems within 10 m of a submap origin
+  size_t found = 0;          ///< true stems in range with a listed stem
+  size_t duplicates = 0;     ///< extra listed stems on one true stem
+  double precision = 0.0, recall = 0.0, duplicate_rate = 0.0;  ///< duplicates / matched
+  double mean_pos_err_m = 0.0;                                 ///< horizontal, over matched stems
+  double median_dbh_err_m = 0.0;  ///< |dbh - dbh_true|, over matched stems
+};
+
+struct MergeScore {
+  std::map<int, TrajectoryScore> component;         ///< aligned once per component
+  std::map<std::string, TrajectoryScore> robot;     ///< residuals under the component's alignment
+  std::map<std::string, TrajectoryScore> odometry;  ///< baseline: each robot aligned alone
+  TrajectoryScore odometry_all;                     ///< the baseline over every submap
+  std::map<int, Pose> T_W_M;                        ///< the alignment per component
+  StemScore stems;
+};
+
+/// DATASET.md's scoring of a merged map against ground_truth.csv and stems.csv (stems scored
+/// only when the dataset has stems.csv). Throws DatasetError without ground truth.
+MergeScore scoreMerge(const Dataset& ds, const std::vector<MergedPose>& poses,
+                      const std::vector<MergedStem>& stems, double match_radius_m = 0.5);
+
+/// The least-squares rigid transform (no scale) taking `from` onto `to` (Umeyama).
+Pose alignRigid(const std::vector<Eigen::Vector3d>& from, const std::vector<Eigen::Vector3d>& to);
+
+/// What summary.json of `dtif merge` holds.
+struct MergeSummary {
+  std::string dataset;
+  size_t submaps = 0, robots = 0;
+  int components = 0;
+  std::map<std::string, int> robot_component;
+  size_t loops_accepted = 0;                  ///< by loop closure (the front end)
+  size_t loops_used = 0, loops_rejected = 0;  ///< by the back end (PCM)
+  size_t inter_robot_used = 0, inter_robot_rejected = 0;
+  size_t stems = 0;
+  MergeRunStats run;
+  bool false_loop_injected = false, false_loop_used = false;
+  std::optional<MergeScore> score;        ///< with ground truth
+  std::optional<MergeScore> score_clean;  ///< with a false loop: the same merge without it
+  std::optional<StemMapRegistration> stem_map;
+  size_t stem_map_field_stems = 0;
+};
+
+/// summary.json of `dtif merge` (atomic write). Throws DatasetError.
+void writeMergeSummaryJson(const std::string& path, const MergeSummary& s);
+
+/// Merge results as a plain-text table (per component, per robot, baseline, stems).
+std::string formatMergeTable(const MergeScore& s);
+
+}  // namespace dtif

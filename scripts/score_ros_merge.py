@@ -1,0 +1,108 @@
+#!/usr/bin/env python3
+"""Scores the map merge nodelet's saved map (save_map: merged_poses.csv, submap_ids.csv) against
+a dataset's ground truth, as DATASET.md's ATE (positions, best rigid alignment, no scale), over
+all robots of each map frame and per robot (each aligned alone, odometry alone beside it).
+Usage: score_ros_merge.py <dataset_dir> <map_dir>"""
+import csv
+import math
+import sys
+
+
+def best_rotation(h):
+    """Unit quaternion (w, x, y, z) of the rotation R maximising sum g . R e, from the
+    cross-covariance h[i][j] = sum e_i g_j (Horn 1987): the top eigenvector of a symmetric 4x4
+    matrix."""
+    (sxx, sxy, sxz), (syx, syy, syz), (szx, szy, szz) = h
+    n = [[sxx + syy + szz, syz - szy, szx - sxz, sxy - syx],
+         [syz - szy, sxx - syy - szz, sxy + syx, szx + sxz],
+         [szx - sxz, sxy + syx, -sxx + syy - szz, syz + szy],
+         [sxy - syx, szx + sxz, syz + szy, -sxx - syy + szz]]
+    return top_eigenvector(n)
+
+
+def top_eigenvector(a):
+    """Eigenvector of the largest eigenvalue of a symmetric matrix (cyclic Jacobi rotations)."""
+    k = len(a)
+    a = [row[:] for row in a]
+    v = [[float(i == j) for j in range(k)] for i in range(k)]
+    for _ in range(100):
+        off = sum(a[i][j] ** 2 for i in range(k) for j in range(k) if i != j)
+        if off < 1e-30:
+            break
+        for p in range(k):
+            for q in range(p + 1, k):
+                if abs(a[p][q]) < 1e-300:
+                    continue
+                theta = (a[q][q] - a[p][p]) / (2 * a[p][q])
+                t = math.copysign(1.0, theta) / (abs(theta) + math.sqrt(theta * theta + 1))
+                c = 1 / math.sqrt(t * t + 1)
+                s = t * c
+                for r in range(k):  # A <- A J
+                    arp, arq = a[r][p], a[r][q]
+                    a[r][p], a[r][q] = c * arp - s * arq, s * arp + c * arq
+                for r in range(k):  # A <- J^T A
+                    apr, aqr = a[p][r], a[q][r]
+                    a[p][r], a[q][r] = c * apr - s * aqr, s * apr + c * aqr
+                for r in range(k):
+                    vrp, vrq = v[r][p], v[r][q]
+                    v[r][p], v[r][q] = c * vrp - s * vrq, s * vrp + c * vrq
+    best = max(range(k), key=lambda i: a[i][i])
+    return [v[r][best] for r in range(k)]
+
+
+def rotate(q, v):
+    w, x, y, z = q
+    t = [2 * (y * v[2] - z * v[1]), 2 * (z * v[0] - x * v[2]), 2 * (x * v[1] - y * v[0])]
+    return [v[0] + w * t[0] + y * t[2] - z * t[1], v[1] + w * t[1] + z * t[0] - x * t[2],
+            v[2] + w * t[2] + x * t[1] - y * t[0]]
+
+
+def align_rms(est, gt):
+    """RMS residual [m] after the rigid transform (no scale) that best maps est onto gt."""
+    n = len(est)
+    ce = [sum(p[i] for p in est) / n for i in range(3)]
+    cg = [sum(p[i] for p in gt) / n for i in range(3)]
+    h = [[sum((e[i] - ce[i]) * (g[j] - cg[j]) for e, g in zip(est, gt)) for j in range(3)]
+         for i in range(3)]
+    q = best_rotation(h)
+    sq = 0.0
+    for e, g in zip(est, gt):
+        r = rotate(q, [e[i] - ce[i] for i in range(3)])
+        sq += sum((r[i] + cg[i] - g[i]) ** 2 for i in range(3))
+    return math.sqrt(sq / n)
+
+
+def main():
+    ds, mp = sys.argv[1], sys.argv[2]
+    gt = {r["id"]: [float(r[k]) for k in ("tx", "ty", "tz")]
+          for r in csv.DictReader(open(ds + "/ground_truth.csv"))}
+    subs = list(csv.DictReader(open(ds + "/submaps.csv")))
+    odom = {r["id"]: [float(r["odom_" + k]) for k in ("tx", "ty", "tz")] for r in subs}
+    ids = {r["id"]: r for r in csv.DictReader(open(mp + "/submap_ids.csv"))}
+    by_comp, by_robot = {}, {}
+    for r in csv.DictReader(open(mp + "/merged_poses.csv")):
+        k = ids[r["id"]]
+        # The dataset submap of the same robot and anchor stamp.
+        match = [s["id"] for s in subs
+                 if s["robot"] == k["robot"] and abs(float(s["stamp"]) - float(k["stamp"])) < 1e-3]
+        if not match:
+            continue
+        p = [float(r[c]) for c in ("tx", "ty", "tz")]
+        by_comp.setdefault(r["component"], []).append((p, gt[match[0]], k["robot"]))
+        by_robot.setdefault(k["robot"], []).append(match[0])
+    print("map frame component  robots        submaps  ATE [m]")
+    for comp, rows in sorted(by_comp.items()):
+        robots = sorted({r[2] for r in rows})
+        print("%19s  %-12s  %7d  %7.3f" % (comp, ",".join(robots), len(rows),
+                                          align_rms([r[0] for r in rows], [r[1] for r in rows])))
+    print("robot (each aligned alone)  submaps  merged ATE [m]  odometry-only ATE [m]")
+    for robot, mine in sorted(by_robot.items()):
+        rows = [r for rs in by_comp.values() for r in rs if r[2] == robot]
+        print("%-26s  %7d  %14.3f  %21.3f" % (robot, len(rows),
+                                             align_rms([r[0] for r in rows], [r[1] for r in rows]),
+                                             align_rms([odom[i] for i in mine],
+                                                       [gt[i] for i in mine])))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,646 @@
+#include "dtif/core/merge/map_merger.h"
+
+#include <ceres/ceres.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <map>
+#include <numeric>
+#include <set>
+#include <sstream>
+#include <stdexcept>
+#include <unordered_map>
+
+#include "core/merge/pose_graph_cost.h"
+#include "dtif/core/merge/pcm.h"
+#include "dtif/core/timing.h"
+
+namespace dtif {
+namespace {
+
+using Vector6d = Eigen::Matrix<double, 6, 1>;
+
+bool finitePose(const Pose& T) { return T.matrix().allFinite(); }
+
+double rotationAngle(const Eigen::Matrix3d& R) { return Eigen::AngleAxisd(R).angle(); }
+
+Matrix6d diagonalSqrtInformation(const Vector6d& sigmas) {
+  return sigmas.cwiseInverse().asDiagonal();
+}
+
+}  // namespace
+
+struct MapMerger::Impl {
+  struct Node {
+    int64_t id = -1;
+    std::string robot;
+    double stamp = 0.0;
+    Pose T_O_S = Pose::Identity();
+    Trunks trunks;
+    double travelled = 0.0;  // along the robot's chain from its first submap [m]
+    Eigen::Quaterniond q = Eigen::Quaterniond::Identity();  // estimate of T_M_S
+    Eigen::Vector3d t = Eigen::Vector3d::Zero();
+    Pose pose() const {
+      Pose T = Pose::Identity();
+      T.linear() = q.toRotationMatrix();
+      T.translation() = t;
+      return T;
+    }
+    void setPose(const Pose& T) {
+      q = Eigen::Quaterniond(T.rotation()).normalized();
+      t = T.translation();
+    }
+  };
+  struct Robot {
+    std::vector<size_t> nodes;
+    Eigen::Matrix3d R_L_S = Eigen::Matrix3d::Identity();
+    int component = -1;
+    int64_t frame = -1;  // anchor submap id whose M the estimates are in (-1: none yet)
+    size_t order = 0;    // insertion order
+  };
+  /// A loop normalised to (a, b) with a on the group's first robot: T_a_b.
+  struct LoopRec {
+    Loop loop;
+    size_t a = 0, b = 0;
+    Pose T_a_b = Pose::Identity();
+    Vector6d sigmas = Vector6d::Ones();
+    bool used = true;
+    double residual_sigmas = 0.0;
+  };
+  struct Group {
+    std::vector<size_t> loops;
+    ConsistencyGraph adjacency;
+  };
+
+  MergeParams p;
+  std::vector<Node> nodes;
+  std::unordered_map<int64_t, size_t> index;
+  std::map<std::string, Robot> robots;
+  std::vector<LoopRec> loops;
+  std::map<std::pair<std::string, std::string>, Group> groups;
+  std::vector<MergeEvent> events;
+  std::vector<FieldStem> field;
+  StemMapRegistration registration;
+  std::vector<MergedStem> stems;
+  bool dirty = true;
+
+  explicit Impl(const MergeParams& params) : p(params) {}
+
+  // --- noise models --------------------------------------------------------------------------
+  Vector6d odomSigmas(double d) const {
+    Vector6d s;
+    const double xy = p.odom_sigma_xy_m + p.odom_sigma_xy_per_m * d;
+    const double z = p.odom_sigma_z_m + p.odom_sigma_z_per_m * d;
+    const double tilt = p.odom_sigma_tilt_rad + p.odom_sigma_tilt_per_m * d;
+    const double yaw = p.odom_sigma_rot_rad + p.odom_sigma_rot_per_m * d;
+    s << xy, xy, z, tilt, tilt, yaw;
+    return s;
+  }
+
+  Vector6d loopSigmas(const Matrix6d& cov) const {
+    const Vector6d floor =
+        (Vector6d() << p.loop_sigma_xy_min_m, p.loop_sigma_xy_min_m, p.loop_sigma_z_min_m,
+         p.loop_sigma_rot_min_rad, p.loop_sigma_rot_min_rad, p.loop_sigma_rot_min_rad)
+            .finished();
+    Vector6d s;
+    for (int i = 0; i < 6; ++i) {
+      const double v = cov(i, i);
+      s(i) = std::max(floor(i), std::isfinite(v) && v > 0.0 ? std::sqrt(v) : 0.0);
+    }
+    return s;
+  }
+
+  Pose odom(size_t from, size_t to) const { return nodes[from].T_O_S.inverse() * nodes[to].T_O_S; }
+
+  // --- PCM -----------------------------------------------------------------------------------
+  /// Loops i and j of one group close a cycle with the two odometry chains; consistent when
+  /// its translation (horizontal, vertical) and rotation are within pcm_sigmas.
+  bool consistent(const LoopRec& li, const LoopRec& lj) const {
+    const Pose cycle = li.T_a_b * odom(li.b, lj.b) * lj.T_a_b.inverse() * odom(lj.a, li.a);
+    const double da = std::fabs(nodes[li.a].travelled - nodes[lj.a].travelled);
+    const double db = std::fabs(nodes[li.b].travelled - nodes[lj.b].travelled);
+    const Vector6d sa = odomSigmas(da), sb = odomSigmas(db);
+    const Vector6d var =
+        sa.cwiseAbs2() + sb.cwiseAbs2() + li.sigmas.cwiseAbs2() + lj.sigmas.cwiseAbs2();
+    const double k = p.pcm_sigmas;
+    const Eigen::Vector3d e = cycle.translation();
+    return e.head<2>().norm() <= k * std::sqrt(var(0) + var(1)) &&
+           std::fabs(e.z()) <= k * std::sqrt(var(2)) &&
+           rotationAngle(cycle.linear()) <= k * std::sqrt(var(3) + var(4) + var(5));
+  }
+
+  void addToGroup(size_t loop_index) {
+    const LoopRec& l = loops[loop_index];
+    const std::pair<std::string, std::string> key{nodes[l.a].robot, nodes[l.b].robot};
+    Group& g = groups[key];
+    const size_t n = g.loops.size();
+    for (auto& row : g.adjacency) row.push_back(false);
+    g.adjacency.emplace_back(n + 1, false);
+    for (size_t k = 0; k < n; ++k) {
+      const bool c = consistent(loops[g.loops[k]], l);
+      g.adjacency[k][n] = g.adjacency[n][k] = c;
+    }
+    g.adjacency[n][n] = true;
+    g.loops.push_back(loop_index);
+  }
+
+  void runPcm() {
+    for (auto& [key, g] : groups) {
+      std::vector<bool> keep(g.loops.size(), true);
+      if (p.pcm) {
+        std::fill(keep.begin(), keep.end(), false);
+        for (size_t v : maximumClique(g.adjacency)) keep[v] = true;
+      }
+      for (size_t k = 0; k < g.loops.size(); ++k) loops[g.loops[k]].used = keep[k];
+    }
+  }
+
+  // --- components ----------------------------------------------------------------------------
+  /// Robots with submaps, in insertion order.
+  std::vector<std::string> robotOrder() const {
+    std::vector<std::string> out;
+    for (const auto& [name, r] : robots) {
+      if (!r.nodes.empty()) out.push_back(name);
+    }
+    std::sort(out.begin(), out.end(), [&](const std::string& a, const std::string& b) {
+      return robots.at(a).order < robots.at(b).order;
+    });
+    return out;
+  }
+
+  /// Robots joined by used inter-robot loops, largest (by submaps) first; ties: earliest robot.
+  std::vector<std::vector<std::string>> computeComponents() const {
+    const std::vector<std::string> order = robotOrder();
+    std::map<std::string, std::string> parent;
+    for (const auto& r : order) parent[r] = r;
+    auto find = [&](std::string r) {
+      while (parent[r] != r) r = parent[r] = parent[parent[r]];
+      return r;
+    };
+    for (const LoopRec& l : loops) {
+      if (!l.used) continue;
+      const std::string ra = find(nodes[l.a].robot), rb = find(nodes[l.b].robot);
+      if (ra == rb) continue;
+      // The earlier robot stays the root, so the component's anchor is its earliest robot.
+      if (robots.at(ra).order < robots.at(rb).order) {
+        parent[rb] = ra;
+      } else {
+        parent[ra] = rb;
+      }
+    }
+    std::map<std::string, std::vector<std::string>> by_root;
+    for (const auto& r : order) by_root[find(r)].push_back(r);
+    std::vector<std::vector<std::string>> comps;
+    for (auto& [root, members] : by_root) comps.push_back(members);
+    auto size = [&](const std::vector<std::string>& c) {
+      size_t n = 0;
+      for (const auto& r : c) n += robots.at(r).nodes.size();
+      return n;
+    };
+    std::sort(comps.begin(), comps.end(), [&](const auto& a, const auto& b) {
+      const size_t sa = size(a), sb = size(b);
+      if (sa != sb) return sa > sb;
+      return robots.at(a.front()).order < robots.at(b.front()).order;
+    });
+    return comps;
+  }
+
+  void rebase(const std::vector<std::string>& members, int64_t old_frame, const Pose& T_new_old) {
+    for (const auto& r : members) {
+      if (robots.at(r).frame != old_frame) continue;
+      for (size_t n : robots.at(r).nodes) nodes[n].setPose(T_new_old * nodes[n].pose());
+    }
+  }
+
+  /// Expresses every robot of a component in the M of its anchor (its earliest robot's first
+  /// submap, levelled): rebases the robots reached through loops from other frames.
+  void placeComponent(const std::vector<std::string>& members) {
+    Robot& first = robots.at(members.front());
+    Node& anchor = nodes[first.nodes.front()];
+    Pose target = Pose::Identity();
+    target.linear() = first.R_L_S;
+    const Pose T_fix = target * anchor.pose().inverse();
+    if (first.frame != anchor.id || !T_fix.isApprox(Pose::Identity(), 1e-12)) {
+      const int64_t old = first.frame;
+      for (const auto& r : members) {
+        if (robots.at(r).frame == old) rebase({r}, old, T_fix);
+      }
+      for (const auto& r : members) {
+        if (robots.at(r).frame == old) robots.at(r).frame = anchor.id;
+      }
+    }
+    // Breadth first over used loops from the placed robots.
+    const std::set<std::string> in(members.begin(), members.end());
+    bool changed = true;
+    while (changed) {
+      changed = false;
+      for (const LoopRec& l : loops) {
+        if (!l.used) continue;
+        const std::string& ra = nodes[l.a].robot;
+        const std::string& rb = nodes[l.b].robot;
+        if (!in.count(ra) || !in.count(rb)) continue;
+        const bool pa = robots.at(ra).frame == anchor.id, pb = robots.at(rb).frame == anchor.id;
+        if (pa == pb) continue;
+        const size_t placed = pa ? l.a : l.b, other = pa ? l.b : l.a;
+        const Pose T_placed_other = pa ? l.T_a_b : l.T_a_b.inverse();
+        const Pose T_new_old =
+            nodes[placed].pose() * T_placed_other * nodes[other].pose().inverse();
+        const int64_t old = robots.at(nodes[other].robot).frame;
+        for (const auto& r : members) {
+          if (robots.at(r).frame != old) continue;
+          rebase({r}, old, T_new_old);
+          robots.at(r).frame = anchor.id;
+        }
+        changed = true;
+      }
+    }
+  }
+
+  void updateComponents() {
+    const auto comps = computeComponents();
+    for (size_t c = 0; c < comps.size(); ++c) {
+      const int64_t old_anchor_frame = robots.at(comps[c].front()).frame;
+      std::map<std::string, int64_t> old_frames;
+      for (const auto& r : comps[c]) old_frames[r] = robots.at(r).frame;
+      placeComponent(comps[c]);
+      (void)old_anchor_frame;
+      for (const auto& r : comps[c]) {
+        Robot& rob = robots.at(r);
+        const int cid = static_cast<int>(c);
+        if (rob.component == cid && old_frames[r] == rob.frame) continue;
+        MergeEvent ev;
+        ev.robot = r;
+        ev.from_component = rob.component;
+        ev.to_component = cid;
+        std::ostringstream os;
+        if (rob.component < 0) {
+          os << "robot " << r << " starts in component " << cid;
+        } else if (old_frames[r] == rob.frame) {
+          os << "robot " << r << " renumbered: component " << rob.component << " -> " << cid
+             << " (same map frame)";
+        } else {
+          os << "robot " << r << " moves from component " << rob.component << " to " << cid
+             << " (map frame of submap " << rob.frame << ")";
+        }
+        if (comps[c].size() > 1) {
+          os << " with";
+          for (const auto& o : comps[c]) os << " " << o;
+        }
+        ev.text = os.str();
+        rob.component = cid;
+        events.push_back(ev);
+      }
+    }
+  }
+
+  // --- Ceres -------------------------------------------------------------------------------
+  MergeSolveStats solveGraph() {
+    MergeSolveStats st;
+    ceres::Problem::Options popt;
+    popt.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+    ceres::Problem problem(popt);
+    ceres::EigenQuaternionManifold quaternion;
+    for (Node& n : nodes) {
+      problem.AddParameterBlock(n.q.coeffs().data(), 4, &quaternion);
+      problem.AddParameterBlock(n.t.data(), 3);
+    }
+    for (const auto& [name, r] : robots) {
+      if (r.nodes.empty()) continue;
+      for (size_t k = 1; k < r.nodes.size(); ++k) {
+        const size_t a = r.nodes[k - 1], b = r.nodes[k];
+        const Pose T = odom(a, b);
+        const double d = T.translation().norm();
+        problem.AddResidualBlock(
+            RelativePoseCost::create(T.translation(), Eigen::Quaterniond(T.rotation()),
+                                     diagonalSqrtInformation(odomSigmas(d))),
+            nullptr, nodes[a].q.coeffs().data(), nodes[a].t.data(), nodes[b].q.coeffs().data(),
+            nodes[b].t.data());
+      }
+      Node& anchor = nodes[r.nodes.front()];
+      if (anchor.id == r.frame) {
+        problem.SetParameterBlockConstant(anchor.q.coeffs().data());
+        problem.SetParameterBlockConstant(anchor.t.data());
+      }
+    }
+    std::vector<ceres::LossFunctionWrapper*> losses;
+    for (const LoopRec& l : loops) {
+      if (!l.used) continue;
+      losses.push_back(new ceres::LossFunctionWrapper(nullptr, ceres::TAKE_OWNERSHIP));
+      problem.AddResidualBlock(
+          RelativePoseCost::create(l.T_a_b.translation(), Eigen::Quaterniond(l.T_a_b.rotation()),
+                                   diagonalSqrtInformation(l.sigmas)),
+          losses.back(), nodes[l.a].q.coeffs().data(), nodes[l.a].t.data(),
+          nodes[l.b].q.coeffs().data(), nodes[l.b].t.data());
+    }
+    ceres::Solver::Options opt;
+    opt.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+    opt.max_num_iterations = p.max_iterations;
+    opt.num_threads = 1;
+    opt.logging_type = ceres::SILENT;
+    // Graduated robustness: a robust loss alone cannot pull a map that odometry has drifted by
+    // many sigmas (every loop looks like an outlier), so the first stage trusts the loops PCM
+    // kept (least squares; without PCM a wide Cauchy), the last uses robust_loss_scale.
+    const double s = p.robust_loss_scale;
+    const std::vector<double> stages =
+        p.pcm ? std::vector<double>{0.0, s} : std::vector<double>{10.0 * s, 3.0 * s, s};
+    for (size_t k = 0; k < stages.size(); ++k) {
+      for (ceres::LossFunctionWrapper* w : losses) {
+        w->Reset(stages[k] > 0.0 ? new ceres::CauchyLoss(stages[k]) : nullptr,
+                 ceres::TAKE_OWNERSHIP);
+      }
+      ceres::Solver::Summary summary;
+      ceres::Solve(opt, &problem, &summary);
+      st.iterations += static_cast<int>(summary.iterations.size());
+      if (k == 0) st.initial_cost = summary.initial_cost;
+      st.final_cost = summary.final_cost;
+    }
+    return st;
+  }
+
+  void updateLoopResiduals() {
+    for (LoopRec& l : loops) {
+      const Pose err = l.T_a_b.inverse() * nodes[l.a].pose().inverse() * nodes[l.b].pose();
+      const Eigen::Vector3d et = err.translation().cwiseQuotient(l.sigmas.head<3>());
+      const double er = rotationAngle(err.linear()) / l.sigmas.tail<3>().maxCoeff();
+      l.residual_sigmas = std::sqrt(et.squaredNorm() + er * er);
+    }
+  }
+
+  // --- stems ---------------------------------------------------------------------------------
+  Pose outputTransform(int component) const {
+    return component == 0 && registration.ok ? registration.T_P_M : Pose::Identity();
+  }
+
+  std::vector<MergedStem> fuseInventory(bool with_field_transform) const {
+    std::vector<StemObservation> obs;
+    for (const Node& n : nodes) {
+      const int comp = robots.at(n.robot).component;
+      const Pose T = (with_field_transform ? outputTransform(comp) : Pose::Identity()) * n.pose();
+      for (const TrunkLandmark& tr : n.trunks) {
+        const Eigen::Vector3d pm = T * Eigen::Vector3d(tr.x, tr.y, tr.z);
+        StemObservation o;
+        o.submap = n.id;
+        o.component = comp;
+        o.x = pm.x();
+        o.y = pm.y();
+        o.z = pm.z();
+        o.r = tr.r;
+        o.base_seen = tr.base_seen;
+        obs.push_back(o);
+      }
+    }
+    return fuseStems(obs, p.stems);
+  }
+
+  void registerField() {
+    registration = StemMapRegistration{};
+    if (field.empty()) return;
+    Trunks comp0;
+    for (const MergedStem& s : fuseInventory(false)) {
+      if (s.component != 0) continue;
+      TrunkLandmark t;
+      t.x = s.x;
+      t.y = s.y;
+      t.z = s.z_base;
+      t.r = s.dbh / 2.0;
+      comp0.push_back(t);
+    }
+    registration = registerStemMap(comp0, field, p.stem_map);
+  }
+
+  void buildInventory() {
+    registerField();
+    stems = fuseInventory(true);
+    if (!registration.ok) return;
+    // The field ids of the paired stems (the inventory in P is registration's order, again).
+    for (MergedStem& s : stems) {
+      if (s.component != 0) continue;
+      double best = p.stem_map.pair_radius_m;
+      for (const FieldStem& f : field) {
+        const double d = std::hypot(s.x - f.x, s.y - f.y);
+        if (d < best) {
+          best = d;
+          s.field_id = f.id;
+        }
+      }
+    }
+  }
+};
+
+std::string MergeParams::validate() const {
+  std::ostringstream e;
+  for (double v : {odom_sigma_xy_m, odom_sigma_z_m, odom_sigma_rot_rad, odom_sigma_tilt_rad,
+                   loop_sigma_xy_min_m, loop_sigma_z_min_m, loop_sigma_rot_min_rad,
+                   robust_loss_scale, pcm_sigmas}) {
+    if (!(v > 0.0)) e << "merge sigmas, robust_loss_scale and pcm_sigmas must be > 0; ";
+  }
+  for (double v :
+       {odom_sigma_xy_per_m, odom_sigma_z_per_m, odom_sigma_rot_per_m, odom_sigma_tilt_per_m}) {
+    if (!(v >= 0.0)) e << "merge per-metre sigmas must be >= 0; ";
+  }
+  if (max_iterations < 1) e << "merge max_iterations must be >= 1; ";
+  e << stems.validate();
+  return e.str();
+}
+
+MapMerger::MapMerger(const MergeParams& params) : impl_(std::make_unique<Impl>(params)) {
+  const std::string err = params.validate();
+  if (!err.empty()) throw std::invalid_argument("MergeParams: " + err);
+}
+MapMerger::~MapMerger() = default;
+MapMerger::MapMerger(MapMerger&&) noexcept = default;
+MapMerger& MapMerger::operator=(MapMerger&&) noexcept = default;
+
+void MapMerger::addSubmap(const MergeSubmap& s) {
+  Impl& m = *impl_;
+  if (m.index.count(s.id)) {
+    throw std::invalid_argument("map merger: duplicate submap id " + std::to_string(s.id));
+  }
+  if (!finitePose(s.T_O_S)) {
+    throw std::invalid_argument("map merger: submap " + std::to_string(s.id) +
+                                " has a non-finite pose");
+  }
+  Impl::Node n;
+  n.id = s.id;
+  n.robot = s.robot;
+  n.stamp = s.stamp;
+  n.T_O_S = s.T_O_S;
+  n.trunks = s.trunks;
+  auto [it, is_new] = m.robots.try_emplace(s.robot);
+  Impl::Robot& r = it->second;
+  if (is_new) r.order = m.robots.size() - 1;
+  if (r.nodes.empty()) {
+    Pose T = Pose::Identity();
+    T.linear() = r.R_L_S;
+    n.setPose(T);
+  } else {
+    const Impl::Node& prev = m.nodes[r.nodes.back()];
+    n.travelled = prev.travelled + (prev.T_O_S.inverse() * s.T_O_S).translation().norm();
+    n.setPose(prev.pose() * prev.T_O_S.inverse() * s.T_O_S);
+  }
+  m.index[s.id] = m.nodes.size();
+  r.nodes.push_back(m.nodes.size());
+  m.nodes.push_back(std::move(n));
+  m.dirty = true;
+}
+
+void MapMerger::setLevelling(const std::string& robot, const Eigen::Matrix3d& R_L_S) {
+  auto [it, is_new] = impl_->robots.try_emplace(robot);
+  if (is_new) it->second.order = impl_->robots.size() - 1;
+  it->second.R_L_S = R_L_S;
+  impl_->dirty = true;
+}
+
+bool MapMerger::addLoop(const Loop& loop) {
+  Impl& m = *impl_;
+  auto iq = m.index.find(loop.query_id), ic = m.index.find(loop.candidate_id);
+  if (iq == m.index.end() || ic == m.index.end() || !finitePose(loop.T_c_q)) return false;
+  if (iq->second == ic->second) return false;
+  Impl::LoopRec l;
+  l.loop = loop;
+  const size_t q = iq->second, c = ic->second;
+  // Normalise so that a's robot sorts first (the group key is an ordered robot pair).
+  if (m.nodes[c].robot <= m.nodes[q].robot) {
+    l.a = c;
+    l.b = q;
+    l.T_a_b = loop.T_c_q;
+  } else {
+    l.a = q;
+    l.b = c;
+    l.T_a_b = loop.T_c_q.inverse();
+  }
+  l.sigmas = m.loopSigmas(loop.covariance);
+  m.loops.push_back(l);
+  m.addToGroup(m.loops.size() - 1);
+  m.dirty = true;
+  return true;
+}
+
+void MapMerger::setStemMap(const std::vector<FieldStem>& field) {
+  impl_->field = field;
+  impl_->dirty = true;
+}
+
+MergeSolveStats MapMerger::solve() {
+  Impl& m = *impl_;
+  MergeSolveStats st;
+  if (m.dirty && !m.nodes.empty()) {
+    const auto t0 = std::chrono::steady_clock::now();
+    m.runPcm();
+    m.updateComponents();
+    st.pcm_ms = msSince(t0);
+    const auto t1 = std::chrono::steady_clock::now();
+    const MergeSolveStats g = m.solveGraph();
+    st.solve_ms = msSince(t1);
+    st.iterations = g.iterations;
+    st.initial_cost = g.initial_cost;
+    st.final_cost = g.final_cost;
+    m.updateLoopResiduals();
+    m.buildInventory();
+    m.dirty = false;
+  }
+  for (const auto& l : m.loops) (l.used ? st.loops_used : st.loops_rejected)++;
+  st.components = componentCount();
+  return st;
+}
+
+std::vector<MergeEvent> MapMerger::takeEvents() {
+  std::vector<MergeEvent> out;
+  out.swap(impl_->events);
+  return out;
+}
+
+size_t MapMerger::submapCount() const { return impl_->nodes.size(); }
+
+std::vector<std::string> MapMerger::robots() const { return impl_->robotOrder(); }
+
+int MapMerger::component(const std::string& robot) const {
+  auto it = impl_->robots.find(robot);
+  return it == impl_->robots.end() ? -1 : it->second.component;
+}
+
+int MapMerger::componentCount() const {
+  std::set<int> c;
+  for (const auto& [name, r] : impl_->robots) {
+    if (!r.nodes.empty()) c.insert(r.component);
+  }
+  return static_cast<int>(c.size());
+}
+
+std::optional<Pose> MapMerger::pose(int64_t id) const {
+  auto it = impl_->index.find(id);
+  if (it == impl_->index.end()) return std::nullopt;
+  const Impl::Node& n = impl_->nodes[it->second];
+  return impl_->outputTransform(impl_->robots.at(n.robot).component) * n.pose();
+}
+
+std::optional<Pose> MapMerger::mapFromOdom(const std::string& robot) const {
+  auto it = impl_->robots.find(robot);
+  if (it == impl_->robots.end() || it->second.nodes.empty()) return std::nullopt;
+  // Of the latest submap: where the robot is now is what the TF should get right.
+  const Impl::Node& n = impl_->nodes[it->second.nodes.back()];
+  return *pose(n.id) * n.T_O_S.inverse();
+}
+
+std::vector<MergedPose> MapMerger::poses() const {
+  std::vector<MergedPose> out;
+  for (const Impl::Node& n : impl_->nodes) {
+    MergedPose mp;
+    mp.id = n.id;
+    mp.robot = n.robot;
+    mp.component = impl_->robots.at(n.robot).component;
+    mp.T_M_S = impl_->outputTransform(mp.component) * n.pose();
+    out.push_back(mp);
+  }
+  return out;
+}
+
+std::vector<LoopVerdict> MapMerger::loops() const {
+  std::vector<LoopVerdict> out;
+  for (const auto& l : impl_->loops) {
+    LoopVerdict v;
+    v.query_id = l.loop.query_id;
+    v.candidate_id = l.loop.candidate_id;
+    v.inter_robot = l.loop.query_robot != l.loop.candidate_robot;
+    v.used = l.used;
+    v.residual_sigmas = l.residual_sigmas;
+    out.push_back(v);
+  }
+  return out;
+}
+
+std::vector<MergedStem> MapMerger::stems() const { return impl_->stems; }
+
+StemMapRegistration MapMerger::stemMapRegistration() const { return impl_->registration; }
+
+std::vector<MergeGraphEdge> MapMerger::graphEdges() const {
+  const Impl& m = *impl_;
+  std::vector<MergeGraphEdge> out;
+  for (const auto& [name, r] : m.robots) {
+    for (size_t k = 1; k < r.nodes.size(); ++k) {
+      MergeGraphEdge e;
+      e.from = m.nodes[r.nodes[k - 1]].id;
+      e.to = m.nodes[r.nodes[k]].id;
+      e.T_from_to = m.odom(r.nodes[k - 1], r.nodes[k]);
+      const Vector6d s = m.odomSigmas(e.T_from_to.translation().norm());
+      e.information = s.cwiseAbs2().cwiseInverse().asDiagonal();
+      out.push_back(e);
+    }
+  }
+  for (const auto& l : m.loops) {
+    if (!l.used) continue;
+    MergeGraphEdge e;
+    e.from = m.nodes[l.a].id;
+    e.to = m.nodes[l.b].id;
+    e.T_from_to = l.T_a_b;
+    e.information = l.sigmas.cwiseAbs2().cwiseInverse().asDiagonal();
+    e.loop = true;
+    out.push_back(e);
+  }
+  return out;
+}
+
+const MergeParams& MapMerger::params() const { return impl_->p; }
+
+}  // namespace dtif

@@ -1,0 +1,686 @@
+// dtif/MapMergeNodelet: one, shared by all robots. Feeds every robot's submap chain (descriptor
+// T_O_S) and the accepted loops into the merge back end (core/merge/map_merger.h), re-solves on
+// a worker thread and publishes TF map -> <robot odometry frame>, per-robot paths, the merged
+// stem inventory, markers and, on request, the merged cloud. All merging is in the core.
+#include <geometry_msgs/TransformStamped.h>
+#include <nodelet/nodelet.h>
+#include <pcl/common/transforms.h>
+#include <pcl/io/pcd_io.h>
+#include <pcl_conversions/pcl_conversions.h>
+#include <ros/ros.h>
+#include <std_srvs/Trigger.h>
+#include <tf2_ros/transform_broadcaster.h>
+
+#include <algorithm>
+#include <boost/bind/bind.hpp>
+#include <chrono>
+#include <condition_variable>
+#include <cstdio>
+#include <deque>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <pluginlib/class_list_macros.hpp>
+#include <set>
+#include <sstream>
+#include <thread>
+
+#include "dtif/core/cloud.h"
+#include "dtif/core/database/loop_detector.h"
+#include "dtif/core/descriptor/validation.h"
+#include "dtif/core/merge/map_merger.h"
+#include "dtif/core/timing.h"
+#include "dtif/core/voxel_grid.h"
+#include "dtif/io/merge_files.h"
+#include "dtif/ros/conversions.h"
+#include "dtif/ros/map_frames.h"
+#include "dtif/ros/merge_outputs.h"
+#include "dtif/ros/merge_params.h"
+#include "dtif/ros/msgs.h"
+#include "dtif/ros/params.h"
+
+namespace dtif {
+
+/// Thread-safety: subscriber callbacks only enqueue (queue_mutex_). One worker thread feeds the
+/// merger and re-solves at most every solve_period_s; it and the services serialise on
+/// merge_mutex_. What is published comes from a snapshot (out_mutex_) the TF timer reads.
+class MapMergeNodelet : public nodelet::Nodelet {
+ public:
+  ~MapMergeNodelet() override {
+    {
+      std::lock_guard<std::mutex> lock(queue_mutex_);
+      stop_ = true;
+    }
+    cv_.notify_all();
+    if (worker_.joinable()) worker_.join();
+  }
+
+ private:
+  using Key = std::pair<std::string, int64_t>;  // (robot, the robot's own submap id)
+
+  // One robot chain of the merger: a live robot, or an earlier run's submaps from a database
+  // (merger robot name "<robot>@database": its own chain, its odometry frame no longer live).
+  struct Chain {
+    std::string odom_frame;
+    bool live = true;
+  };
+
+  void onInit() override {
+    ros::NodeHandle& nh = getNodeHandle();
+    ros::NodeHandle& pnh = getPrivateNodeHandle();
+    readParams(pnh);
+    frames_ = ros_glue::MapFrames(node_.map_frame);
+    if (!node_.database_file.empty()) {
+      std::string message;
+      loadDatabase(node_.database_file, &message);
+      NODELET_INFO("%s", message.c_str());
+    }
+    for (const std::string& robot : node_.robots) {
+      subs_.push_back(nh.subscribe<dtif::TrunkDescriptor>(
+          robot + "/" + node_.descriptor_topic, 50,
+          boost::bind(&MapMergeNodelet::onDescriptor, this, boost::placeholders::_1, robot)));
+      if (!node_.cloud_topic.empty()) {
+        subs_.push_back(nh.subscribe<sensor_msgs::PointCloud2>(
+            robot + "/" + node_.cloud_topic, 5,
+            boost::bind(&MapMergeNodelet::onCloud, this, boost::placeholders::_1, robot)));
+      }
+      path_pubs_[robot] = pnh.advertise<nav_msgs::Path>("path/" + robot, 1, true);
+    }
+    subs_.push_back(nh.subscribe(node_.loop_topic, 100, &MapMergeNodelet::onLoop, this));
+    stems_pub_ = pnh.advertise<dtif::StemInventory>("stems", 1, true);
+    markers_pub_ = pnh.advertise<visualization_msgs::MarkerArray>("markers", 1, true);
+    cloud_pub_ = pnh.advertise<sensor_msgs::PointCloud2>("merged_cloud", 1, true);
+    save_srv_ = pnh.advertiseService("save_map", &MapMergeNodelet::onSaveMap, this);
+    info_srv_ = pnh.advertiseService("get_map_info", &MapMergeNodelet::onInfo, this);
+    cloud_srv_ = pnh.advertiseService("publish_cloud", &MapMergeNodelet::onPublishCloud, this);
+    load_srv_ = pnh.advertiseService("load_database", &MapMergeNodelet::onLoad, this);
+    if (node_.tf_rate_hz > 0.0) {
+      tf_timer_ = nh.createWallTimer(ros::WallDuration(1.0 / node_.tf_rate_hz),
+                                     [this](const ros::WallTimerEvent&) { publishTf(); });
+    }
+    worker_ = std::thread(&MapMergeNodelet::work, this);
+  }
+
+  void readParams(ros::NodeHandle& pnh) {
+    try {
+      ros_glue::ParamReader reader(pnh);
+      reader.readSection("", &node_);
+      reader.checkNoUnknownKeys();
+      std::string problems = merge_params_.validate();
+      if (node_.robots.empty()) problems += "robots: list at least one robot\n";
+      if (node_.map_frame.empty()) problems += "map_frame must not be empty\n";
+      if (!(node_.solve_period_s >= 0.0)) problems += "solve_period_s must be >= 0\n";
+      if (!(node_.tf_rate_hz >= 0.0)) problems += "tf_rate_hz must be >= 0\n";
+      if (!(node_.cloud_voxel_m > 0.0)) problems += "cloud_voxel_m must be > 0\n";
+      if (node_.queue_size < 1) problems += "queue_size must be >= 1\n";
+      if (!problems.empty()) throw ParamError(pnh.getNamespace() + ": " + problems);
+    } catch (const ParamError& e) {
+      NODELET_FATAL("%s", e.what());
+      throw;
+    }
+    merger_ = MapMerger(merge_params_);
+  }
+
+  // ---- Callbacks: enqueue only. ----
+
+  template <class Q, class M>
+  void enqueue(Q* q, const M& msg, const char* what) {
+    {
+      std::lock_guard<std::mutex> lock(queue_mutex_);
+      if (q->size() >= static_cast<size_t>(node_.queue_size)) {
+        NODELET_WARN_THROTTLE(5.0, "map merge is behind: dropping a %s", what);
+        q->pop_front();
+      }
+      q->push_back(msg);
+    }
+    cv_.notify_one();
+  }
+
+  void onDescriptor(const dtif::TrunkDescriptor::ConstPtr& msg, const std::string& robot) {
+    if (msg->robot != robot) {
+      NODELET_WARN_THROTTLE(5.0, "descriptor of robot '%s' on the topic of '%s': dropped",
+                            msg->robot.c_str(), robot.c_str());
+      return;
+    }
+    enqueue(&descriptors_, msg, "descriptor");
+  }
+
+  void onLoop(const dtif::LoopClosure::ConstPtr& msg) { enqueue(&loops_in_, msg, "loop"); }
+
+  void onCloud(const sensor_msgs::PointCloud2::ConstPtr& msg, const std::string& robot) {
+    enqueue(&clouds_in_, std::make_pair(robot, msg), "submap cloud");
+  }
+
+  // ---- Worker: feed the merger, re-solve, publish. ----
+
+  void work() {
+    while (true) {
+      std::vector<dtif::TrunkDescriptor::ConstPtr> ds;
+      std::vector<dtif::LoopClosure::ConstPtr> ls;
+      std::vector<std::pair<std::string, sensor_msgs::PointCloud2::ConstPtr>> cs;
+      {
+        std::unique_lock<std::mutex> lock(queue_mutex_);
+        cv_.wait_for(lock, std::chrono::duration<double>(std::max(node_.solve_period_s, 0.05)),
+                     [this] { return stop_; });
+        if (stop_) return;
+        ds.assign(descriptors_.begin(), descriptors_.end());
+        ls.assign(loops_in_.begin(), loops_in_.end());
+        cs.assign(clouds_in_.begin(), clouds_in_.end());
+        descriptors_.clear();
+        loops_in_.clear();
+        clouds_in_.clear();
+      }
+      try {
+        update(ds, ls, cs);
+      } catch (const std::exception& e) {
+        NODELET_ERROR_THROTTLE(5.0, "map merge update failed: %s", e.what());
+      }
+    }
+  }
+
+  void update(std::vector<dtif::TrunkDescriptor::ConstPtr>& ds,
+              const std::vector<dtif::LoopClosure::ConstPtr>& ls,
+              const std::vector<std::pair<std::string, sensor_msgs::PointCloud2::ConstPtr>>& cs) {
+    std::unique_lock<std::mutex> lock(merge_mutex_);
+    // Submaps in (stamp, robot) order: simultaneous first submaps of two robots enter in the
+    // same order every run, so a component's anchor (its earliest robot) is reproducible.
+    std::sort(ds.begin(), ds.end(), [](const auto& a, const auto& b) {
+      return a->header.stamp != b->header.stamp ? a->header.stamp < b->header.stamp
+                                                : a->robot < b->robot;
+    });
+    bool changed = false;
+    for (const auto& d : ds) changed |= addSubmap(*d);
+    for (const auto& l : ls) pending_loops_.push_back(l);
+    changed |= addPendingLoops();
+    for (const auto& c : cs) addCloud(c.first, *c.second);
+    if (!changed && !dirty_) return;
+    dirty_ = false;
+    const auto t0 = std::chrono::steady_clock::now();
+    const MergeSolveStats st = merger_.solve();
+    last_solve_ms_ = msSince(t0);
+    max_solve_ms_ = std::max(max_solve_ms_, last_solve_ms_);
+    ++solves_;
+    loops_used_ = st.loops_used;
+    loops_rejected_ = st.loops_rejected;
+    NODELET_DEBUG("re-solve: %zu submaps, %zu loops used, %zu rejected, %.1f ms",
+                  merger_.submapCount(), st.loops_used, st.loops_rejected, last_solve_ms_);
+    for (const MergeEvent& e : merger_.takeEvents()) NODELET_INFO("%s", e.text.c_str());
+    assignFrames();
+    publishOutputs();
+  }
+
+  // A descriptor's submap on its robot's chain; false (logged) when malformed or known.
+  bool addSubmap(const dtif::TrunkDescriptor& msg) {
+    Descriptor d;
+    Pose T_O_S;
+    std::string error;
+    if (!ros_glue::fromMsg(msg, receiver_params_, &d, &T_O_S, &error)) {
+      NODELET_WARN_THROTTLE(5.0, "descriptor %s/%ld: %s: dropped", msg.robot.c_str(),
+                            static_cast<long>(msg.submap_id), error.c_str());
+      return false;
+    }
+    if (msg.header.frame_id.empty()) {
+      NODELET_WARN_THROTTLE(5.0, "descriptor %s/%ld without frame_id: dropped", msg.robot.c_str(),
+                            static_cast<long>(msg.submap_id));
+      return false;
+    }
+    Chain& chain = chains_[msg.robot];
+    if (!chain.odom_frame.empty() && chain.odom_frame != msg.header.frame_id) {
+      NODELET_WARN_THROTTLE(5.0, "descriptor %s/%ld in frame %s, the robot's is %s: dropped",
+                            msg.robot.c_str(), static_cast<long>(msg.submap_id),
+                            msg.header.frame_id.c_str(), chain.odom_frame.c_str());
+      return false;
+    }
+    chain.odom_frame = msg.header.frame_id;
+    return addToMerger(msg.robot, msg.robot, d.submap_id, msg.header.stamp.toSec(), T_O_S,
+                       d.trunks);
+  }
+
+  // addSubmap of the merger under a global id; false (logged) on a duplicate or bad pose.
+  bool addToMerger(const std::string& chain, const std::string& robot, int64_t id, double stamp,
+                   const Pose& T_O_S, const Trunks& trunks) {
+    const Key key(robot, id);
+    if (global_id_.count(key)) {
+      NODELET_WARN_THROTTLE(5.0, "submap %s/%ld already merged: dropped", robot.c_str(),
+                            static_cast<long>(id));
+      return false;
+    }
+    MergeSubmap s;
+    s.robot = chain;
+    s.id = next_global_id_;
+    s.stamp = stamp;
+    s.T_O_S = T_O_S;
+    s.trunks = trunks;
+    try {
+      merger_.addSubmap(s);
+    } catch (const std::exception& e) {
+      NODELET_WARN_THROTTLE(5.0, "submap %s/%ld: %s: dropped", robot.c_str(), static_cast<long>(id),
+                            e.what());
+      return false;
+    }
+    global_id_[key] = next_global_id_;
+    stamp_index_[{robot, stamp}] = next_global_id_;
+    stamp_of_[next_global_id_] = stamp;
+    odom_of_[next_global_id_] = T_O_S;
+    ++next_global_id_;
+    return true;
+  }
+
+  // Loops whose submaps are both merged go in; the others wait (their descriptor may come
+  // later than the loop). True when one went in.
+  bool addPendingLoops() {
+    bool added = false;
+    for (auto it = pending_loops_.begin(); it != pending_loops_.end();) {
+      Loop lc;
+      std::string error;
+      if (!ros_glue::fromMsg(**it, &lc, &error)) {
+        NODELET_WARN_THROTTLE(5.0, "loop closure: %s: dropped", error.c_str());
+        it = pending_loops_.erase(it);
+        continue;
+      }
+      auto q = global_id_.find({lc.query_robot, lc.query_id});
+      auto c = global_id_.find({lc.candidate_robot, lc.candidate_id});
+      if (q == global_id_.end() || c == global_id_.end()) {
+        ++it;
+        continue;
+      }
+      lc.query_id = q->second;
+      lc.candidate_id = c->second;
+      if (merger_.addLoop(lc)) {
+        added = true;
+      } else {
+        NODELET_WARN_THROTTLE(5.0, "loop %s -> %s refused by the merge back end",
+                              lc.query_robot.c_str(), lc.candidate_robot.c_str());
+      }
+      it = pending_loops_.erase(it);
+    }
+    if (pending_loops_.size() > static_cast<size_t>(node_.queue_size)) {
+      NODELET_WARN_THROTTLE(5.0, "loops whose submaps never came: dropping the oldest");
+      pending_loops_.pop_front();
+    }
+    return added;
+  }
+
+  // A submap cloud (odometry frame, stamped with the submap's anchor time: the extraction
+  // nodelet's submap_cloud), kept voxel-downsampled in its submap frame S.
+  void addCloud(const std::string& robot, const sensor_msgs::PointCloud2& msg) {
+    auto it = stamp_index_.find({robot, msg.header.stamp.toSec()});
+    if (it == stamp_index_.end()) {
+      NODELET_WARN_THROTTLE(5.0, "submap cloud of %s at %.3f matches no submap: dropped",
+                            robot.c_str(), msg.header.stamp.toSec());
+      return;
+    }
+    Cloud cloud;
+    std::string error;
+    if (!ros_glue::fromMsg(msg, &cloud, nullptr, &error)) {
+      NODELET_WARN_THROTTLE(5.0, "submap cloud of %s: %s: dropped", robot.c_str(), error.c_str());
+      return;
+    }
+    // O -> S with the submap's own odometry pose.
+    const Pose T_S_O = odom_of_.at(it->second).inverse();
+    Cloud::Ptr in_s(new Cloud);
+    pcl::transformPointCloud(cloud, *in_s, T_S_O.matrix().cast<float>());
+    clouds_[it->second] = voxelDown(in_s);
+  }
+
+  // The core's centroid voxel filter (as the submaps' own downsampling).
+  Cloud::Ptr voxelDown(const Cloud::ConstPtr& in) const {
+    VoxelCentroidGrid grid(node_.cloud_voxel_m);
+    for (const auto& p : *in) grid.add(p.getVector3fMap());
+    Cloud::Ptr out(new Cloud);
+    for (const Eigen::Vector3f& c : grid.centroids())
+      out->push_back(pcl::PointXYZ(c.x(), c.y(), c.z()));
+    return out;
+  }
+
+  // Map frames per component (merge_mutex_); robots that change frame are logged.
+  void assignFrames() {
+    std::map<int, std::set<std::string>> comps;
+    for (const std::string& r : merger_.robots()) comps[merger_.component(r)].insert(r);
+    std::vector<std::set<std::string>> list;
+    for (auto& c : comps) list.push_back(c.second);
+    for (const auto& ch : frames_.assign(list)) {
+      if (ch.from.empty()) {
+        NODELET_INFO("robot %s is in frame %s", ch.robot.c_str(), ch.to.c_str());
+      } else {
+        NODELET_WARN("robot %s moves from frame %s to %s (its component joined another)",
+                     ch.robot.c_str(), ch.from.c_str(), ch.to.c_str());
+      }
+    }
+    component_frame_.clear();
+    for (const std::string& r : merger_.robots()) {
+      component_frame_[merger_.component(r)] = frames_.frameOf(r);
+    }
+  }
+
+  std::string frameOfComponent(int c) const {
+    auto it = component_frame_.find(c);
+    return it == component_frame_.end() ? std::string() : it->second;
+  }
+
+  // Paths, stems, markers and the TF snapshot from the latest solve (merge_mutex_ held).
+  void publishOutputs() {
+    const ros::Time now = ros::Time::now();
+    const std::vector<MergedPose> poses = merger_.poses();
+    std::map<std::string, std::vector<std::pair<double, Pose>>> per_robot;
+    for (const MergedPose& p : poses) per_robot[p.robot].emplace_back(stamp_of_[p.id], p.T_M_S);
+    std::vector<geometry_msgs::TransformStamped> tfs;
+    for (const auto& [robot, chain] : chains_) {
+      if (!chain.live) continue;
+      const std::optional<Pose> T_M_O = merger_.mapFromOdom(robot);
+      if (!T_M_O) continue;
+      geometry_msgs::TransformStamped t;
+      t.header.frame_id = frames_.frameOf(robot);
+      t.child_frame_id = chain.odom_frame;
+      t.transform = ros_glue::toTransformMsg(*T_M_O);
+      tfs.push_back(t);
+      auto pub = path_pubs_.find(robot);
+      if (pub != path_pubs_.end()) {
+        pub->second.publish(ros_glue::pathMsg(per_robot[robot], frames_.frameOf(robot), now));
+      }
+    }
+    {
+      std::lock_guard<std::mutex> lock(out_mutex_);
+      tf_snapshot_ = tfs;
+      tf_changed_ = true;
+    }
+    publishTf();
+    const std::vector<MergedStem> stems = merger_.stems();
+    stems_count_ = stems.size();
+    const int map_component = componentOfFrame(node_.map_frame);
+    if (map_component >= 0) {
+      stems_pub_.publish(ros_glue::stemInventoryMsg(stems, map_component, node_.map_frame, now));
+    }
+    markers_pub_.publish(ros_glue::mergedMapMarkers(
+        poses, merger_.loops(), stems, [this](int c) { return frameOfComponent(c); }, now));
+  }
+
+  int componentOfFrame(const std::string& frame) const {
+    for (const auto& c : component_frame_) {
+      if (c.second == frame) return c.first;
+    }
+    return -1;
+  }
+
+  // The snapshot's map -> odometry transforms, stamped now (timer or worker thread). tf2 ignores
+  // a transform whose stamp it already holds, so a new solve while the clock stands (a bag that
+  // ended, a paused replay) goes out a microsecond after the last one, and an unchanged snapshot
+  // is not sent again at the same time.
+  void publishTf() {
+    std::lock_guard<std::mutex> lock(out_mutex_);
+    if (tf_snapshot_.empty()) return;
+    ros::Time stamp = ros::Time::now();
+    if (stamp + ros::Duration(1.0) < last_tf_stamp_) last_tf_stamp_ = ros::Time();  // replay
+    if (stamp <= last_tf_stamp_) {
+      if (!tf_changed_) return;
+      stamp = last_tf_stamp_ + ros::Duration(1e-6);
+    }
+    for (auto& t : tf_snapshot_) t.header.stamp = stamp;
+    if (!tf_broadcaster_) tf_broadcaster_ = std::make_unique<tf2_ros::TransformBroadcaster>();
+    tf_broadcaster_->sendTransform(tf_snapshot_);
+    last_tf_stamp_ = stamp;
+    tf_changed_ = false;
+  }
+
+  // ---- Database of an earlier run: its submaps as chains of their own. ----
+
+  // Replaces the merged map by the database's submaps whose odometry is known (version-2 files),
+  // one chain "<robot>@database" per robot, and its loops. Loops of the new run against them then
+  // place the new robots in that map.
+  bool loadDatabase(const std::string& path, std::string* message) {
+    LoopDetector db{LoopDetectorParams{}};
+    try {
+      db.load(path);
+    } catch (const std::exception& e) {
+      *message = std::string("database not loaded, map unchanged: ") + e.what();
+      return false;
+    }
+    std::lock_guard<std::mutex> lock(merge_mutex_);
+    resetMap();
+    // (stamp, robot) order, as live submaps enter: the earliest robot anchors the map.
+    std::vector<size_t> order(db.size());
+    for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+      const Descriptor &da = *db.entries()[a], &dbb = *db.entries()[b];
+      return da.stamp != dbb.stamp ? da.stamp < dbb.stamp : da.robot < dbb.robot;
+    });
+    size_t added = 0, unknown = 0;
+    for (size_t i : order) {
+      const Descriptor& d = *db.entries()[i];
+      const EntryOdometry& o = db.odometry(i);
+      if (!o.known()) {
+        ++unknown;
+        continue;
+      }
+      const std::string chain = d.robot + "@database";
+      chains_[chain] = Chain{o.odom_frame, false};
+      added += addToMerger(chain, d.robot, d.submap_id, d.stamp, o.T_O_S, d.trunks);
+    }
+    // The earlier run's loops rebuild its map, so the new run lands in that map.
+    size_t loops = 0;
+    for (Loop lc : db.loops()) {
+      auto q = global_id_.find({lc.query_robot, lc.query_id});
+      auto c = global_id_.find({lc.candidate_robot, lc.candidate_id});
+      if (q == global_id_.end() || c == global_id_.end()) continue;
+      lc.query_id = q->second;
+      lc.candidate_id = c->second;
+      loops += merger_.addLoop(lc);
+    }
+    dirty_ = true;
+    *message = "map: " + std::to_string(added) + " submaps and " + std::to_string(loops) +
+               " loops of an earlier run from " + path +
+               (unknown ? " (" + std::to_string(unknown) + " without odometry pose skipped)" : "");
+    return true;
+  }
+
+  void resetMap() {
+    merger_ = MapMerger(merge_params_);
+    frames_ = ros_glue::MapFrames(node_.map_frame);
+    chains_.clear();
+    global_id_.clear();
+    stamp_index_.clear();
+    stamp_of_.clear();
+    odom_of_.clear();
+    clouds_.clear();
+    pending_loops_.clear();
+    component_frame_.clear();
+    next_global_id_ = 0;
+  }
+
+  bool onLoad(dtif::LoadDatabase::Request& req, dtif::LoadDatabase::Response& res) {
+    res.success = loadDatabase(req.path, &res.message);
+    if (res.success) {
+      NODELET_INFO("%s", res.message.c_str());
+    } else {
+      NODELET_ERROR("%s", res.message.c_str());
+    }
+    std::lock_guard<std::mutex> lock(merge_mutex_);
+    res.size = merger_.submapCount();
+    cv_.notify_one();
+    return true;
+  }
+
+  // ---- Services. ----
+
+  bool onInfo(dtif::GetMapInfo::Request&, dtif::GetMapInfo::Response& res) {
+    std::lock_guard<std::mutex> lock(merge_mutex_);
+    std::map<std::string, uint32_t> count;
+    for (const MergedPose& p : merger_.poses()) ++count[p.robot];
+    for (const auto& [robot, chain] : chains_) {
+      res.robots.push_back(robot);
+      res.map_frames.push_back(frames_.frameOf(robot));
+      res.odom_frames.push_back(chain.odom_frame);
+      res.submaps.push_back(count[robot]);
+    }
+    res.loops_used = static_cast<uint32_t>(loops_used_);
+    res.loops_rejected = static_cast<uint32_t>(loops_rejected_);
+    res.stems = static_cast<uint32_t>(stems_count_);
+    res.solves = static_cast<uint32_t>(solves_);
+    res.last_solve_ms = last_solve_ms_;
+    res.max_solve_ms = max_solve_ms_;
+    {
+      std::lock_guard<std::mutex> qlock(queue_mutex_);
+      res.up_to_date = !dirty_ && descriptors_.empty() && loops_in_.empty() &&
+                       pending_loops_.empty() && solves_ > 0;
+    }
+    return true;
+  }
+
+  // The merged cloud of a component in its frame (merge_mutex_ held); null when no clouds.
+  Cloud::Ptr mergedCloud(int component) const {
+    Cloud::Ptr all(new Cloud);
+    std::map<int64_t, const MergedPose*> by_id;
+    const std::vector<MergedPose> poses = merger_.poses();
+    for (const MergedPose& p : poses) by_id[p.id] = &p;
+    for (const auto& [id, cloud] : clouds_) {
+      auto p = by_id.find(id);
+      if (p == by_id.end() || p->second->component != component) continue;
+      Cloud moved;
+      pcl::transformPointCloud(*cloud, moved, p->second->T_M_S.matrix().cast<float>());
+      *all += moved;
+    }
+    if (all->empty()) return nullptr;
+    return voxelDown(all);
+  }
+
+  bool onPublishCloud(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
+    std::lock_guard<std::mutex> lock(merge_mutex_);
+    const int c = componentOfFrame(node_.map_frame);
+    Cloud::Ptr cloud = c >= 0 ? mergedCloud(c) : nullptr;
+    if (!cloud) {
+      res.success = false;
+      res.message = "no submap clouds in " + node_.map_frame +
+                    " (enable the extraction nodelets' publish_submap_cloud)";
+      return true;
+    }
+    sensor_msgs::PointCloud2 msg;
+    pcl::toROSMsg(*cloud, msg);
+    msg.header.frame_id = node_.map_frame;
+    msg.header.stamp = ros::Time::now();
+    cloud_pub_.publish(msg);
+    res.success = true;
+    res.message = std::to_string(cloud->size()) + " points on " + cloud_pub_.getTopic();
+    return true;
+  }
+
+  bool onSaveMap(dtif::SaveMap::Request& req, dtif::SaveMap::Response& res) {
+    std::lock_guard<std::mutex> lock(merge_mutex_);
+    namespace fs = std::filesystem;
+    try {
+      if (req.directory.empty()) throw std::runtime_error("empty directory");
+      fs::create_directories(req.directory);
+      const fs::path dir(req.directory);
+      const std::vector<MergedPose> poses = merger_.poses();
+      writeMergedPosesCsv((dir / "merged_poses.csv").string(), poses);
+      writeMergedStemsCsv((dir / "merged_stems.csv").string(), merger_.stems());
+      writeG2o((dir / "pose_graph.g2o").string(), poses, merger_.graphEdges());
+      writeSubmapIds((dir / "submap_ids.csv").string());
+      res.files = {"merged_poses.csv", "merged_stems.csv", "pose_graph.g2o", "submap_ids.csv"};
+      const int c = componentOfFrame(node_.map_frame);
+      if (Cloud::Ptr cloud = c >= 0 ? mergedCloud(c) : nullptr) {
+        writePcdAtomically((dir / "merged_cloud.pcd").string(), *cloud);
+        res.files.push_back("merged_cloud.pcd");
+      }
+      res.success = true;
+      res.message = "saved " + std::to_string(poses.size()) + " submaps to " + req.directory;
+    } catch (const std::exception& e) {
+      res.success = false;
+      res.message = std::string("save_map failed: ") + e.what();
+      NODELET_ERROR("%s", res.message.c_str());
+    }
+    return true;
+  }
+
+  // submap_ids.csv: the merged map's ids (merged_poses.csv, pose_graph.g2o) as the robots' own
+  // submap ids and anchor stamps; chain is the merger's robot ("<robot>@database": loaded).
+  void writeSubmapIds(const std::string& path) const {
+    std::map<int64_t, std::pair<std::string, int64_t>> own;
+    for (const auto& [key, id] : global_id_) own[id] = key;
+    std::ostringstream out;
+    out << "id,chain,robot,submap_id,stamp\n" << std::setprecision(17);
+    for (const MergedPose& p : merger_.poses()) {
+      const auto& k = own.at(p.id);
+      out << p.id << ',' << p.robot << ',' << k.first << ',' << k.second << ','
+          << stamp_of_.at(p.id) << '\n';
+    }
+    writeTextAtomically(path, out.str());
+  }
+
+  static void writeTextAtomically(const std::string& path, const std::string& text) {
+    const std::string tmp = path + ".tmp";
+    {
+      std::ofstream f(tmp, std::ios::trunc);
+      f << text;
+      f.flush();
+      if (!f) {
+        std::remove(tmp.c_str());
+        throw std::runtime_error(tmp + ": write failed");
+      }
+    }
+    if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+      std::remove(tmp.c_str());
+      throw std::runtime_error(path + ": cannot rename " + tmp + " into place");
+    }
+  }
+
+  static void writePcdAtomically(const std::string& path, const Cloud& cloud) {
+    const std::string tmp = path + ".tmp";
+    if (pcl::io::savePCDFileBinaryCompressed(tmp, cloud) != 0) {
+      std::remove(tmp.c_str());
+      throw std::runtime_error(tmp + ": cannot write");
+    }
+    if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+      std::remove(tmp.c_str());
+      throw std::runtime_error(path + ": cannot rename " + tmp + " into place");
+    }
+  }
+
+  ros_glue::MapMergeNodeParams node_;
+  MergeParams merge_params_;
+  // This nodelet builds no descriptors: it keeps each one's trunks as its sender sent them.
+  const DescriptorParams receiver_params_ = loosestDescriptorParams();
+
+  std::mutex merge_mutex_;  // everything down to out_mutex_
+  MapMerger merger_;
+  ros_glue::MapFrames frames_;
+  std::map<std::string, Chain> chains_;                            // merger robot name -> chain
+  std::map<Key, int64_t> global_id_;                               // (robot, own id) -> merger id
+  std::map<std::pair<std::string, double>, int64_t> stamp_index_;  // (robot, stamp) -> id
+  std::map<int64_t, double> stamp_of_;                             // merger id -> anchor stamp
+  std::map<int64_t, Pose> odom_of_;                                // merger id -> T_O_S
+  std::map<int64_t, Cloud::Ptr> clouds_;                           // merger id -> cloud in S
+  std::deque<dtif::LoopClosure::ConstPtr> pending_loops_;
+  std::map<int, std::string> component_frame_;
+  int64_t next_global_id_ = 0;
+  bool dirty_ = false;  // a database load wants a solve
+  size_t loops_used_ = 0, loops_rejected_ = 0, stems_count_ = 0;
+  size_t solves_ = 0;
+  double last_solve_ms_ = 0.0, max_solve_ms_ = 0.0;
+
+  std::mutex queue_mutex_;  // the three queues, stop_
+  std::condition_variable cv_;
+  std::deque<dtif::TrunkDescriptor::ConstPtr> descriptors_;
+  std::deque<dtif::LoopClosure::ConstPtr> loops_in_;
+  std::deque<std::pair<std::string, sensor_msgs::PointCloud2::ConstPtr>> clouds_in_;
+  bool stop_ = false;
+  std::thread worker_;
+
+  std::mutex out_mutex_;  // tf_snapshot_, tf_changed_, last_tf_stamp_, tf_broadcaster_
+  std::vector<geometry_msgs::TransformStamped> tf_snapshot_;
+  bool tf_changed_ = false;  // the snapshot was not sent since the last solve
+  ros::Time last_tf_stamp_;
+  std::unique_ptr<tf2_ros::TransformBroadcaster> tf_broadcaster_;
+
+  std::vector<ros::Subscriber> subs_;
+  std::map<std::string, ros::Publisher> path_pubs_;
+  ros::Publisher stems_pub_, markers_pub_, cloud_pub_;
+  ros::ServiceServer save_srv_, info_srv_, cloud_srv_, load_srv_;
+  ros::WallTimer tf_timer_;
+};
+
+}  // namespace dtif
+
+PLUGINLIB_EXPORT_CLASS(dtif::MapMergeNodelet, nodelet::Nodelet)

@@ -1,0 +1,136 @@
+// dtif merge <dataset_dir> --out <dir> [--config params.yaml] [--inject-false-loop] [--no-pcm]
+//            [--stem-map stems.csv [--stem-map-plot id]]
+// Eval's sequential loop closure, then the map merger (core/merge): DATASET.md's "Merged map"
+// (merged_poses.csv, merged_stems.csv, summary.json) plus the pose graph (pose_graph.g2o) and
+// the component events (events.txt); scored against the ground truth when it exists.
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+#include <iostream>
+
+#include "commands.h"
+#include "dtif/eval/merge_eval.h"
+#include "dtif/io/merge_files.h"
+
+namespace dtif::tool {
+namespace {
+
+void countLoops(const MapMerger& merger, MergeSummary* s) {
+  for (const LoopVerdict& v : merger.loops()) {
+    (v.used ? s->loops_used : s->loops_rejected)++;
+    if (v.inter_robot) (v.used ? s->inter_robot_used : s->inter_robot_rejected)++;
+  }
+}
+
+void writeEvents(const std::string& path, const std::vector<MergeEvent>& events) {
+  std::ofstream f(path);
+  for (const MergeEvent& e : events) f << e.text << "\n";
+  if (!f) throw DatasetError(path + ": write failed");
+}
+
+void printStemMap(const StemMapRegistration& r, size_t field_stems) {
+  std::cout << std::fixed << std::setprecision(3) << "stem map (" << field_stems
+            << " field stems): ";
+  if (!r.ok) {
+    std::cout << "not registered: " << r.reason << "\n";
+    return;
+  }
+  const double yaw = std::atan2(r.T_P_M.linear()(1, 0), r.T_P_M.linear()(0, 0)) * 180.0 / M_PI;
+  std::cout << "registered, " << r.pairs.size() << " stems paired, residual RMS " << r.rms_m
+            << " m, median " << r.median_m << " m; map -> plot yaw " << std::setprecision(2) << yaw
+            << " deg, t (" << r.T_P_M.translation().x() << ", " << r.T_P_M.translation().y()
+            << ") m\n";
+}
+
+}  // namespace
+
+int runMerge(const MergeArgs& a) {
+  const DtifParams params = loadParams(a.configs);
+  MergeParams mp;
+  mp.pcm = !a.no_pcm;
+  const Dataset ds = readDataset(a.dataset);
+  std::vector<FieldStem> field;
+  if (!a.stem_map.empty()) field = readStemMapCsv(a.stem_map, a.stem_map_plot);
+
+  const bool quiet = a.quiet;
+  const MergeInput in = collectMergeInput(ds, params, EvalParams{}, [&](size_t i, size_t n) {
+    if (!quiet && (i % 10 == 0 || i == n)) {
+      std::cerr << "\rdtif merge: loop closure " << i << "/" << n << " submaps" << std::flush;
+      if (i == n) std::cerr << "\n";
+    }
+  });
+
+  MergeSummary sum;
+  sum.dataset = ds.root;
+  sum.submaps = in.submaps.size();
+  sum.loops_accepted = in.loops.size();
+  std::optional<Loop> false_loop;
+  if (a.inject_false_loop) {
+    false_loop = makeFalseLoop(ds, in);
+    if (!false_loop) throw DatasetError(ds.root + ": a false loop needs at least two robots");
+    sum.false_loop_injected = true;
+    if (in.eval) {
+      const MapMerger clean = runMerger(in, mp, std::nullopt, field);
+      sum.score_clean = scoreMerge(ds, clean.poses(), clean.stems());
+    }
+  }
+  std::vector<MergeEvent> events;
+  const MapMerger merger = runMerger(in, mp, false_loop, field, &events, &sum.run);
+  countLoops(merger, &sum);
+  if (false_loop) {
+    for (const LoopVerdict& v : merger.loops()) {
+      if (v.query_id == false_loop->query_id && v.candidate_id == false_loop->candidate_id) {
+        sum.false_loop_used = v.used;
+      }
+    }
+  }
+  sum.components = merger.componentCount();
+  for (const std::string& r : merger.robots()) sum.robot_component[r] = merger.component(r);
+  sum.robots = sum.robot_component.size();
+  const std::vector<MergedPose> poses = merger.poses();
+  const std::vector<MergedStem> stems = merger.stems();
+  sum.stems = stems.size();
+  if (!field.empty()) {
+    sum.stem_map = merger.stemMapRegistration();
+    sum.stem_map_field_stems = field.size();
+  }
+  if (in.eval) sum.score = scoreMerge(ds, poses, stems);
+
+  // Outputs only once everything succeeded.
+  std::error_code ec;
+  std::filesystem::create_directories(a.out, ec);
+  if (ec) throw DatasetError(a.out + ": cannot create output folder: " + ec.message());
+  const std::filesystem::path dir(a.out);
+  writeMergedPosesCsv((dir / "merged_poses.csv").string(), poses);
+  writeMergedStemsCsv((dir / "merged_stems.csv").string(), stems);
+  writeG2o((dir / "pose_graph.g2o").string(), poses, merger.graphEdges());
+  writeEvents((dir / "events.txt").string(), events);
+  writeMergeSummaryJson((dir / "summary.json").string(), sum);
+
+  std::cout << "dataset " << ds.root << ": " << sum.submaps << " submaps, " << sum.robots
+            << " robots, " << sum.components << " component(s); loops: " << sum.loops_accepted
+            << " accepted by loop closure, " << sum.loops_used << " used, " << sum.loops_rejected
+            << " rejected by the back end (inter-robot: " << sum.inter_robot_used << " used, "
+            << sum.inter_robot_rejected << " rejected); " << sum.stems << " stems\n";
+  for (const MergeEvent& e : events) std::cout << "  " << e.text << "\n";
+  std::cout << std::fixed << std::setprecision(1) << "graph: " << sum.run.solves
+            << " incremental solves, mean "
+            << (sum.run.solves ? sum.run.solve_ms_total / sum.run.solves : 0.0) << " ms, max "
+            << sum.run.solve_ms_max << " ms\n";
+  if (sum.score) std::cout << formatMergeTable(*sum.score);
+  if (false_loop) {
+    std::cout << "false loop " << false_loop->query_robot << "/" << false_loop->query_id << " -> "
+              << false_loop->candidate_robot << "/" << false_loop->candidate_id << ": "
+              << (sum.false_loop_used ? "USED" : "rejected");
+    if (sum.score && sum.score_clean && sum.score->component.count(0) &&
+        sum.score_clean->component.count(0)) {
+      const double d = sum.score->component.at(0).ate_m - sum.score_clean->component.at(0).ate_m;
+      std::cout << std::setprecision(4) << "; component 0 ATE change " << d << " m";
+    }
+    std::cout << "\n";
+  }
+  if (sum.stem_map) printStemMap(*sum.stem_map, sum.stem_map_field_stems);
+  return 0;
+}
+
+}  // namespace dtif::tool

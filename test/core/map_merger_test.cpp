@@ -1,0 +1,255 @@
+// The map merger (core/merge): pose graph on drifting odometry and loops, PCM against a false
+// loop, components and their events, levelling of M.
+#include "dtif/core/merge/map_merger.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+#include <random>
+
+#include "dtif/core/merge/pcm.h"
+#include "test_utils.h"
+
+namespace dtif {
+namespace {
+
+/// Two robots drive the same 40 m x 40 m square circuit (b starting a corner later), a submap
+/// every 5 m, each back to its start (a loop closing its own circuit), and b's submaps close
+/// loops with a's at the same places. Loops between parallel lines alone could not see a
+/// common yaw drift; the circuits make it observable.
+struct Scenario {
+  std::vector<MergeSubmap> submaps;  // odometry with drift
+  std::map<int64_t, Pose> gt;        // T_W_S
+  std::vector<Loop> loops;           // true loops
+};
+
+constexpr int kA = 33, kB = 33;  // submaps per robot (k = 32 is back at the start)
+
+Pose onSquare(double s, double z) {
+  s = std::fmod(s, 160.0);
+  if (s < 40.0) return test::makePose(s, 0.0, z, 0.0, 0.0, 0.0);
+  if (s < 80.0) return test::makePose(40.0, s - 40.0, z, 0.0, 0.0, M_PI / 2);
+  if (s < 120.0) return test::makePose(120.0 - s, 40.0, z, 0.0, 0.0, M_PI);
+  return test::makePose(0.0, 160.0 - s, z, 0.0, 0.0, -M_PI / 2);
+}
+
+Pose gtPose(const std::string& robot, int k) {
+  return robot == "a" ? onSquare(5.0 * k, 0.0) : onSquare(5.0 * k + 40.0, 0.5);
+}
+
+/// Odometry: the true increments with a yaw bias and noise (fixed seed), so that it drifts by
+/// decimetres to metres over 200 m.
+std::vector<MergeSubmap> drift(const std::string& robot, int n, double yaw_bias, std::mt19937* rng,
+                               std::map<int64_t, Pose>* gt, int64_t first_id) {
+  std::normal_distribution<double> nt(0.0, 0.01), nr(0.0, 0.001);
+  std::vector<MergeSubmap> out;
+  Pose T_O_S = Pose::Identity();
+  for (int k = 0; k < n; ++k) {
+    if (k > 0) {
+      const Pose step = gtPose(robot, k - 1).inverse() * gtPose(robot, k);
+      T_O_S = T_O_S * step *
+              test::makePose(nt(*rng), nt(*rng), nt(*rng), nr(*rng), nr(*rng), yaw_bias + nr(*rng));
+    }
+    MergeSubmap s;
+    s.robot = robot;
+    s.id = first_id + k;
+    s.stamp = 10.0 * k;
+    s.T_O_S = T_O_S;
+    out.push_back(s);
+    (*gt)[s.id] = gtPose(robot, k);
+  }
+  return out;
+}
+
+Loop makeLoop(const Scenario& sc, int64_t q, int64_t c, const Pose& noise) {
+  Loop l;
+  l.query_id = q;
+  l.candidate_id = c;
+  l.query_robot = q >= 100 ? "b" : "a";
+  l.candidate_robot = c >= 100 ? "b" : "a";
+  l.T_c_q = sc.gt.at(c).inverse() * sc.gt.at(q) * noise;
+  l.covariance = Matrix6d::Identity() * 1e-4;
+  l.inliers = 10;
+  return l;
+}
+
+Scenario makeScenario() {
+  Scenario sc;
+  std::mt19937 rng(7);
+  const auto a = drift("a", kA, 0.002, &rng, &sc.gt, 0);
+  const auto b = drift("b", kB, -0.003, &rng, &sc.gt, 100);
+  sc.submaps.insert(sc.submaps.end(), a.begin(), a.end());
+  sc.submaps.insert(sc.submaps.end(), b.begin(), b.end());
+  std::normal_distribution<double> nt(0.0, 0.01), nr(0.0, 0.001);
+  auto noise = [&] { return test::makePose(nt(rng), nt(rng), nt(rng), nr(rng), nr(rng), nr(rng)); };
+  sc.loops.push_back(makeLoop(sc, kA - 1, 0, noise()));  // a closes its circuit
+  for (int k = 0; k + 8 < kA; k += 2) {
+    sc.loops.push_back(makeLoop(sc, 100 + k, k + 8, noise()));  // b where a was
+  }
+  sc.loops.push_back(makeLoop(sc, 100 + kB - 1, 100, noise()));  // b closes its circuit
+  return sc;
+}
+
+/// RMS position error after the least-squares rigid alignment.
+double ate(const std::vector<std::pair<Pose, Pose>>& est_gt) {
+  Eigen::Matrix3Xd a(3, est_gt.size()), b(3, est_gt.size());
+  for (size_t i = 0; i < est_gt.size(); ++i) {
+    a.col(i) = est_gt[i].first.translation();
+    b.col(i) = est_gt[i].second.translation();
+  }
+  const Eigen::Matrix4d T = Eigen::umeyama(a, b, false);
+  double ss = 0.0;
+  for (size_t i = 0; i < est_gt.size(); ++i) {
+    ss +=
+        ((T.topLeftCorner<3, 3>() * a.col(i) + T.topRightCorner<3, 1>()) - b.col(i)).squaredNorm();
+  }
+  return std::sqrt(ss / est_gt.size());
+}
+
+double mergedAte(const MapMerger& m, const Scenario& sc) {
+  std::vector<std::pair<Pose, Pose>> v;
+  for (const MergedPose& p : m.poses()) v.emplace_back(p.T_M_S, sc.gt.at(p.id));
+  return ate(v);
+}
+
+MapMerger merge(const Scenario& sc, const std::vector<Loop>& extra = {}, MergeParams p = {}) {
+  MapMerger m(p);
+  for (const auto& s : sc.submaps) m.addSubmap(s);
+  for (const auto& l : sc.loops) EXPECT_TRUE(m.addLoop(l));
+  for (const auto& l : extra) EXPECT_TRUE(m.addLoop(l));
+  m.solve();
+  return m;
+}
+
+TEST(MapMerger, RecoversTheTrajectoryFromDriftingOdometryAndLoops) {
+  const Scenario sc = makeScenario();
+  // The odometry of both robots in one frame (b placed by its first true pose) drifts apart.
+  std::vector<std::pair<Pose, Pose>> odo;
+  for (const auto& s : sc.submaps) {
+    const Pose T_W_O = s.robot == "a" ? sc.gt.at(0) : sc.gt.at(100);
+    odo.emplace_back(T_W_O * s.T_O_S, sc.gt.at(s.id));
+  }
+  const double odo_ate = ate(odo);
+  const MapMerger m = merge(sc);
+  EXPECT_EQ(m.componentCount(), 1);
+  EXPECT_EQ(m.component("a"), 0);
+  EXPECT_EQ(m.component("b"), 0);
+  const double merged = mergedAte(m, sc);
+  EXPECT_GT(odo_ate, 0.3);
+  EXPECT_LT(merged, 0.05) << "odometry " << odo_ate;
+  for (const LoopVerdict& v : m.loops()) EXPECT_TRUE(v.used);
+}
+
+TEST(MapMerger, PcmRejectsAFalseLoopAndTheMapDoesNotMove) {
+  const Scenario sc = makeScenario();
+  const MapMerger clean = merge(sc);
+  // b's submap at (40, 20) "matched" a's at (20, 0), with a plausible pose.
+  Loop wrong = makeLoop(sc, 104, 4, Pose::Identity());  // b at (40, 20), a at (20, 0)
+  wrong.T_c_q = test::makePose(3.0, -2.0, 0.0, 0.0, 0.0, 0.4);
+  const MapMerger m = merge(sc, {wrong});
+  bool seen = false;
+  for (const LoopVerdict& v : m.loops()) {
+    if (v.query_id == 104 && v.candidate_id == 4) {
+      EXPECT_FALSE(v.used);
+      seen = true;
+    } else {
+      EXPECT_TRUE(v.used);
+    }
+  }
+  EXPECT_TRUE(seen);
+  for (const MergedPose& p : clean.poses()) {
+    EXPECT_LT((m.pose(p.id)->translation() - p.T_M_S.translation()).norm(), 0.02) << p.id;
+  }
+  EXPECT_LT(std::fabs(mergedAte(m, sc) - mergedAte(clean, sc)), 0.02);
+}
+
+TEST(MapMerger, RobustLossAloneLimitsAFalseLoop) {
+  // Without PCM the false loop is in the solve; the Cauchy loss keeps it from tearing the map.
+  const Scenario sc = makeScenario();
+  Loop wrong = makeLoop(sc, 104, 4, Pose::Identity());  // b at (40, 20), a at (20, 0)
+  wrong.T_c_q = test::makePose(3.0, -2.0, 0.0, 0.0, 0.0, 0.4);
+  MergeParams p;
+  p.pcm = false;
+  const MapMerger m = merge(sc, {wrong}, p);
+  EXPECT_LT(mergedAte(m, sc), 0.25);
+}
+
+TEST(MapMerger, ComponentsJoinWithAnEvent) {
+  const Scenario sc = makeScenario();
+  MapMerger m;
+  for (const auto& s : sc.submaps) m.addSubmap(s);
+  m.solve();
+  EXPECT_EQ(m.componentCount(), 2);
+  EXPECT_EQ(m.component("a"), 0);
+  EXPECT_EQ(m.component("b"), 1);
+  EXPECT_EQ(m.takeEvents().size(), 2u);  // both start
+  ASSERT_TRUE(m.addLoop(makeLoop(sc, 100, 8, Pose::Identity())));
+  m.solve();
+  EXPECT_EQ(m.componentCount(), 1);
+  EXPECT_EQ(m.component("b"), 0);
+  const auto events = m.takeEvents();
+  ASSERT_FALSE(events.empty());
+  EXPECT_EQ(events.back().robot, "b");
+  EXPECT_EQ(events.back().from_component, 1);
+  EXPECT_EQ(events.back().to_component, 0);
+  // b's map-from-odometry maps its latest submap's odometry pose onto its merged pose.
+  const Pose T_M_O = *m.mapFromOdom("b");
+  const MergeSubmap& last = sc.submaps.back();
+  EXPECT_TRUE((T_M_O * last.T_O_S).isApprox(*m.pose(last.id), 1e-9));
+}
+
+TEST(MapMerger, UnknownSubmapsAndBadPosesAreRefused) {
+  const Scenario sc = makeScenario();
+  MapMerger m;
+  m.addSubmap(sc.submaps[0]);
+  EXPECT_THROW(m.addSubmap(sc.submaps[0]), std::invalid_argument);
+  MergeSubmap nan = sc.submaps[1];
+  nan.T_O_S.translation().x() = std::nan("");
+  EXPECT_THROW(m.addSubmap(nan), std::invalid_argument);
+  EXPECT_FALSE(m.addLoop(sc.loops.front()));  // its query, submap 32, is unknown
+  EXPECT_EQ(m.submapCount(), 1u);
+}
+
+TEST(MapMerger, LevellingMakesMGravityAligned) {
+  // Robot a's odometry frame is tilted 10 deg (upstream FAST-LIO2): S is tilted the same way.
+  const Scenario sc = makeScenario();
+  const Eigen::Matrix3d R_tilt =
+      test::makePose(0, 0, 0, 0.12, -0.1, 0.0).linear();  // roll, pitch of S from gravity
+  MapMerger m;
+  m.setLevelling("a", R_tilt);  // S -> level
+  for (const auto& s : sc.submaps) {
+    if (s.robot != "a") continue;
+    MergeSubmap t = s;
+    Pose tilt = Pose::Identity();
+    tilt.linear() = R_tilt.transpose();
+    t.T_O_S = tilt * s.T_O_S * tilt.inverse();  // the same motion seen in tilted frames
+    m.addSubmap(t);
+  }
+  m.solve();
+  for (const MergedPose& p : m.poses()) {
+    const Eigen::Vector3d up_S_est = p.T_M_S.linear().transpose() * Eigen::Vector3d::UnitZ();
+    const Eigen::Vector3d up_S_true =
+        R_tilt.transpose() * sc.gt.at(p.id).linear().transpose() * Eigen::Vector3d::UnitZ();
+    const double angle = std::acos(std::min(1.0, up_S_est.dot(up_S_true)));
+    // The anchor exactly; the others up to the odometry's roll/pitch random walk (1 mrad/step).
+    EXPECT_LT(angle, p.id == 0 ? 1e-6 : 0.02) << p.id;
+  }
+}
+
+TEST(Pcm, MaximumCliqueIsExactAndDeterministic) {
+  // 0-1-2 a triangle, 3-4-5-6 a 4-clique, 7 alone.
+  ConsistencyGraph g(8, std::vector<bool>(8, false));
+  auto link = [&](size_t a, size_t b) { g[a][b] = g[b][a] = true; };
+  link(0, 1), link(1, 2), link(0, 2);
+  link(3, 4), link(3, 5), link(3, 6), link(4, 5), link(4, 6), link(5, 6);
+  link(2, 3);
+  EXPECT_EQ(maximumClique(g), (std::vector<size_t>{3, 4, 5, 6}));
+  // The greedy fallback (grown from the best-connected vertex) finds it here too.
+  EXPECT_EQ(maximumClique(g, 0), (std::vector<size_t>{3, 4, 5, 6}));
+  ConsistencyGraph ties(2, std::vector<bool>(2, false));
+  EXPECT_EQ(maximumClique(ties), (std::vector<size_t>{0}));
+  EXPECT_TRUE(maximumClique({}).empty());
+}
+
+}  // namespace
+}  // namespace dtif

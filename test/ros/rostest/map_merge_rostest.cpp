@@ -1,0 +1,201 @@
+// Integration test run by test/map_merge.test: the shipped demo launch file (extraction for
+// alpha and bravo, loop closure and map merge in one manager) on the tiny scene's bag (dtif
+// simulate, seed 1). Nothing is killed: once the bag has played and the merge nodelet reports
+// an up-to-date solve, the test reads TF `map -> <robot odometry frame>` for every robot and
+// checks that
+//  - every robot is in the one frame `map` (tiny has loops between the robots);
+//  - the merged submap poses (the robots' paths in map) are within the ATE tolerance of ground
+//    truth after one rigid alignment of all robots together (DATASET.md's ATE);
+//  - TF map -> odometry frame puts each robot's latest submap within tolerance of ground truth;
+//  - get_map_info and save_map report and write the merged map.
+#include <gtest/gtest.h>
+#include <ros/ros.h>
+#include <tf2_ros/transform_listener.h>
+#include <unistd.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <map>
+#include <set>
+#include <thread>
+
+#include "dtif/io/dataset.h"
+#include "dtif/ros/msgs.h"
+#include "dtif_test/test_config.h"
+#include "merge_rostest_utils.h"
+#include "rostest_utils.h"
+
+namespace dtif {
+namespace {
+
+using test::Inbox;
+using test::waitFor;
+namespace fs = std::filesystem;
+
+constexpr double kAteTolM = 0.10;  // issue #16's merged-map ATE target
+constexpr double kTfTolM = 0.15;   // the map TF of each robot at its latest submap
+
+size_t countLines(const fs::path& p) {
+  std::ifstream f(p);
+  size_t n = 0;
+  for (std::string line; std::getline(f, line);) n += !line.empty();
+  return n;
+}
+
+TEST(MapMergeRostest, EveryRobotsMapTfMatchesGroundTruth) {
+  ros::NodeHandle nh, pnh("~");
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+  double rate = 3.0;
+  pnh.getParam("rate", rate);
+  tf2_ros::Buffer tf;
+  tf2_ros::TransformListener listener(tf);
+
+  const char* home = std::getenv("ROS_HOME");
+  const fs::path dir =
+      fs::path(home ? home : "/tmp") / ("map_merge_rostest_" + std::to_string(getpid()));
+  fs::remove_all(dir);
+  const std::string bag = (dir / "tiny.bag").string();
+  const std::string simulate = std::string(DTIF_TOOL) + " simulate " + DTIF_SCENES_DIR +
+                               "/tiny.yaml --out " + (dir / "dataset").string() +
+                               " --seed 1 --bag " + bag + " > " + (dir.string() + ".log") + " 2>&1";
+  ASSERT_EQ(std::system(simulate.c_str()), 0) << simulate;
+  const Dataset ds = readDataset((dir / "dataset").string());
+  ASSERT_FALSE(ds.T_W_S.empty());
+
+  Inbox<dtif::TrunkDescriptor> descriptors;
+  Inbox<dtif::LoopClosure> loops;
+  ros::Subscriber da =
+      nh.subscribe("/alpha/descriptor", 50, &Inbox<dtif::TrunkDescriptor>::cb, &descriptors);
+  ros::Subscriber db =
+      nh.subscribe("/bravo/descriptor", 50, &Inbox<dtif::TrunkDescriptor>::cb, &descriptors);
+  ros::Subscriber ls = nh.subscribe("/loop_closures", 50, &Inbox<dtif::LoopClosure>::cb, &loops);
+  std::map<std::string, test::Latest<nav_msgs::Path>> paths;
+  std::vector<ros::Subscriber> path_subs;
+  for (const std::string robot : {"alpha", "bravo"}) {
+    path_subs.push_back(nh.subscribe("/map_merge/path/" + robot, 2,
+                                     &test::Latest<nav_msgs::Path>::cb, &paths[robot]));
+  }
+  ros::ServiceClient info_srv = nh.serviceClient<dtif::GetMapInfo>("/map_merge/get_map_info");
+  ASSERT_TRUE(waitFor([&] { return info_srv.exists() && ls.getNumPublishers() > 0; }, 30.0))
+      << "the nodelets did not come up";
+
+  const std::string play = "rosbag play --clock --quiet --delay 1 --rate " + std::to_string(rate) +
+                           " " + bag + " > " + (dir / "play.log").string() + " 2>&1";
+  ASSERT_EQ(std::system(play.c_str()), 0) << play;
+
+  // Every submap in the graph and the latest solve holding all of it.
+  dtif::GetMapInfo info;
+  auto merged = [&] {
+    if (descriptors.size() < ds.submaps.size() || !info_srv.call(info)) return false;
+    size_t n = 0;
+    for (uint32_t k : info.response.submaps) n += k;
+    return n == descriptors.size() && info.response.up_to_date &&
+           info.response.loops_used + info.response.loops_rejected == loops.size();
+  };
+  ASSERT_TRUE(waitFor(merged, 60.0))
+      << descriptors.size() << " descriptors, " << loops.size() << " loops";
+  ASSERT_GE(loops.size(), 3u);
+
+  // Each robot's map frame from the service, and TF map -> odometry frame.
+  const auto& r = info.response;
+  ASSERT_EQ(r.robots.size(), 2u);
+  std::map<std::string, std::string> odom_frame;
+  for (size_t i = 0; i < r.robots.size(); ++i) {
+    EXPECT_EQ(r.map_frames[i], "map") << r.robots[i] << " is not joined to the map";
+    odom_frame[r.robots[i]] = r.odom_frames[i];
+  }
+  std::map<std::string, Pose> T_map_O;
+  ASSERT_TRUE(waitFor(
+      [&] {
+        for (const auto& f : odom_frame) {
+          if (!test::lookup(tf, "map", f.second, &T_map_O[f.first])) return false;
+        }
+        return true;
+      },
+      10.0))
+      << "no TF map -> odometry frames";
+
+  // The merged submap poses (each robot's path in map) against ground truth, all robots
+  // aligned together (DATASET.md's ATE); each robot's own odometry aligned alone beside it.
+  std::vector<Eigen::Vector3d> est, gt;
+  std::vector<std::string> robot_of;
+  std::map<std::string, std::vector<Eigen::Vector3d>> odom_est, odom_gt;
+  std::map<std::string, test::SeenSubmap> latest;  // each robot's latest submap
+  for (const test::SeenSubmap& s : test::seenSubmaps(ds, descriptors.all())) {
+    EXPECT_EQ(s.odom_frame, odom_frame[s.robot]);
+    odom_est[s.robot].push_back(s.T_O_S.translation());
+    odom_gt[s.robot].push_back(ds.T_W_S.at(s.dataset_id).translation());
+    latest[s.robot] = s;
+  }
+  ASSERT_TRUE(waitFor(
+      [&] {
+        size_t n = 0;
+        for (auto& p : paths) n += p.second.latest() ? p.second.latest()->poses.size() : 0;
+        return n == ds.submaps.size();
+      },
+      10.0))
+      << "the paths do not hold every submap";
+  for (const std::string robot : {"alpha", "bravo"}) {
+    const auto path = paths[robot].latest();
+    ASSERT_TRUE(path) << "no path of " << robot;
+    EXPECT_EQ(path->header.frame_id, "map");
+    for (const auto& [id, T] : test::pathPoses(ds, robot, *path)) {
+      est.push_back(T.translation());
+      gt.push_back(ds.T_W_S.at(id).translation());
+      robot_of.push_back(robot);
+    }
+  }
+  ASSERT_EQ(est.size(), ds.submaps.size()) << "a submap is missing from the paths";
+  const std::vector<double> res = test::alignedResiduals(est, gt);
+  std::map<std::string, std::vector<double>> per_robot;
+  for (size_t i = 0; i < res.size(); ++i) per_robot[robot_of[i]].push_back(res[i]);
+  for (const auto& p : per_robot) {
+    std::cout << "merged " << p.first << ": ATE " << test::rms(p.second) << " m over "
+              << p.second.size() << " submaps (odometry alone "
+              << test::rms(test::alignedResiduals(odom_est[p.first], odom_gt[p.first])) << " m)\n";
+  }
+  std::cout << "merged, all robots: ATE " << test::rms(res) << " m; " << r.loops_used
+            << " loops used, " << r.loops_rejected << " rejected, " << r.solves
+            << " solves, latest " << r.last_solve_ms << " ms, longest " << r.max_solve_ms
+            << " ms\n";
+  EXPECT_LE(test::rms(res), kAteTolM);
+
+  // TF map -> odometry frame places each robot's latest submap (where it is now) in the map,
+  // within the tolerance of ground truth (map aligned to the world as above).
+  const Pose T_W_map = test::alignPositions(est, gt);
+  for (const auto& [robot, s] : latest) {
+    const Eigen::Vector3d p = T_W_map * (T_map_O[robot] * s.T_O_S).translation();
+    const double e = (p - ds.T_W_S.at(s.dataset_id).translation()).norm();
+    std::cout << "map TF of " << robot << ": latest submap " << e << " m from ground truth\n";
+    EXPECT_LE(e, kTfTolM) << robot;
+  }
+
+  // save_map writes the merged map's files.
+  dtif::SaveMap save;
+  save.request.directory = (dir / "map").string();
+  ASSERT_TRUE(ros::service::call("/map_merge/save_map", save));
+  EXPECT_TRUE(save.response.success) << save.response.message;
+  // map_merge.test turns the submap clouds on, so the merged cloud is written too.
+  for (const char* f :
+       {"merged_poses.csv", "merged_stems.csv", "pose_graph.g2o", "merged_cloud.pcd"}) {
+    EXPECT_TRUE(fs::exists(dir / "map" / f)) << f;
+  }
+  EXPECT_EQ(countLines(dir / "map" / "merged_poses.csv"), ds.submaps.size() + 1);  // + header
+  EXPECT_GT(countLines(dir / "map" / "merged_stems.csv"), 10u);
+  if (!std::getenv("DTIF_KEEP_TEST_OUTPUT")) {
+    fs::remove_all(dir);
+    fs::remove(dir.string() + ".log");
+  }
+}
+
+}  // namespace
+}  // namespace dtif
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "map_merge_rostest");
+  return RUN_ALL_TESTS();
+}
