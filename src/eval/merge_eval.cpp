@@ -28,12 +28,10 @@ bool hasGroundTruth(const Dataset& ds) {
 }
 
 MergeSubmap toMergeSubmap(const SubmapRecord& rec, const Descriptor& desc) {
-  MergeSubmap s;
+  MergeSubmap s = mergeSubmapOf(desc, rec.T_O_S);
   s.robot = rec.robot;
   s.id = rec.id;
   s.stamp = rec.stamp;
-  s.T_O_S = rec.T_O_S;
-  s.trunks = desc.trunks;
   return s;
 }
 
@@ -160,6 +158,7 @@ MergeInput collectMergeInput(const Dataset& ds, const DtifParams& params, const 
   const QueryObserver collect = [&](const Descriptor& desc, const std::optional<Loop>& loop) {
     const size_t i = in.submaps.size();
     in.submaps.push_back(toMergeSubmap(ds.submaps.at(i), desc));
+    if (desc.levelled()) in.levelling[desc.robot] = desc.level_rotation.toRotationMatrix();
     if (loop) {
       in.loops.push_back(*loop);
       in.loop_after.push_back(i);
@@ -237,6 +236,7 @@ MapMerger runMerger(const MergeInput& in, const MergeParams& params,
                     std::vector<MergeEvent>* events, MergeRunStats* stats) {
   MapMerger merger(params);
   if (!stem_map.empty()) merger.setStemMap(stem_map);
+  for (const auto& [robot, R_L_S] : in.levelling) merger.setLevelling(robot, R_L_S);
   MergeRunStats st;
   auto solve = [&]() {
     const auto t0 = std::chrono::steady_clock::now();

@@ -235,8 +235,10 @@ class MapMergeNodelet : public nodelet::Nodelet {
       return false;
     }
     chain.odom_frame = msg.header.frame_id;
+    // A tilted odometry frame (stock FAST-LIO2): the robot's latest levelling keeps map z up.
+    if (d.levelled()) merger_.setLevelling(msg.robot, d.level_rotation.toRotationMatrix());
     return addToMerger(msg.robot, msg.robot, d.submap_id, msg.header.stamp.toSec(), T_O_S,
-                       d.trunks);
+                       mergeSubmapOf(d, T_O_S).trunks);
   }
 
   // addSubmap of the merger under a global id; false (logged) on a duplicate or bad pose.

@@ -643,4 +643,20 @@ std::vector<MergeGraphEdge> MapMerger::graphEdges() const {
 
 const MergeParams& MapMerger::params() const { return impl_->p; }
 
+MergeSubmap mergeSubmapOf(const Descriptor& d, const Pose& T_O_S) {
+  MergeSubmap s;
+  s.robot = d.robot;
+  s.id = d.submap_id;
+  s.stamp = d.stamp;
+  s.T_O_S = T_O_S;
+  s.trunks = d.trunks;
+  if (!d.levelled()) return s;
+  const Eigen::Matrix3d R_S_L = d.level_rotation.normalized().conjugate().toRotationMatrix();
+  for (TrunkLandmark& t : s.trunks) {
+    const Eigen::Vector3d p = R_S_L * Eigen::Vector3d(t.x, t.y, t.z);
+    t.x = p.x(), t.y = p.y(), t.z = p.z();
+  }
+  return s;
+}
+
 }  // namespace dtif

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "dtif/core/database/loop_detector.h"
+#include "dtif/core/descriptor/descriptor.h"
 #include "dtif/core/merge/stem_inventory.h"
 #include "dtif/core/merge/stem_map.h"
 #include "dtif/core/types.h"
@@ -57,6 +58,10 @@ struct MergeSubmap {
   Pose T_O_S = Pose::Identity();  ///< odometry pose
   Trunks trunks;                  ///< in S (may be empty)
 };
+
+/// A descriptor's submap for the merger: robot, id, stamp, T_O_S, and its trunks in S (a
+/// levelled descriptor holds them in L: Descriptor::level_rotation, undone here).
+MergeSubmap mergeSubmapOf(const Descriptor& d, const Pose& T_O_S);
 
 /// A robot changed component (joined another, or a rejected loop split it off): log it.
 struct MergeEvent {
