@@ -177,9 +177,14 @@ TEST(Descriptor, WireRoundTripSmallAndExact) {
   EXPECT_EQ(e.stamp, 1234.5);
   ASSERT_EQ(e.trunks.size(), d.trunks.size());
   for (size_t i = 0; i < d.trunks.size(); ++i) {
-    EXPECT_NEAR(e.trunks[i].x, d.trunks[i].x, 1e-3);  // float32 offsets: mm at 50 m
-    EXPECT_NEAR(e.trunks[i].y, d.trunks[i].y, 1e-3);
-    EXPECT_NEAR(e.trunks[i].r, d.trunks[i].r, 1e-6);
+    // float32 offsets from the first trunk, under 64 m in a 40 m stand: rounding is at most
+    // half a float ULP, 2^-19 m (1.9 um), plus half a double ULP when the origin is added back
+    // at up to 5.1e6 m (2^-31 m); radii under 0.5 m: 2^-26 m (15 nm).
+    const double tol_m = std::ldexp(1.0, -19) + std::ldexp(1.0, -31);
+    EXPECT_NEAR(e.trunks[i].x, d.trunks[i].x, tol_m);
+    EXPECT_NEAR(e.trunks[i].y, d.trunks[i].y, tol_m);
+    EXPECT_NEAR(e.trunks[i].z, d.trunks[i].z, tol_m);
+    EXPECT_NEAR(e.trunks[i].r, d.trunks[i].r, std::ldexp(1.0, -26));
     EXPECT_EQ(e.trunks[i].base_seen, d.trunks[i].base_seen) << "trunk " << i;
   }
   ASSERT_EQ(e.triangles.size(), d.triangles.size());

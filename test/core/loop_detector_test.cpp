@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <random>
@@ -125,7 +126,17 @@ TEST(LoopDetector, DatabaseQueryFindsTheOverlappingSubmap) {
     ++found;
     EXPECT_LT(test::yawError(lc->T_c_q, cases[i].T_c_q), 0.3 * M_PI / 180.0);
     EXPECT_GE(lc->inliers, LoopDetectorParams{}.verification.min_inliers);
-    EXPECT_EQ(lc->inlier_pairs.size(), static_cast<size_t>(lc->inliers));
+    // Every inlier pair is a true correspondence: under the true pose the query trunk lands on
+    // its candidate trunk. The stand's stems are >= 1 m apart and each side adds 3 cm of noise
+    // per axis, so a true pair is within 0.25 m (6 sigma) and a pair of different stems is not.
+    ASSERT_FALSE(lc->inlier_pairs.empty());
+    for (const auto& [iq, ic] : lc->inlier_pairs) {
+      const TrunkLandmark& tq = cases[i].q.trunks.at(iq);
+      const TrunkLandmark& tc = cases[i].c.trunks.at(ic);
+      const Eigen::Vector3d p = cases[i].T_c_q * Eigen::Vector3d(tq.x, tq.y, tq.z);
+      EXPECT_LT(std::hypot(p.x() - tc.x, p.y() - tc.y), 0.25)
+          << "query " << i << " pair (" << iq << ", " << ic << ")";
+    }
     EXPECT_GT(lc->covariance(0, 0), 0.0);
     EXPECT_GT(lc->score, 0.0);
     EXPECT_LE(lc->score, 1.0);

@@ -70,7 +70,8 @@ TEST(VotePoses, StrongestPeakIsTheTruePoseInADenseStandSeenByHalves) {
     const double dt = (peaks[0].t - s.T_c_q.translation().head<2>()).norm();
     if (dyaw < 1.5 && dt < 0.6) ++right;
   }
-  EXPECT_GE(right, 19) << "of " << cases.size();
+  // As the name says, on every pair (measured, seed 7: 20 of 20).
+  EXPECT_EQ(right, static_cast<int>(cases.size()));
 }
 
 TEST(VotePoses, DeterministicAndEmptyWithoutPairs) {
@@ -231,8 +232,12 @@ TEST(LoopDetector, VoteFallbackRecoversPairsThatShareFewTriangles) {
   }
   std::printf("[ info ] accepted %d/%zu with the vote fallback, %d without\n", found_with,
               cases.size(), found_without);
-  EXPECT_GE(found_with, found_without + 5);
-  EXPECT_GE(found_with, static_cast<int>(0.7 * cases.size()));
+  // The construction (a quarter of the common stems seen by both) defeats the triangles on
+  // most pairs: fewer than half are found without the fallback (measured, seed 9: 14 of 30).
+  EXPECT_LT(found_without, static_cast<int>(cases.size()) / 2);
+  // Measured (seed 9): 29 of 30 with the fallback; asserted at that figure, so a loss of even
+  // one recovered pair fails.
+  EXPECT_GE(found_with, 29);
 }
 
 /// Through the database query: the vote fallback finds these loops; max_vote_candidates 0
@@ -252,7 +257,10 @@ TEST(LoopDetector, DatabaseQueryUsesTheVoteFallback) {
   }
   std::printf("[ info ] database: %d/%zu with votes, %d without\n", found_votes, cases.size(),
               found_none);
-  EXPECT_GE(found_votes, found_none + 4);
+  // Measured (seed 12, commit 5d16674): 19 of 20 with votes, 12 without. The fallback must keep
+  // its 19, and turning it off must lose loops.
+  EXPECT_GE(found_votes, 19);
+  EXPECT_LT(found_none, found_votes);
 }
 
 /// Different places of the same kind of dense stand, their 20 m windows 2-59 m apart: the vote

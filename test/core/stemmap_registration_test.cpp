@@ -140,10 +140,14 @@ TEST(StemMapRegistration, FortlsRiojaPlots) {
     EXPECT_GE(std::fabs(r.yaw_deg), 7.5 - 0.5) << "plot " << plot;
     EXPECT_LE(std::fabs(r.yaw_deg), 10.0 + 0.5) << "plot " << plot;
     EXPECT_LE(std::hypot(r.tx, r.ty), 2.6 + 0.3) << "plot " << plot;
-    EXPECT_LT(r.rms, 0.35);
+    // What docs/results.md reports: 25-42 stems paired per plot, residual RMS 0.14-0.26 m
+    // (rounded; the acceptance bound is 0.35 m).
+    EXPECT_GE(r.inliers, 25) << "plot " << plot;
+    EXPECT_GE(r.rms, 0.135) << "plot " << plot;
+    EXPECT_LT(r.rms, 0.265) << "plot " << plot;
   }
   std::printf("[ info ] FORTLS: %d of %zu plots registered\n", registered, field.size());
-  EXPECT_GE(registered, 12);
+  EXPECT_EQ(registered, 16) << "docs/results.md claims all 16 FORTLS plots";
 }
 
 TEST(StemMapRegistration, TreeMatchingPrf025) {
