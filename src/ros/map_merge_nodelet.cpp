@@ -82,12 +82,19 @@ class MapMergeNodelet : public nodelet::Nodelet {
       subs_.push_back(nh.subscribe<dtif::TrunkDescriptor>(
           robot + "/" + node_.descriptor_topic, 50,
           boost::bind(&MapMergeNodelet::onDescriptor, this, boost::placeholders::_1, robot)));
-      if (!node_.cloud_topic.empty()) {
+      if (!node_.cloud_topic.empty() && node_.cloud_topic[0] != '/') {
         subs_.push_back(nh.subscribe<sensor_msgs::PointCloud2>(
             robot + "/" + node_.cloud_topic, 5,
             boost::bind(&MapMergeNodelet::onCloud, this, boost::placeholders::_1, robot)));
       }
       path_pubs_[robot] = pnh.advertise<nav_msgs::Path>("path/" + robot, 1, true);
+    }
+    if (!node_.cloud_topic.empty() && node_.cloud_topic[0] == '/') {
+      // One topic for every robot (dtif.launch's default /submap_cloud): the cloud's frame names
+      // its robot (robotOfFrame).
+      subs_.push_back(nh.subscribe<sensor_msgs::PointCloud2>(
+          node_.cloud_topic, 5,
+          boost::bind(&MapMergeNodelet::onCloud, this, boost::placeholders::_1, std::string())));
     }
     subs_.push_back(nh.subscribe(node_.loop_topic, 100, &MapMergeNodelet::onLoop, this));
     stems_pub_ = pnh.advertise<dtif::StemInventory>("stems", 1, true);
@@ -306,9 +313,18 @@ class MapMergeNodelet : public nodelet::Nodelet {
     return added;
   }
 
+  // The robot whose descriptors come in `frame` ("" when none does yet).
+  std::string robotOfFrame(const std::string& frame) const {
+    for (const auto& [robot, chain] : chains_) {
+      if (chain.odom_frame == frame) return robot;
+    }
+    return "";
+  }
+
   // A submap cloud (odometry frame, stamped with the submap's anchor time: the extraction
   // nodelet's submap_cloud), kept voxel-downsampled in its submap frame S.
-  void addCloud(const std::string& robot, const sensor_msgs::PointCloud2& msg) {
+  void addCloud(const std::string& topic_robot, const sensor_msgs::PointCloud2& msg) {
+    const std::string robot = topic_robot.empty() ? robotOfFrame(msg.header.frame_id) : topic_robot;
     auto it = stamp_index_.find({robot, msg.header.stamp.toSec()});
     if (it == stamp_index_.end()) {
       NODELET_WARN_THROTTLE(5.0, "submap cloud of %s at %.3f matches no submap: dropped",

@@ -11,14 +11,14 @@ namespace ros_glue {
 struct MapMergeNodeParams {
   std::vector<std::string> robots;              ///< robots whose descriptors are subscribed
   std::string descriptor_topic = "descriptor";  ///< subscribes `<robot>/<descriptor_topic>`
-  std::string cloud_topic = "submap_cloud";     ///< `<robot>/<cloud_topic>`; "": no clouds
-  std::string loop_topic = "loop_closures";     ///< accepted loops of the loop-closure nodelet
-  std::string map_frame = "map";                ///< first map frame; others `<map_frame>_<k>`
-  std::string database_file;                    ///< old run's submaps loaded at start, if any
-  double solve_period_s = 1.0;                  ///< re-solve at most this often (wall) [s]
-  double tf_rate_hz = 10.0;                     ///< map -> odometry TF re-publication [Hz]
-  double cloud_voxel_m = 0.2;                   ///< voxel of stored submap clouds [m]
-  int queue_size = 1000;                        ///< messages waiting; the oldest is dropped
+  std::string cloud_topic = "/submap_cloud";  ///< absolute: one for all robots; relative: per robot
+  std::string loop_topic = "loop_closures";   ///< accepted loops of the loop-closure nodelet
+  std::string map_frame = "map";              ///< first map frame; others `<map_frame>_<k>`
+  std::string database_file;                  ///< old run's submaps loaded at start, if any
+  double solve_period_s = 1.0;                ///< re-solve at most this often (wall) [s]
+  double tf_rate_hz = 10.0;                   ///< map -> odometry TF re-publication [Hz]
+  double cloud_voxel_m = 0.2;                 ///< voxel of stored submap clouds [m]
+  int queue_size = 1000;                      ///< messages waiting; the oldest is dropped
 
   template <class V>
   void visit(V& v) {
