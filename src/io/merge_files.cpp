@@ -130,7 +130,9 @@ std::vector<FieldStem> readStemMapCsv(const std::string& path, const std::string
   const StemMapColumns c = stemMapColumns(path, rows.front().second);
   std::vector<FieldStem> out;
   for (size_t i = c.header ? 1 : 0; i < rows.size(); ++i) {
-    const auto& [line, cells] = rows[i];
+    // Not a structured binding: clang (the sanitizer build, C++17) refuses lambdas capturing one.
+    const size_t line = rows[i].first;
+    const auto& cells = rows[i].second;
     const std::string where = "line " + std::to_string(line);
     auto cellAt = [&](int col) -> const std::string& {
       if (col >= static_cast<int>(cells.size())) fail(path, where + ": too few columns");
