@@ -24,6 +24,7 @@ fi
 declare -A EXCLUDE=(
   [trunk_extractor_test]="CircleFit.RecoversCircleFromArcWithOutliers"
   [loop_detector_test]="LoopDetector.Exact180DegreesAndUtmScaleCoordinates"
+  [pair_vote_test]="LoopDetector.VoteFallbackRecoversPairsThatShareFewTriangles"
   [elevation_test]="Elevation.AgreeingWrongBasesMakeTheElevationAmbiguous:Elevation.ElevationComesFromSeenBasesOnly:Elevation.ElevationFromGroundMapsWhenNoBaseIsSeen"
 )
 dtif_san_build "${TESTS[@]}"
