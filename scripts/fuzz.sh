@@ -25,7 +25,7 @@ for t in "${TARGETS[@]}"; do
   mkdir -p "${out}/corpus"
   seeds="${DTIF_REPO}/fuzz/corpus/${t#fuzz_}"
   log="${out}/fuzz.log"
-  if (cd "${out}" && "${DTIF_SAN_WS}/devel/lib/dtif/${t}" -max_total_time="${SECONDS_EACH}" \
+  if (cd "${out}" && "${DTIF_SAN_WS}/devel/lib/dtif/${t}" -seed=1 -max_total_time="${SECONDS_EACH}" \
       -timeout=20 -rss_limit_mb=2048 -max_len=65536 -print_final_stats=1 \
       -artifact_prefix="${out}/" corpus "${seeds}" > "${log}" 2>&1); then
     echo "fuzz: ${t} ok: $(grep -E '^#[0-9]+.*DONE' "${log}" | tail -1)"

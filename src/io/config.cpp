@@ -49,6 +49,7 @@ class YamlReader {
   /// Throws on the first key of the map that no field declared.
   void rejectUnknown() const {
     for (const auto& kv : node_) {
+      if (!kv.first.IsScalar()) throw ParamError(where_ + ": a key is not a name");
       const std::string key = kv.first.as<std::string>();
       if (!used_.count(key)) throw ParamError(where_ + ": unknown parameter '" + key + "'");
     }
@@ -141,6 +142,7 @@ void loadParamsYaml(const std::string& path, DtifParams* p) {
                                                   "multi_submap",     "matcher",   "pose",
                                                   "verification",     "database"};
   for (const auto& kv : root) {
+    if (!kv.first.IsScalar()) throw ParamError(path + ": a section name is not a name");
     const std::string key = kv.first.as<std::string>();
     if (!kSections.count(key)) throw ParamError(path + ": unknown section '" + key + "'");
   }

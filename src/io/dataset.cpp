@@ -4,6 +4,7 @@
 
 #include <pcl/io/pcd_io.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
@@ -204,6 +205,12 @@ void checkPcdHeader(const std::string& path) {
   while (data.empty() && std::getline(in, line)) {
     if (!line.empty() && line.back() == '\r') line.pop_back();
     if (line.empty() || line[0] == '#') continue;
+    // A header is ASCII text: control or 8-bit bytes in it (found by fuzz_pcd: PCL then asked
+    // for a 100 TB string) mean binary junk, refused before PCL reads the file.
+    if (std::any_of(line.begin(), line.end(),
+                    [](unsigned char c) { return (c < 0x20 && c != '\t') || c >= 0x7f; })) {
+      fail(path, "not a PCD file (binary bytes in the header)");
+    }
     std::istringstream ss(line);
     std::string key, v;
     ss >> key;

@@ -33,6 +33,7 @@ class SectionReader {
 
   void checkUnknown() const {
     for (const auto& kv : node_) {
+      if (!kv.first.IsScalar()) throw ParamError(where_ + ": a key is not a name");
       const std::string key = kv.first.as<std::string>();
       if (!known_.count(key)) throw ParamError(where_ + ": unknown key '" + key + "'");
     }
@@ -327,11 +328,13 @@ YAML::Node loadSceneRoot(const std::string& path) {
     throw ParamError(path + ": cannot read the file: " + ex.what());
   }
   if (!root.IsMap()) throw ParamError(path + ": the scene must be a YAML map");
-  static const std::set<std::string> kTop = {
-      "name",       "description", "epoch_s", "plot",     "terrain", "stems",  "trees",
-      "understory", "sensor",      "motion",  "odometry", "fastlio", "submap", "robots",
-      "bag_layout"};
+  static const std::set<std::string> kTop = {"name",    "description", "epoch_s",   "plot",
+                                             "terrain", "stems",       "trees",     "understory",
+                                             "sensor",  "motion",      "odometry",  "fastlio",
+                                             "submap",  "robots",      "bag_layout"};
   for (const auto& kv : root) {
+    // A map or list as a key (found by fuzz_scene) would throw yaml-cpp's conversion error.
+    if (!kv.first.IsScalar()) throw ParamError(path + ": a top-level key is not a name");
     const std::string key = kv.first.as<std::string>();
     if (!kTop.count(key)) throw ParamError(path + ": unknown key '" + key + "'");
   }
@@ -342,6 +345,7 @@ YAML::Node loadSceneRoot(const std::string& path) {
 RobotRoute readRobot(const YAML::Node& r, const std::string& where) {
   if (!r.IsMap()) throw ParamError(where + ": must be a map");
   for (const auto& kv : r) {
+    if (!kv.first.IsScalar()) throw ParamError(where + ": a key is not a name");
     const std::string key = kv.first.as<std::string>();
     if (key != "name" && key != "waypoints" && key != "start_s" && key != "tilt_deg" &&
         key != "tilt_azimuth_deg") {

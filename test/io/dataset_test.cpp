@@ -266,9 +266,14 @@ TEST_F(DatasetTest, GarbageRowsFoldersAndHugeCountsAreRefusedByName) {
   writeFile("points.pcd",
             "VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n"
             "WIDTH 1\nPOINTS 99999999999\nDATA binary\n");
+  // fuzz_pcd's finding (fuzz/corpus/pcd/fuzz-found-binary-header): NUL and 8-bit bytes in the
+  // header made PCL ask for a 100 TB string.
+  writeFile("binary_header.pcd", std::string("VERSION .7\nFIELDS x y z int\xd1\0sity\n", 34) +
+                                     "SIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\nWIDTH 1\n"
+                                     "POINTS 1\nDATA ascii\n1 2 3 4\n");
   fs::create_directories(dir_ / "folder.pcd");
-  for (const char* f :
-       {"garbage.pcd", "short_row.pcd", "rows.pcd", "huge.pcd", "points.pcd", "folder.pcd"}) {
+  for (const char* f : {"garbage.pcd", "short_row.pcd", "rows.pcd", "huge.pcd", "points.pcd",
+                        "binary_header.pcd", "folder.pcd"}) {
     try {
       loadPcd((dir_ / f).string());
       ADD_FAILURE() << f << " was accepted";
@@ -277,6 +282,12 @@ TEST_F(DatasetTest, GarbageRowsFoldersAndHugeCountsAreRefusedByName) {
     }
   }
   EXPECT_THROW(readTrunkCsv((dir_ / "folder.pcd").string()), DatasetError);
+  try {  // refused by dtif's header check, before PCL reads it
+    loadPcd((dir_ / "binary_header.pcd").string());
+  } catch (const DatasetError& e) {
+    EXPECT_NE(std::string(e.what()).find("binary bytes in the header"), std::string::npos)
+        << e.what();
+  }
 }
 
 }  // namespace

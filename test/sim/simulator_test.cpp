@@ -640,6 +640,10 @@ TEST(SimulatorScenes, ValuesBeyondTheLimitsAreRefusedByKey) {
   expectError("understory: {saplings_per_ha: 1e9}\n" + robots, "saplings_per_ha");
   expectError("epoch_s: .nan\n" + robots, "epoch_s");
   expectError("epoch_s: 1e300\n" + robots, "epoch_s");
+  // fuzz_scene's finding: a map or list as a key threw yaml-cpp's conversion error, uncaught.
+  expectError("? [a, b]\n: 1\n" + robots, "key is not a name");
+  expectError("plot: {? {x: 1} : 2}\n" + robots, "key is not a name");
+  expectError("robots: [{name: a, ? [w] : 1, waypoints: [[1, 1], [5, 5]]}]\n", "key is not a name");
   expectError("robots: [{name: a, waypoints: [[3, 3], [3, 3], [3, 3]]}]\n", "waypoints coincide");
   std::string many = "robots: [{name: a, waypoints: [";
   for (int i = 0; i < 10000; ++i) many += std::string(i ? ", " : "") + "[1, 1], [2, 2]";
