@@ -10,6 +10,7 @@
 #include <string>
 
 #include "dtif/core/database/loop_detector.h"
+#include "dtif/core/merge/stem_map.h"
 #include "dtif_test/test_config.h"
 
 namespace dtif {
@@ -71,21 +72,6 @@ std::map<int, Trunks> readStemMap(const std::string& path) {
   return out;
 }
 
-/// Field inventories vs LiDAR stem maps: field positions carry decimetre errors and the two
-/// sources disagree on dbh, so the match radius and residual bound are wider than for
-/// LiDAR-vs-LiDAR submaps (defaults), and the stem maps are whole plots (no time exclusion).
-LoopDetectorParams fieldParams() {
-  LoopDetectorParams p;
-  p.matcher.edge_rel_tol = 0.05;
-  p.matcher.edge_abs_tol_m = 0.3;
-  p.matcher.radius_abs_tol_m = 0.05;
-  p.pose.beta_yaw_m = 0.5;
-  p.pose.beta_xy_m = 0.5;
-  p.verification.match_radius_m = 0.6;
-  p.verification.max_rms_xy_m = 0.35;
-  return p;
-}
-
 struct Result {
   bool ok = false;
   double yaw_deg = 0, tx = 0, ty = 0, rms = 0;
@@ -128,7 +114,7 @@ TEST(StemMapRegistration, FortlsRiojaPlots) {
   int registered = 0;
   for (const auto& [plot, trunks] : field) {
     if (!tls.count(plot)) continue;
-    const Result r = registerMaps(trunks, tls.at(plot), fieldParams());
+    const Result r = registerMaps(trunks, tls.at(plot), fieldStemMapLoopParams());
     std::printf(
         "[ info ] plot %2d: field %3zu, tls %3zu: %s yaw %6.2f deg t (%6.2f, %6.2f) m, "
         "%2d pairs, rms %.3f m %s\n",
@@ -156,7 +142,7 @@ TEST(StemMapRegistration, TreeMatchingPrf025) {
   if (!exists(field_path) || !exists(mls_path)) GTEST_SKIP() << "no stem maps in " << kStemDir;
   const Trunks field = readStemMap(field_path).at(0);
   const Trunks mls = readStemMap(mls_path).at(0);
-  const Result r = registerMaps(field, mls, fieldParams());
+  const Result r = registerMaps(field, mls, fieldStemMapLoopParams());
   std::printf(
       "[ info ] PRF025: field %zu, mls %zu: %s yaw %.2f deg t (%.2f, %.2f) m, %d pairs, "
       "rms %.3f m %s\n",
