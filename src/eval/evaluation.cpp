@@ -25,6 +25,7 @@
 #include "dtif/core/extraction/gravity.h"
 #include "dtif/core/extraction/trunk_extractor.h"
 #include "dtif/core/timing.h"
+#include "dtif/eval/front_end.h"
 
 namespace dtif {
 
@@ -272,19 +273,6 @@ void scoreAccepted(const Dataset& ds, const CellSets& cells, size_t i, size_t j,
   scoreAcceptedLoop(trueTcq(ds, i, j), T_c_q, cellOverlap(cells[i], cells[j]), eval, row);
 }
 
-// Step 1 through the robot's trunk accumulator (very sparse stands): as online, a submap may
-// only draw on earlier submaps of its own robot, chained by that robot's odometry.
-Descriptor describeQuery(const Cloud& cloud, const Eigen::Quaterniond& R_L_S,
-                         const SubmapRecord& rec, const DtifParams& params,
-                         std::map<std::string, TrunkAccumulator>* accumulators,
-                         DescribeTimings* timings, TrunkExtractionResult* ext,
-                         AccumulatedTrunks* acc) {
-  auto it = accumulators->try_emplace(rec.robot, params.multi_submap).first;
-  return describeLevelledCloudAccumulated(cloud, R_L_S, {rec.robot, rec.id, rec.stamp}, rec.T_O_S,
-                                          &it->second, params.trunk_extraction, params.descriptor,
-                                          timings, ext, acc);
-}
-
 void checkGroundTruth(const Dataset& ds) {
   for (const auto& rec : ds.submaps) {
     if (!ds.T_W_S.count(rec.id)) {
@@ -376,13 +364,8 @@ double angleDeg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
   return std::atan2(a.cross(b).norm(), a.dot(b)) * kRadToDeg;
 }
 
-// Levelling as the online system does it (Leveller: each robot's submap observed, then levelled
-// with the estimate after it), scored against the ground-truth attitude into *rows.
-Eigen::Quaterniond levelForEval(Leveller* leveller, const SubmapRecord& rec, const Cloud& cloud,
-                                const Pose& T_W_S, std::vector<LevellingRow>* rows) {
-  if (!leveller->enabled()) return Eigen::Quaterniond::Identity();
-  const Leveller::Result r =
-      leveller->level(rec.robot, cloud, Eigen::Quaterniond(rec.T_O_S.rotation()));
+// The levelling the front end applied to a submap, scored against its ground-truth attitude.
+LevellingRow levellingRow(const SubmapRecord& rec, const Leveller::Result& r, const Pose& T_W_S) {
   const Eigen::Vector3d z = Eigen::Vector3d::UnitZ();
   const Eigen::Vector3d true_up_S = T_W_S.rotation().transpose() * z;
   const Eigen::Vector3d used_up_S = r.R_L_S.conjugate() * z;
@@ -396,8 +379,7 @@ Eigen::Quaterniond levelForEval(Leveller* leveller, const SubmapRecord& rec, con
   row.sigma_deg = r.estimate.valid ? r.estimate.sigma_deg : -1.0;
   row.support_cells = r.observation.support_cells;
   row.from_ground = r.observation.from_ground;
-  rows->push_back(row);
-  return r.R_L_S;
+  return row;
 }
 
 // The submap levelled by R_L_S and its ground-truth pose, for trunkDetection (trunks are in L).
@@ -470,12 +452,10 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
                          const QueryObserver& on_query) {
   checkGroundTruth(ds);
   EvalResult result;
-  LoopDetector detector(params.loop);
-  Leveller leveller(params.levelling);
+  SequentialFrontEnd front_end(params);
   CellSets cells;
   cells.reserve(ds.submaps.size());
   std::vector<std::shared_ptr<const Descriptor>> descs;  // every submap's, for explainMiss
-  std::map<std::string, TrunkAccumulator> accumulators;  // per robot (multi_submap)
   double bytes_sum = 0.0;
   const size_t n = ds.submaps.size();
 
@@ -485,57 +465,49 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
     const Cloud::Ptr cloud = loadSubmapCloud(ds, rec);
     cells.push_back(overlapCells(*cloud, T_W_q));
 
+    // 1.-3. Descriptor (timed: desc, levelling included), query against all earlier
+    // descriptors (timed: loop; solver alone: solver).
+    const FrontEndStep step = front_end.describeAndQuery(rec, *cloud);
+    const Descriptor& desc = *step.desc;
+    if (front_end.levelling()) result.levelling.push_back(levellingRow(rec, step.level, T_W_q));
     EvalRow row;
     row.query = rec.id;
-
-    // 1. Descriptor (timed: desc, levelling included).
-    TrunkExtractionResult ext;
-    DescribeTimings timings;
-    const auto t_level = std::chrono::steady_clock::now();
-    const Eigen::Quaterniond R_L_S = levelForEval(&leveller, rec, *cloud, T_W_q, &result.levelling);
-    const double level_ms = msSince(t_level);
-    AccumulatedTrunks acc;
-    auto desc = std::make_shared<Descriptor>(
-        describeQuery(*cloud, R_L_S, rec, params, &accumulators, &timings, &ext, &acc));
-    row.described_trunks = desc->trunks.size();
-    row.described_submaps = acc.submaps;
-    row.t_desc_ms = timings.total_ms + (leveller.enabled() ? level_ms : 0.0);
-    row.trunks = ext.trunks.size();
+    row.described_trunks = desc.trunks.size();
+    row.described_submaps = step.accumulated.submaps;
+    row.t_desc_ms = step.descMs(front_end.levelling());
+    row.trunks = step.extraction.trunks.size();
     if (!ds.stems.empty()) {
-      result.detection.push_back(levelledDetection(*cloud, R_L_S, T_W_q, ext.trunks, ds.stems));
+      result.detection.push_back(
+          levelledDetection(*cloud, step.level.R_L_S, T_W_q, step.extraction.trunks, ds.stems));
       result.detection.back().submap = rec.id;
     }
-    row.invalid_reason = desc->invalid_reason;
-    bytes_sum += static_cast<double>(encodeDescriptor(*desc).size());
-
-    // 2.-3. Query against all earlier descriptors (timed: loop; solver alone: solver).
-    QueryStats qs;
-    const auto t0 = std::chrono::steady_clock::now();
-    const std::optional<Loop> loop = detector.query(*desc, &qs);
-    row.t_loop_ms = msSince(t0);
-    row.t_solver_ms = qs.solver_ms;
+    row.invalid_reason = desc.invalid_reason;
+    bytes_sum += static_cast<double>(encodeDescriptor(desc).size());
+    row.t_loop_ms = step.loop_ms;
+    row.t_solver_ms = step.query.solver_ms;
 
     row.has_loop = hasTrueLoop(ds, cells, i, params.loop.database.exclude_recent_s, eval);
-    if (loop) {
-      row.inliers = loop->inliers;
-      row.score = loop->score;
+    if (step.loop) {
+      const Loop& loop = *step.loop;
+      row.inliers = loop.inliers;
+      row.score = loop.score;
       size_t j = 0;
-      while (j < i && ds.submaps[j].id != loop->candidate_id) ++j;
+      while (j < i && ds.submaps[j].id != loop.candidate_id) ++j;
       if (j == i) {
         throw std::logic_error("loop detector returned an unknown candidate id " +
-                               std::to_string(loop->candidate_id));
+                               std::to_string(loop.candidate_id));
       }
-      scoreAccepted(ds, cells, i, j, loop->T_c_q, eval, &row);
+      scoreAccepted(ds, cells, i, j, loop.T_c_q, eval, &row);
     }
-    descs.push_back(desc);
+    descs.push_back(step.desc);
     if (row.has_loop && !row.true_positive) {
-      result.misses.push_back(explainMiss(ds, cells, descs, i, qs, params.loop));
+      result.misses.push_back(explainMiss(ds, cells, descs, i, step.query, params.loop));
     }
 
-    if (on_query) on_query(*desc, loop);
+    if (on_query) on_query(desc, step.loop);
 
     // 4. Insert q.
-    detector.insert(desc);
+    front_end.insert(step);
     result.rows.push_back(std::move(row));
     if (progress) progress(i + 1, n);
   }

@@ -14,6 +14,7 @@
 
 #include "dtif/core/descriptor/describe.h"
 #include "dtif/core/timing.h"
+#include "dtif/eval/front_end.h"
 
 namespace dtif {
 namespace {
@@ -35,19 +36,17 @@ MergeSubmap toMergeSubmap(const SubmapRecord& rec, const Descriptor& desc) {
   return s;
 }
 
-/// The protocol's steps 1-4 without ground truth (nothing to score).
+/// The protocol's steps 1-4 without ground truth (nothing to score), through the same front end
+/// as runEvaluation: levelled and accumulated per robot alike.
 void sequentialLoopsUnscored(const Dataset& ds, const DtifParams& params,
                              const std::function<void(size_t, size_t)>& progress,
                              const QueryObserver& on_query) {
-  LoopDetector detector(params.loop);
+  SequentialFrontEnd front_end(params);
   for (size_t i = 0; i < ds.submaps.size(); ++i) {
     const SubmapRecord& rec = ds.submaps[i];
-    const Cloud::Ptr cloud = loadSubmapCloud(ds, rec);
-    auto desc = std::make_shared<Descriptor>(describeCloud(
-        *cloud, {rec.robot, rec.id, rec.stamp}, params.trunk_extraction, params.descriptor));
-    const std::optional<Loop> loop = detector.query(*desc);
-    on_query(*desc, loop);
-    detector.insert(desc);
+    const FrontEndStep step = front_end.describeAndQuery(rec, *loadSubmapCloud(ds, rec));
+    on_query(*step.desc, step.loop);
+    front_end.insert(step);
     if (progress) progress(i + 1, ds.submaps.size());
   }
 }
