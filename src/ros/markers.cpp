@@ -8,9 +8,8 @@
 
 namespace dtif {
 namespace ros_glue {
-namespace {
 
-std_msgs::ColorRGBA color(float r, float g, float b, float a = 1.0f) {
+std_msgs::ColorRGBA color(float r, float g, float b, float a) {
   std_msgs::ColorRGBA c;
   c.r = r;
   c.g = g;
@@ -27,10 +26,8 @@ geometry_msgs::Point point(const Eigen::Vector3d& p) {
   return m;
 }
 
-Eigen::Vector3d trunkPoint(const TrunkLandmark& t, double dz = 0.0) { return {t.x, t.y, t.z + dz}; }
-
-visualization_msgs::Marker base(const std::string& frame, const std::string& ns, int id, int type,
-                                const ros::Time& stamp) {
+visualization_msgs::Marker newMarker(const std::string& frame, const std::string& ns, int id,
+                                     int type, const ros::Time& stamp) {
   visualization_msgs::Marker m;
   m.header.frame_id = frame;
   m.header.stamp = stamp;
@@ -42,11 +39,16 @@ visualization_msgs::Marker base(const std::string& frame, const std::string& ns,
   return m;
 }
 
+namespace {
+
+Eigen::Vector3d trunkPoint(const TrunkLandmark& t, double dz = 0.0) { return {t.x, t.y, t.z + dz}; }
+
 // Delaunay edges of a descriptor as a LINE_LIST at 1.3 m above the stem bases.
 visualization_msgs::Marker edgeMarker(const Descriptor& d, const Pose& T_F_S,
                                       const std::string& frame, const std::string& ns, int id,
                                       const ros::Time& stamp, const std_msgs::ColorRGBA& c) {
-  visualization_msgs::Marker m = base(frame, ns, id, visualization_msgs::Marker::LINE_LIST, stamp);
+  visualization_msgs::Marker m =
+      newMarker(frame, ns, id, visualization_msgs::Marker::LINE_LIST, stamp);
   m.scale.x = 0.05;
   m.color = c;
   std::set<std::pair<int, int>> edges;
@@ -72,7 +74,7 @@ void addCylinders(const Descriptor& d, const Pose& T_F_S, const std::string& fra
   const Eigen::Quaterniond q(T_F_S.rotation());
   for (size_t i = 0; i < d.trunks.size(); ++i) {
     visualization_msgs::Marker m =
-        base(frame, ns, static_cast<int>(i), visualization_msgs::Marker::CYLINDER, stamp);
+        newMarker(frame, ns, static_cast<int>(i), visualization_msgs::Marker::CYLINDER, stamp);
     m.pose.position = point(T_F_S * trunkPoint(d.trunks[i], 1.0));
     m.pose.orientation.x = q.x();
     m.pose.orientation.y = q.y();
@@ -127,7 +129,8 @@ visualization_msgs::MarkerArray loopMarkers(const Descriptor& q, const Descripto
 
   auto pairs = [&](const std::vector<std::pair<int, int>>& ps, const std::string& ns,
                    const std_msgs::ColorRGBA& col, double width) {
-    visualization_msgs::Marker m = base(frame, ns, 0, visualization_msgs::Marker::LINE_LIST, stamp);
+    visualization_msgs::Marker m =
+        newMarker(frame, ns, 0, visualization_msgs::Marker::LINE_LIST, stamp);
     m.scale.x = width;
     m.color = col;
     for (const auto& p : ps) {

@@ -3,19 +3,11 @@
 #include <map>
 
 #include "dtif/ros/conversions.h"
+#include "dtif/ros/markers.h"
 
 namespace dtif {
 namespace ros_glue {
 namespace {
-
-std_msgs::ColorRGBA rgba(float r, float g, float b, float a) {
-  std_msgs::ColorRGBA c;
-  c.r = r;
-  c.g = g;
-  c.b = b;
-  c.a = a;
-  return c;
-}
 
 // A distinct colour per robot (index in sorted order).
 std_msgs::ColorRGBA robotColour(size_t k) {
@@ -23,28 +15,7 @@ std_msgs::ColorRGBA robotColour(size_t k) {
                                       {0.58f, 0.4f, 0.74f},  {0.55f, 0.34f, 0.29f},
                                       {0.89f, 0.47f, 0.76f}, {0.09f, 0.75f, 0.81f}};
   const float* p = kPalette[k % 6];
-  return rgba(p[0], p[1], p[2], 1.0f);
-}
-
-geometry_msgs::Point point(const Eigen::Vector3d& p) {
-  geometry_msgs::Point q;
-  q.x = p.x();
-  q.y = p.y();
-  q.z = p.z();
-  return q;
-}
-
-visualization_msgs::Marker marker(const std::string& frame, const ros::Time& stamp,
-                                  const std::string& ns, int id, int type) {
-  visualization_msgs::Marker m;
-  m.header.frame_id = frame;
-  m.header.stamp = stamp;
-  m.ns = ns;
-  m.id = id;
-  m.type = type;
-  m.action = visualization_msgs::Marker::ADD;
-  m.pose.orientation.w = 1.0;
-  return m;
+  return color(p[0], p[1], p[2], 1.0f);
 }
 
 }  // namespace
@@ -107,7 +78,7 @@ visualization_msgs::MarkerArray mergedMapMarkers(const std::vector<MergedPose>& 
     const std::string frame = frame_of(comp);
     if (frame.empty()) return nullptr;
     auto it = m.find(comp);
-    if (it == m.end()) it = m.emplace(comp, marker(frame, stamp, ns, comp, type)).first;
+    if (it == m.end()) it = m.emplace(comp, newMarker(frame, ns, comp, type, stamp)).first;
     return &it->second;
   };
   for (const MergedPose& p : poses) {
@@ -125,7 +96,7 @@ visualization_msgs::MarkerArray mergedMapMarkers(const std::vector<MergedPose>& 
                     l.used ? "loops" : "rejected_loops", Marker::LINE_LIST);
     if (!m) continue;
     m->scale.x = l.used ? 0.15 : 0.1;
-    m->color = l.used ? rgba(0.1f, 0.85f, 0.2f, 1.0f) : rgba(0.9f, 0.1f, 0.1f, 1.0f);
+    m->color = l.used ? color(0.1f, 0.85f, 0.2f, 1.0f) : color(0.9f, 0.1f, 0.1f, 1.0f);
     m->points.push_back(point(a->second->T_M_S.translation()));
     m->points.push_back(point(b->second->T_M_S.translation()));
   }
@@ -133,11 +104,11 @@ visualization_msgs::MarkerArray mergedMapMarkers(const std::vector<MergedPose>& 
   for (const MergedStem& s : stems) {
     const std::string frame = frame_of(s.component);
     if (frame.empty()) continue;
-    Marker m = marker(frame, stamp, "stems", stem_id++, Marker::CYLINDER);
+    Marker m = newMarker(frame, "stems", stem_id++, Marker::CYLINDER, stamp);
     m.scale.x = m.scale.y = std::max(0.05, s.dbh);
     m.scale.z = 1.3;
     m.pose.position = point(Eigen::Vector3d(s.x, s.y, s.z_base + 0.65));
-    m.color = rgba(0.45f, 0.3f, 0.15f, 0.9f);
+    m.color = color(0.45f, 0.3f, 0.15f, 0.9f);
     out.markers.push_back(m);
   }
   for (auto* group : {&nodes, &used, &rejected}) {

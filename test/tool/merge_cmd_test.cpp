@@ -14,29 +14,15 @@
 #include "dtif/io/merge_files.h"
 #include "dtif_test/test_config.h"
 #include "test_utils.h"
+#include "tool/tool_run.h"
 
 namespace dtif {
 namespace {
 
 namespace fs = std::filesystem;
 
-struct ToolRun {
-  int status = -1;
-  std::string out;
-};
-
-ToolRun runTool(const std::string& args) {
-  ToolRun r;
-  const std::string cmd = std::string(DTIF_TOOL) + " " + args + " 2>&1";
-  FILE* pipe = popen(cmd.c_str(), "r");
-  if (!pipe) return r;
-  std::array<char, 4096> buf;
-  size_t n = 0;
-  while ((n = fread(buf.data(), 1, buf.size(), pipe)) > 0) r.out.append(buf.data(), n);
-  const int st = pclose(pipe);
-  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-  return r;
-}
+using test::runTool;
+using test::ToolRun;
 
 std::string firstLine(const fs::path& p) {
   std::ifstream f(p);

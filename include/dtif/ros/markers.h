@@ -16,6 +16,13 @@
 namespace dtif {
 namespace ros_glue {
 
+/// The building blocks of every dtif marker (also the map merge's).
+std_msgs::ColorRGBA color(float r, float g, float b, float a = 1.0f);
+geometry_msgs::Point point(const Eigen::Vector3d& p);
+/// An ADD marker with identity orientation (scale, colour and points are the caller's).
+visualization_msgs::Marker newMarker(const std::string& frame, const std::string& ns, int id,
+                                     int type, const ros::Time& stamp);
+
 /// One cylinder per trunk (base at z, 2 m tall, diameter 2r) and the Delaunay edges, placed in
 /// `frame` by T_F_S. Namespaces are prefixed with ns; stamp is the marker stamp.
 visualization_msgs::MarkerArray trunkMarkers(const Descriptor& d, const Pose& T_F_S,
