@@ -71,15 +71,9 @@ TEST(DemoBagRostest, LoopsMatchEvalAndGroundTruthDespiteBadInput) {
   pnh.getParam("rate", rate);
 
   // The scene as a dataset and a bag, generated here (a few seconds).
-  const char* home = std::getenv("ROS_HOME");
-  const fs::path dir =
-      fs::path(home ? home : "/tmp") / ("demo_bag_rostest_" + std::to_string(getpid()));
-  fs::remove_all(dir);
+  const fs::path dir = test::scratchDir("demo_bag_rostest");
   const std::string bag = (dir / "tiny.bag").string();
-  const std::string simulate = std::string(DTIF_TOOL) + " simulate " + DTIF_SCENES_DIR +
-                               "/tiny.yaml --out " + (dir / "dataset").string() +
-                               " --seed 1 --bag " + bag + " > " + (dir.string() + ".log") + " 2>&1";
-  ASSERT_EQ(std::system(simulate.c_str()), 0) << simulate;
+  ASSERT_EQ(test::simulateScene("tiny", dir, "--bag " + bag), "");
   const Dataset ds = readDataset((dir / "dataset").string());
   ASSERT_FALSE(ds.T_W_S.empty());
 
@@ -261,7 +255,6 @@ TEST(DemoBagRostest, LoopsMatchEvalAndGroundTruthDespiteBadInput) {
   EXPECT_TRUE(load.response.success) << load.response.message;
   EXPECT_EQ(load.response.size, n);
   fs::remove_all(dir);
-  fs::remove(dir.string() + ".log");
 }
 
 }  // namespace

@@ -90,15 +90,10 @@ TEST(FleetBagsRostest, StockUnitsGetQualifiedFramesAndTfBetweenRobots) {
   tf2_ros::TransformListener tf_listener(tf_buffer);
 
   // The scene as a dataset and a bag per unit, generated here (a few seconds).
-  const char* home = std::getenv("ROS_HOME");
-  const fs::path dir =
-      fs::path(home ? home : "/tmp") / ("fleet_bags_rostest_" + std::to_string(getpid()));
-  fs::remove_all(dir);
-  const std::string simulate = std::string(DTIF_TOOL) + " simulate " + DTIF_SCENES_DIR + "/" +
-                               scene + ".yaml --out " + (dir / "dataset").string() +
-                               " --seed 1 --bag " + (dir / "unit.bag").string() +
-                               " --bag-layout fastlio > " + (dir.string() + ".log") + " 2>&1";
-  ASSERT_EQ(std::system(simulate.c_str()), 0) << simulate;
+  const fs::path dir = test::scratchDir("fleet_bags_rostest");
+  ASSERT_EQ(test::simulateScene(scene, dir,
+                                "--bag " + (dir / "unit.bag").string() + " --bag-layout fastlio"),
+            "");
   const Dataset ds = readDataset((dir / "dataset").string());
   ASSERT_FALSE(ds.T_W_S.empty());
   std::set<std::string> scene_robots;
@@ -216,7 +211,6 @@ TEST(FleetBagsRostest, StockUnitsGetQualifiedFramesAndTfBetweenRobots) {
   }
   EXPECT_FALSE(tf_buffer._frameExists("camera_init"));
   fs::remove_all(dir);
-  fs::remove(dir.string() + ".log");
 }
 
 }  // namespace

@@ -53,15 +53,9 @@ TEST(MapMergeRostest, EveryRobotsMapTfMatchesGroundTruth) {
   tf2_ros::Buffer tf;
   tf2_ros::TransformListener listener(tf);
 
-  const char* home = std::getenv("ROS_HOME");
-  const fs::path dir =
-      fs::path(home ? home : "/tmp") / ("map_merge_rostest_" + std::to_string(getpid()));
-  fs::remove_all(dir);
+  const fs::path dir = test::scratchDir("map_merge_rostest");
   const std::string bag = (dir / "tiny.bag").string();
-  const std::string simulate = std::string(DTIF_TOOL) + " simulate " + DTIF_SCENES_DIR +
-                               "/tiny.yaml --out " + (dir / "dataset").string() +
-                               " --seed 1 --bag " + bag + " > " + (dir.string() + ".log") + " 2>&1";
-  ASSERT_EQ(std::system(simulate.c_str()), 0) << simulate;
+  ASSERT_EQ(test::simulateScene("tiny", dir, "--bag " + bag), "");
   const Dataset ds = readDataset((dir / "dataset").string());
   ASSERT_FALSE(ds.T_W_S.empty());
 
@@ -187,7 +181,6 @@ TEST(MapMergeRostest, EveryRobotsMapTfMatchesGroundTruth) {
   EXPECT_GT(countLines(dir / "map" / "merged_stems.csv"), 10u);
   if (!std::getenv("DTIF_KEEP_TEST_OUTPUT")) {
     fs::remove_all(dir);
-    fs::remove(dir.string() + ".log");
   }
 }
 

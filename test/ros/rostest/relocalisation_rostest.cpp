@@ -155,17 +155,9 @@ void playAndCollect(const Dataset& ds, const std::string& bag, const fs::path& d
 TEST(RelocalisationRostest, SecondRunLandsInTheFirstRunsMap) {
   ros::AsyncSpinner spinner(2);
   spinner.start();
-  const char* home = std::getenv("ROS_HOME");
-  const fs::path dir =
-      fs::path(home ? home : "/tmp") / ("relocalisation_rostest_" + std::to_string(getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = test::scratchDir("relocalisation_rostest");
   const std::string bag = (dir / "tiny.bag").string();
-  const std::string simulate = std::string(DTIF_TOOL) + " simulate " + DTIF_SCENES_DIR +
-                               "/tiny.yaml --out " + (dir / "dataset").string() +
-                               " --seed 1 --bag " + bag + " > " + (dir / "sim.log").string() +
-                               " 2>&1";
-  ASSERT_EQ(std::system(simulate.c_str()), 0) << simulate;
+  ASSERT_EQ(test::simulateScene("tiny", dir, "--bag " + bag), "");
   const Dataset ds = readDataset((dir / "dataset").string());
   const std::string db = (dir / "run1.db").string();
 

@@ -1,14 +1,40 @@
-// Helpers of the rostest nodes (test/ros/rostest/*.cpp): waiting with deadlines, collecting
-// messages.
+// Helpers of the rostest nodes (test/ros/rostest/*.cpp): the simulated scene, waiting with
+// deadlines, collecting messages.
 #pragma once
 
 #include <ros/ros.h>
+#include <unistd.h>
 
+#include <cstdlib>
+#include <filesystem>
 #include <functional>
 #include <mutex>
+#include <string>
 #include <vector>
 
+#include "dtif_test/test_config.h"
+
 namespace dtif::test {
+
+/// This node's folder under ROS_HOME (else /tmp), named after the test and the process, empty.
+inline std::filesystem::path scratchDir(const std::string& name) {
+  const char* home = std::getenv("ROS_HOME");
+  const std::filesystem::path dir =
+      std::filesystem::path(home ? home : "/tmp") / (name + "_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  return dir;
+}
+
+/// `dtif simulate` of a built-in scene (seed 1) into dir/dataset, with `args` (the bag options),
+/// its output in dir/simulate.log. Returns the command when it fails, else "".
+inline std::string simulateScene(const std::string& scene, const std::filesystem::path& dir,
+                                 const std::string& args) {
+  const std::string cmd = std::string(DTIF_TOOL) + " simulate " + DTIF_SCENES_DIR + "/" + scene +
+                          ".yaml --out " + (dir / "dataset").string() + " --seed 1 " + args +
+                          " > " + (dir / "simulate.log").string() + " 2>&1";
+  return std::system(cmd.c_str()) == 0 ? "" : cmd;
+}
 
 // Spins until pred() holds or the deadline passes.
 inline bool waitFor(const std::function<bool()>& pred, double timeout_s) {
