@@ -116,6 +116,7 @@ std::string DtifParams::validate() const {
   add("pose", loop.pose.validate());
   add("verification", loop.verification.validate());
   add("database", loop.database.validate());
+  add("merge", merge.validate());
   if (!out.empty()) out.pop_back();
   return out;
 }
@@ -138,9 +139,9 @@ void loadParamsYaml(const std::string& path, DtifParams* p) {
   }
   if (root.IsNull()) return;  // an empty file changes nothing
   if (!root.IsMap()) throw ParamError(path + ": expected a map of parameter sections");
-  static const std::set<std::string> kSections = {"trunk_extraction", "levelling", "descriptor",
-                                                  "multi_submap",     "matcher",   "pose",
-                                                  "verification",     "database"};
+  static const std::set<std::string> kSections = {
+      "trunk_extraction", "levelling", "descriptor", "multi_submap", "matcher", "pose",
+      "verification",     "database",  "merge",      "stems"};
   for (const auto& kv : root) {
     if (!kv.first.IsScalar()) throw ParamError(path + ": a section name is not a name");
     const std::string key = kv.first.as<std::string>();
@@ -155,6 +156,8 @@ void loadParamsYaml(const std::string& path, DtifParams* p) {
   readSection(root, "pose", path, &next.loop.pose);
   readSection(root, "verification", path, &next.loop.verification);
   readSection(root, "database", path, &next.loop.database);
+  readSection(root, "merge", path, &next.merge);
+  readSection(root, "stems", path, &next.merge.stems);
   const std::string problems = next.validate();
   if (!problems.empty()) throw ParamError(path + ": invalid parameters: " + problems);
   *p = next;
@@ -172,6 +175,8 @@ std::string paramsToYaml(const DtifParams& p) {
   writeSection(out, "pose", p.loop.pose);
   writeSection(out, "verification", p.loop.verification);
   writeSection(out, "database", p.loop.database);
+  writeSection(out, "merge", p.merge);
+  writeSection(out, "stems", p.merge.stems);
   out << YAML::EndMap;
   return std::string(out.c_str()) + "\n";
 }

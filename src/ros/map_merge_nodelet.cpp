@@ -34,6 +34,7 @@
 #include "dtif/core/merge/map_merger.h"
 #include "dtif/core/timing.h"
 #include "dtif/core/voxel_grid.h"
+#include "dtif/io/dataset.h"
 #include "dtif/io/merge_files.h"
 #include "dtif/ros/conversions.h"
 #include "dtif/ros/map_frames.h"
@@ -115,6 +116,8 @@ class MapMergeNodelet : public nodelet::Nodelet {
     try {
       ros_glue::ParamReader reader(pnh);
       reader.readSection("", &node_);
+      reader.readSection("merge", &merge_params_);
+      reader.readSection("stems", &merge_params_.stems);
       reader.checkNoUnknownKeys();
       std::string problems = merge_params_.validate();
       if (node_.robots.empty()) problems += "robots: list at least one robot\n";
@@ -124,11 +127,52 @@ class MapMergeNodelet : public nodelet::Nodelet {
       if (!(node_.cloud_voxel_m > 0.0)) problems += "cloud_voxel_m must be > 0\n";
       if (node_.queue_size < 1) problems += "queue_size must be >= 1\n";
       if (!problems.empty()) throw ParamError(pnh.getNamespace() + ": " + problems);
+      loadStemMap();
     } catch (const ParamError& e) {
       NODELET_FATAL("%s", e.what());
       throw;
     }
-    merger_ = MapMerger(merge_params_);
+    merger_ = newMerger();
+  }
+
+  // The field stem map (stem_map_file), once at start-up: a file that cannot be read is a
+  // configuration error, as an unknown key is.
+  void loadStemMap() {
+    if (node_.stem_map_file.empty()) return;
+    try {
+      field_ = readStemMapCsv(node_.stem_map_file, node_.stem_map_plot);
+    } catch (const DatasetError& e) {
+      throw ParamError(std::string("stem_map_file: ") + e.what());
+    }
+    if (field_.empty()) {
+      throw ParamError("stem_map_file: " + node_.stem_map_file + " holds no stem" +
+                       (node_.stem_map_plot.empty() ? "" : " of plot " + node_.stem_map_plot));
+    }
+    NODELET_INFO("stem map %s: %zu field stems; %s becomes the plot's frame once they register",
+                 node_.stem_map_file.c_str(), field_.size(), node_.map_frame.c_str());
+  }
+
+  MapMerger newMerger() const {
+    MapMerger m(merge_params_);
+    if (!field_.empty()) m.setStemMap(field_);
+    return m;
+  }
+
+  // Logs when component 0 registers to the field stem map, or stops registering (merge_mutex_).
+  void reportStemMap() {
+    if (field_.empty()) return;
+    const StemMapRegistration r = merger_.stemMapRegistration();
+    if (r.ok == stem_map_registered_) return;
+    stem_map_registered_ = r.ok;
+    if (r.ok) {
+      NODELET_INFO(
+          "stem map: registered, %zu stems paired, residual RMS %.2f m: %s is now the "
+          "plot's frame",
+          r.pairs.size(), r.rms_m, node_.map_frame.c_str());
+    } else {
+      NODELET_WARN("stem map: no longer registered (%s): %s is the first robot's frame again",
+                   r.reason.c_str(), node_.map_frame.c_str());
+    }
   }
 
   // ---- Callbacks: enqueue only. ----
@@ -215,6 +259,7 @@ class MapMergeNodelet : public nodelet::Nodelet {
     NODELET_DEBUG("re-solve: %zu submaps, %zu loops used, %zu rejected, %.1f ms",
                   merger_.submapCount(), st.loops_used, st.loops_rejected, last_solve_ms_);
     for (const MergeEvent& e : merger_.takeEvents()) NODELET_INFO("%s", e.text.c_str());
+    reportStemMap();
     assignFrames();
     publishOutputs();
   }
@@ -495,7 +540,8 @@ class MapMergeNodelet : public nodelet::Nodelet {
   }
 
   void resetMap() {
-    merger_ = MapMerger(merge_params_);
+    merger_ = newMerger();
+    stem_map_registered_ = false;
     frames_ = ros_glue::MapFrames(node_.map_frame);
     chains_.clear();
     global_id_.clear();
@@ -658,6 +704,8 @@ class MapMergeNodelet : public nodelet::Nodelet {
 
   ros_glue::MapMergeNodeParams node_;
   MergeParams merge_params_;
+  std::vector<FieldStem> field_;  // the field stem map, if any
+  bool stem_map_registered_ = false;
   // This nodelet builds no descriptors: it keeps each one's trunks as its sender sent them.
   const DescriptorParams receiver_params_ = loosestDescriptorParams();
 

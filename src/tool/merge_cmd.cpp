@@ -46,8 +46,8 @@ void printStemMap(const StemMapRegistration& r, size_t field_stems) {
 
 int runMerge(const MergeArgs& a) {
   const DtifParams params = loadParams(a.configs);
-  MergeParams mp;
-  mp.pcm = !a.no_pcm;
+  MergeParams mp = params.merge;  // --config: sections merge and stems
+  if (a.no_pcm) mp.pcm = false;
   const Dataset ds = readDataset(a.dataset);
   std::vector<FieldStem> field;
   if (!a.stem_map.empty()) field = readStemMapCsv(a.stem_map, a.stem_map_plot);

@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "dtif_test/test_config.h"
+#include "test_utils.h"
 
 namespace dtif {
 namespace {
@@ -134,6 +135,44 @@ TEST(Config, ShippedTrunkExtractionYamlNamesEveryField) {
   };
   p.visit(named);
   EXPECT_EQ(fields, 56);
+}
+
+// The shipped merge.yaml names every parameter of the map merger and the stem inventory.
+TEST(Config, ShippedMergeYamlNamesEveryField) {
+  std::ifstream in(fs::path(DTIF_CONFIG_DIR) / "merge.yaml");
+  ASSERT_TRUE(in.good());
+  std::stringstream text;
+  text << in.rdbuf();
+  int fields = 0;
+  auto named = [&](const char* key, auto&) {
+    ++fields;
+    EXPECT_NE(text.str().find("\n  " + std::string(key) + ":"), std::string::npos) << key;
+  };
+  MergeParams p;
+  p.visit(named);
+  p.stems.visit(named);
+  EXPECT_EQ(fields, 19);
+}
+
+// A merge section reaches the merger's parameters; an invalid value is refused by name.
+TEST(Config, MergeSectionsOverrideTheMergerAndValidate) {
+  const fs::path dir = test::freshTempDir("dtif_config_merge");
+  std::ofstream(dir / "m.yaml") << "merge:\n  pcm: false\n  odom_sigma_xy_per_m: 0.02\n"
+                                   "stems:\n  min_observations: 2\n";
+  DtifParams p;
+  loadParamsYaml((dir / "m.yaml").string(), &p);
+  EXPECT_FALSE(p.merge.pcm);
+  EXPECT_DOUBLE_EQ(p.merge.odom_sigma_xy_per_m, 0.02);
+  EXPECT_EQ(p.merge.stems.min_observations, 2);
+  std::ofstream(dir / "bad.yaml") << "merge:\n  pcm_sigmas: -1\n";
+  try {
+    loadParamsYaml((dir / "bad.yaml").string(), &p);
+    FAIL() << "pcm_sigmas -1 was accepted";
+  } catch (const ParamError& e) {
+    EXPECT_NE(std::string(e.what()).find("pcm_sigmas"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("bad.yaml"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(p.merge.pcm);  // unchanged by the failed load
 }
 
 }  // namespace

@@ -39,6 +39,15 @@ std::set<std::string> loopClosureKeys() {
   return k;
 }
 
+// What the map merge nodelet reads: its node keys and the core's sections merge and stems.
+std::set<std::string> mergeKeys() {
+  std::set<std::string> k;
+  for (const auto& s : declaredKeys<MapMergeNodeParams>("")) k.insert(s);
+  for (const auto& s : declaredKeys<MergeParams>("merge")) k.insert(s);
+  for (const auto& s : declaredKeys<StemFusionParams>("stems")) k.insert(s);
+  return k;
+}
+
 // Flattens a YAML map into `a/b/c` keys (what rosparam load puts on the server).
 void flatten(const YAML::Node& n, const std::string& prefix, std::vector<std::string>* out) {
   if (n.IsMap()) {
@@ -120,7 +129,8 @@ TEST(ShippedYaml, ComponentYamlsFitTheNodeletsThatLoadThem) {
   const std::vector<std::pair<std::string, std::set<std::string>>> files = {
       {"trunk_extraction.yaml", extractionKeys()},
       {"descriptor.yaml", extractionKeys()},
-      {"loop_closure.yaml", loopClosureKeys()}};
+      {"loop_closure.yaml", loopClosureKeys()},
+      {"merge.yaml", mergeKeys()}};
   for (const auto& f : files) {
     YAML::Node root;
     ASSERT_NO_THROW(root = YAML::LoadFile(dir + f.first)) << f.first;
@@ -148,6 +158,8 @@ TEST(ShippedYaml, MapMergeYamlShowsTheStructsDefaults) {
   EXPECT_EQ(root["loop_topic"].as<std::string>(), d.loop_topic);
   EXPECT_EQ(root["map_frame"].as<std::string>(), d.map_frame);
   EXPECT_EQ(root["database_file"].as<std::string>(), d.database_file);
+  EXPECT_EQ(root["stem_map_file"].as<std::string>(), d.stem_map_file);
+  EXPECT_EQ(root["stem_map_plot"].as<std::string>(), d.stem_map_plot);
   EXPECT_EQ(root["solve_period_s"].as<double>(), d.solve_period_s);
   EXPECT_EQ(root["tf_rate_hz"].as<double>(), d.tf_rate_hz);
   EXPECT_EQ(root["cloud_voxel_m"].as<double>(), d.cloud_voxel_m);

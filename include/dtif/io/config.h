@@ -8,6 +8,7 @@
 #include "dtif/core/descriptor/trunk_accumulator.h"
 #include "dtif/core/extraction/gravity.h"
 #include "dtif/core/extraction/trunk_extractor.h"
+#include "dtif/core/merge/map_merger.h"
 #include "dtif/core/params.h"
 
 namespace dtif {
@@ -18,6 +19,7 @@ struct DtifParams {
   DescriptorParams descriptor;            ///< YAML section `descriptor`
   MultiSubmapParams multi_submap;         ///< YAML section `multi_submap` (very sparse stands)
   LoopDetectorParams loop;  ///< sections `matcher`, `pose`, `verification`, `database`
+  MergeParams merge;        ///< sections `merge` and `stems` (the map merger, map_merger.h)
 
   /// Empty when every component validates, else the problems, one per line.
   std::string validate() const;

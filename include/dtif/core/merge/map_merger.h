@@ -45,9 +45,28 @@ struct MergeParams {
   bool pcm = true;
   double pcm_sigmas = 3.0;
   int max_iterations = 30;  ///< Ceres iterations per solve
-  StemFusionParams stems;
-  StemMapParams stem_map;
+  StemFusionParams stems;   ///< YAML section `stems` (its own visit)
+  StemMapParams stem_map;   ///< field stem maps: fixed (fieldStemMapLoopParams)
   std::string validate() const;
+
+  template <class V>
+  void visit(V& v) {
+    v("odom_sigma_xy_m", odom_sigma_xy_m);
+    v("odom_sigma_xy_per_m", odom_sigma_xy_per_m);
+    v("odom_sigma_z_m", odom_sigma_z_m);
+    v("odom_sigma_z_per_m", odom_sigma_z_per_m);
+    v("odom_sigma_rot_rad", odom_sigma_rot_rad);
+    v("odom_sigma_rot_per_m", odom_sigma_rot_per_m);
+    v("odom_sigma_tilt_rad", odom_sigma_tilt_rad);
+    v("odom_sigma_tilt_per_m", odom_sigma_tilt_per_m);
+    v("loop_sigma_xy_min_m", loop_sigma_xy_min_m);
+    v("loop_sigma_z_min_m", loop_sigma_z_min_m);
+    v("loop_sigma_rot_min_rad", loop_sigma_rot_min_rad);
+    v("robust_loss_scale", robust_loss_scale);
+    v("pcm", pcm);
+    v("pcm_sigmas", pcm_sigmas);
+    v("max_iterations", max_iterations);
+  }
 };
 
 /// One submap of a robot's chain, in acquisition order per robot.

@@ -17,6 +17,14 @@ struct StemFusionParams {
       0.2;  ///< ... to join a cluster (loose: one submap's radius can be far off) [m]
   int min_observations = 1;  ///< fewer contributing submaps: dropped (false trunks)
   std::string validate() const;
+
+  template <class V>
+  void visit(V& v) {
+    v("cluster_radius_m", cluster_radius_m);
+    v("radius_rel_tol", radius_rel_tol);
+    v("radius_abs_tol_m", radius_abs_tol_m);
+    v("min_observations", min_observations);
+  }
 };
 
 /// One trunk of one submap, already in the component's map frame M.
