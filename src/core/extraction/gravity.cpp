@@ -284,6 +284,74 @@ void GravityEstimator::addImu(const Eigen::Vector3d& accel_O, double sigma_deg) 
   update();
 }
 
+std::string ImuGravityParams::validate() const {
+  std::ostringstream e;
+  if (!(max_gyro_rad_s > 0.0)) e << "imu max_gyro_rad_s must be > 0; ";
+  if (!(max_norm_dev > 0.0 && max_norm_dev < 1.0)) e << "imu max_norm_dev must be in (0, 1); ";
+  if (min_samples < 1) e << "imu min_samples must be >= 1; ";
+  return e.str();
+}
+
+bool ImuGravityWindow::addImu(double stamp, const Eigen::Vector3d& accel_B,
+                              const Eigen::Vector3d& gyro_B) {
+  if (!std::isfinite(stamp) || !accel_B.allFinite() || !gyro_B.allFinite()) return false;
+  if (!(accel_B.norm() > 0.0)) return false;
+  // A bound on what waits: odometry that never comes must not grow it (a few s at 200 Hz).
+  constexpr size_t kMaxWaiting = 4000;
+  if (waiting_.size() >= kMaxWaiting) waiting_.erase(waiting_.begin());
+  waiting_.push_back({stamp, accel_B, gyro_B.norm()});
+  return true;
+}
+
+void ImuGravityWindow::addOdometry(double stamp, const Eigen::Quaterniond& R_O_B) {
+  if (!std::isfinite(stamp) || !R_O_B.coeffs().allFinite()) return;
+  const Eigen::Quaterniond R = R_O_B.normalized();
+  size_t used = 0;
+  for (const Sample& s : waiting_) {
+    if (s.stamp > stamp) break;
+    ++used;
+    if (prev_stamp_ < 0.0 || s.stamp < prev_stamp_ || s.gyro > params_.max_gyro_rad_s) continue;
+    const double span = stamp - prev_stamp_;
+    constexpr double kMaxOdomGapS = 0.5;  // no attitude to interpolate across a longer gap
+    if (span > kMaxOdomGapS) continue;
+    const double t = span > 0.0 ? (s.stamp - prev_stamp_) / span : 1.0;
+    rotated_.push_back(prev_R_O_B_.slerp(t, R) * s.accel_B);
+    norms_.push_back(s.accel_B.norm());
+  }
+  waiting_.erase(waiting_.begin(), waiting_.begin() + static_cast<std::ptrdiff_t>(used));
+  if (stamp >= prev_stamp_) {
+    prev_stamp_ = stamp;
+    prev_R_O_B_ = R;
+  }
+}
+
+ImuGravityWindow::Reading ImuGravityWindow::take() {
+  Reading r;
+  std::vector<double> sorted = norms_;
+  double median = 0.0;
+  if (!sorted.empty()) {
+    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+    median = sorted[sorted.size() / 2];
+  }
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  std::vector<Eigen::Vector3d> used;
+  for (size_t i = 0; i < rotated_.size(); ++i) {
+    if (std::abs(norms_[i] / median - 1.0) > params_.max_norm_dev) continue;
+    sum += rotated_[i];
+    used.push_back(rotated_[i].normalized());
+  }
+  rotated_.clear();
+  norms_.clear();
+  r.samples = static_cast<int>(used.size());
+  if (r.samples < params_.min_samples || !(sum.norm() > 0.0)) return r;
+  r.ok = true;
+  r.up_O = sum.normalized();
+  double a2 = 0.0;
+  for (const Eigen::Vector3d& u : used) a2 += std::pow(angleBetween(u, r.up_O), 2);
+  r.spread_deg = std::sqrt(a2 / used.size()) / kDeg;
+  return r;
+}
+
 Eigen::Vector3d GravityEstimator::upInSubmap(const Eigen::Quaterniond& R_O_S) const {
   if (!estimate_.valid) return Eigen::Vector3d::UnitZ();
   return (R_O_S.conjugate() * estimate_.up_O).normalized();

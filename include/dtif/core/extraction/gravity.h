@@ -131,6 +131,55 @@ class GravityEstimator {
   GravityEstimate estimate_;
 };
 
+/// An IMU's accelerometer as a gravity observation in the odometry frame O (issue #15): each
+/// sample's specific force a_B (body = IMU frame, as FAST-LIO2's body; any unit: only the
+/// direction counts) is rotated into O with the body's attitude interpolated between the two
+/// odometry poses around it, and the rotated directions are averaged over a window. Walking
+/// accelerations average out (their mean over a window is the change of velocity over its length,
+/// a few hundredths of g), turns do not matter once the attitude is interpolated; samples while
+/// the body turns fast (attitude uncertain) or whose magnitude is far from the window's median
+/// (impacts) are left out. Not thread-safe.
+struct ImuGravityParams {
+  double max_gyro_rad_s = 1.0;  ///< samples while turning faster are left out [rad/s]
+  double max_norm_dev = 0.3;    ///< |‖a‖ / median‖a‖ - 1| beyond this: left out (impacts)
+  int min_samples = 200;        ///< a window needs this many usable samples (MID-360: 200 Hz)
+  std::string validate() const;
+};
+
+class ImuGravityWindow {
+ public:
+  explicit ImuGravityWindow(const ImuGravityParams& params = {}) : params_(params) {}
+
+  /// An IMU sample (stamp [s], specific force in B, angular rate in B [rad/s]). Kept until the
+  /// odometry has passed its stamp. False (nothing kept) when not finite or zero.
+  bool addImu(double stamp, const Eigen::Vector3d& accel_B, const Eigen::Vector3d& gyro_B);
+  /// An odometry attitude R_O_B at a stamp: the waiting samples up to it are rotated into O
+  /// (slerp from the previous pose); earlier samples with no previous pose are dropped.
+  void addOdometry(double stamp, const Eigen::Quaterniond& R_O_B);
+
+  struct Reading {
+    bool ok = false;
+    Eigen::Vector3d up_O = Eigen::Vector3d::UnitZ();  ///< mean direction of the force (up) in O
+    int samples = 0;                                  ///< used
+    double spread_deg = 0.0;  ///< RMS angle of the used samples to the mean [deg]
+  };
+  /// The window's reading, and a new window. Not ok with fewer than min_samples usable.
+  Reading take();
+
+ private:
+  struct Sample {
+    double stamp;
+    Eigen::Vector3d accel_B;
+    double gyro;
+  };
+  ImuGravityParams params_;
+  std::vector<Sample> waiting_;           // not yet passed by the odometry
+  std::vector<Eigen::Vector3d> rotated_;  // force in O, this window
+  std::vector<double> norms_;
+  double prev_stamp_ = -1.0;
+  Eigen::Quaterniond prev_R_O_B_ = Eigen::Quaterniond::Identity();
+};
+
 /// Levelling of several robots' submaps as an online system does it: a submap, when it
 /// arrives, is observed first and then levelled with the estimate as it stands after that (so
 /// the first submap of a robot is levelled by its own observation). One GravityEstimator per
