@@ -6,6 +6,7 @@
 #include <pcl/common/transforms.h>
 #include <pcl_conversions/pcl_conversions.h>
 #include <ros/ros.h>
+#include <sensor_msgs/Imu.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/transform_broadcaster.h>
@@ -74,6 +75,9 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
         problems += "input must be 'odometry' or 'submap', not '" + node_.input + "'\n";
       }
       if (node_.queue_size < 1) problems += "queue_size must be >= 1\n";
+      if (!node_.imu_topic.empty() && node_.input != "odometry") {
+        problems += "imu_topic needs input 'odometry' (the IMU is rotated by the odometry)\n";
+      }
       if (node_.marker_history < 0) problems += "marker_history must be >= 0\n";
       if (!(node_.marker_period_s >= 0.0)) problems += "marker_period_s must be >= 0\n";
       if (!(node_.input_timeout_s >= 0.0)) problems += "input_timeout_s must be >= 0\n";
@@ -110,6 +114,9 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
     if (node_.input == "odometry") {
       odom_sub_ = nh.subscribe("Odometry", 200, &TrunkExtractionNodelet::onOdometry, this);
       cloud_sub_ = nh.subscribe("cloud_registered", 20, &TrunkExtractionNodelet::onCloud, this);
+      if (!node_.imu_topic.empty()) {
+        imu_sub_ = nh.subscribe(node_.imu_topic, 2000, &TrunkExtractionNodelet::onImu, this);
+      }
     } else {
       if (!node_.odom_frame.empty()) {
         tf_buffer_ = std::make_unique<tf2_ros::Buffer>();
@@ -134,7 +141,7 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
     if (node_.input_timeout_s <= 0.0) return;
     input_watch_ = std::make_unique<ros_glue::InputWatch>(node_.input_timeout_s);
     const double now = ros::WallTime::now().toSec();
-    for (const ros::Subscriber* sub : {&odom_sub_, &cloud_sub_, &submap_sub_}) {
+    for (const ros::Subscriber* sub : {&odom_sub_, &cloud_sub_, &submap_sub_, &imu_sub_}) {
       if (*sub) input_watch_->watch(sub->getTopic(), now);
     }
     input_timer_ = nh.createWallTimer(
@@ -233,6 +240,8 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
       std::lock_guard<std::mutex> lock(mutex_);
       if (!acceptFrame(msg->header.frame_id, "Odometry")) return;
       report(assembler_->addOdometry(msg->header.stamp.toSec(), T_O_B), "Odometry");
+      if (imu_sub_)
+        imu_window_.addOdometry(msg->header.stamp.toSec(), Eigen::Quaterniond(T_O_B.rotation()));
       frame = out_frame_;
     }
     publishBodyTf(*msg, frame);
@@ -252,13 +261,29 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
     }
     std::optional<ros_glue::AssembledSubmap> done;
     std::string frame;
+    ImuGravityWindow::Reading imu;
     {
       std::lock_guard<std::mutex> lock(mutex_);
       if (!acceptFrame(msg->header.frame_id, "cloud_registered")) return;
       report(assembler_->addCloud(msg->header.stamp.toSec(), cloud, &done), "cloud_registered");
       frame = out_frame_;
+      if (done && imu_sub_) imu = imu_window_.take();  // the IMU over this submap's window
     }
-    if (done) enqueue(std::move(*done), frame);
+    if (done) enqueue(std::move(*done), frame, imu);
+  }
+
+  // The IMU (imu_topic): its accelerometer over each submap's window is a gravity reading in the
+  // odometry frame (core ImuGravityWindow), added to the robot's estimate before levelling.
+  void onImu(const sensor_msgs::Imu::ConstPtr& msg) {
+    noteInput(imu_sub_);
+    const auto& a = msg->linear_acceleration;
+    const auto& w = msg->angular_velocity;
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!imu_window_.addImu(msg->header.stamp.toSec(), Eigen::Vector3d(a.x, a.y, a.z),
+                            Eigen::Vector3d(w.x, w.y, w.z))) {
+      NODELET_WARN_THROTTLE(5.0, "%s: an IMU message without a finite acceleration: dropped",
+                            imu_sub_.getTopic().c_str());
+    }
   }
 
   void onSubmap(const sensor_msgs::PointCloud2::ConstPtr& msg) {
@@ -310,22 +335,23 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
     enqueue(std::move(s), ros_glue::outputOdomFrame(node_.robot, frame, node_.output_odom_frame));
   }
 
-  void enqueue(ros_glue::AssembledSubmap s, const std::string& frame) {
+  void enqueue(ros_glue::AssembledSubmap s, const std::string& frame,
+               const ImuGravityWindow::Reading& imu = {}) {
     {
       std::lock_guard<std::mutex> lock(queue_mutex_);
       if (queue_.size() >= static_cast<size_t>(node_.queue_size)) {
         NODELET_WARN_THROTTLE(5.0, "extraction is behind: dropping submap %ld",
-                              static_cast<long>(queue_.front().first.id));
+                              static_cast<long>(queue_.front().submap.id));
         queue_.pop_front();
       }
-      queue_.emplace_back(std::move(s), frame);
+      queue_.push_back(Job{std::move(s), frame, imu});
     }
     cv_.notify_one();
   }
 
   void work() {
     while (true) {
-      std::pair<ros_glue::AssembledSubmap, std::string> job;
+      Job job;
       {
         std::unique_lock<std::mutex> lock(queue_mutex_);
         cv_.wait(lock, [this] { return stop_ || !queue_.empty(); });
@@ -333,13 +359,22 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
         job = std::move(queue_.front());
         queue_.pop_front();
       }
-      process(job.first, job.second);
+      process(job.submap, job.frame, job.imu);
     }
   }
 
-  void process(ros_glue::AssembledSubmap& s, const std::string& frame) {
+  void process(ros_glue::AssembledSubmap& s, const std::string& frame,
+               const ImuGravityWindow::Reading& imu) {
     const auto t0 = std::chrono::steady_clock::now();
     if (voxel_grid_) ros_glue::voxelFilterSubmap(voxel_grid_.get(), s.cloud.get());
+    if (imu.ok) leveller_->addImu(node_.robot, imu.up_O);
+    if (imu_sub_ && !imu.ok) {
+      NODELET_WARN_THROTTLE(30.0,
+                            "%s: %d usable IMU samples over submap %ld (need %d): no IMU "
+                            "gravity reading",
+                            imu_sub_.getTopic().c_str(), imu.samples, static_cast<long>(s.id),
+                            ImuGravityParams().min_samples);
+    }
     // Levelling (the odometry frame may be tilted, e.g. upstream FAST-LIO2's camera_init).
     const Leveller::Result lev =
         leveller_->level(node_.robot, *s.cloud, Eigen::Quaterniond(s.T_O_S.rotation()));
@@ -420,7 +455,12 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
 
   std::mutex queue_mutex_;  // queue_, stop_
   std::condition_variable cv_;
-  std::deque<std::pair<ros_glue::AssembledSubmap, std::string>> queue_;
+  struct Job {
+    ros_glue::AssembledSubmap submap;
+    std::string frame;              // published odometry frame
+    ImuGravityWindow::Reading imu;  // over the submap's window (imu_topic)
+  };
+  std::deque<Job> queue_;
   bool stop_ = false;
   std::thread worker_;
   std::unique_ptr<VoxelCentroidGrid> voxel_grid_;  // worker thread only; null: no voxel filter
@@ -435,7 +475,8 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
   std::unique_ptr<ros_glue::InputWatch> input_watch_;
   ros::WallTimer input_timer_;
   ros::Publisher descriptor_pub_, trunks_pub_, cloud_pub_;
-  ros::Subscriber odom_sub_, cloud_sub_, submap_sub_;
+  ros::Subscriber odom_sub_, cloud_sub_, submap_sub_, imu_sub_;
+  ImuGravityWindow imu_window_;  // under mutex_
 };
 
 }  // namespace dtif

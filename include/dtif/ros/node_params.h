@@ -11,14 +11,17 @@ namespace ros_glue {
 /// Node-level parameters (the core's sections `trunk_extraction` and `descriptor` are read
 /// separately).
 struct TrunkExtractionNodeParams {
-  std::string input = "odometry";     ///< "odometry": cloud_registered + Odometry; "submap"
-  std::string robot;                  ///< robot name; empty: last element of the namespace
-  std::string odom_frame;             ///< expected odometry frame; empty: take it from the input
+  std::string input = "odometry";  ///< "odometry": cloud_registered + Odometry; "submap"
+  std::string robot;               ///< robot name; empty: last element of the namespace
+  std::string odom_frame;          ///< expected odometry frame; empty: take it from the input
   /// Odometry frame of everything published (descriptors, markers, clouds, body TF); empty:
   /// `<robot>/<input frame>` (ros_glue::robotFrame), so units sharing `camera_init` differ.
   std::string output_odom_frame;
-  bool publish_body_tf = true;  ///< TF output_odom_frame -> `<robot>/<child_frame_id>` (Odometry)
+  bool publish_body_tf = true;    ///< TF output_odom_frame -> `<robot>/<child_frame_id>` (Odometry)
   double input_timeout_s = 10.0;  ///< warn while an input topic is silent this long; 0: never [s]
+  /// sensor_msgs/Imu of the body frame (FAST-LIO2 on a MID-360: /livox/imu); "": no IMU. Its
+  /// accelerometer over each submap adds a gravity reading to the levelling.
+  std::string imu_topic;
   int first_submap_id = 0;            ///< id of the first submap (raise it after a restart)
   int queue_size = 2;                 ///< submaps waiting for extraction; the oldest is dropped
   bool publish_submap_cloud = false;  ///< publish the assembled submap on `submap_cloud`
@@ -33,6 +36,7 @@ struct TrunkExtractionNodeParams {
     v("output_odom_frame", output_odom_frame);
     v("publish_body_tf", publish_body_tf);
     v("input_timeout_s", input_timeout_s);
+    v("imu_topic", imu_topic);
     v("first_submap_id", first_submap_id);
     v("queue_size", queue_size);
     v("publish_submap_cloud", publish_submap_cloud);
