@@ -3,6 +3,7 @@
 
 #include <nav_msgs/Odometry.h>
 #include <rosbag/bag.h>
+#include <sensor_msgs/Imu.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <tf2_msgs/TFMessage.h>
 
@@ -198,6 +199,48 @@ void fillPointCloud2(const std::vector<Eigen::Vector3f>& points,
   msg->is_dense = true;
 }
 
+// The MID-360's IMU between two frames, as its driver publishes it (/livox/imu, frame
+// livox_frame, 200 Hz, acceleration in g): the true specific force R_B_W (a_W + g z) and angular
+// rate of the body, attitude slerped between the frames, a_W from the last three frames'
+// positions (constant over the interval). FAST-LIO2's body is the IMU frame.
+std::vector<sensor_msgs::Imu> imuBetween(const std::vector<std::pair<double, Pose>>& last,
+                                         double t1, const Pose& T_W_B1) {
+  std::vector<sensor_msgs::Imu> out;
+  if (last.empty()) return out;
+  const auto& [t0, T0] = last.back();
+  const double dt = t1 - t0;
+  if (!(dt > 0.0)) return out;
+  Eigen::Vector3d a_W = Eigen::Vector3d::Zero();
+  if (last.size() == 2) {
+    const auto& [tm, Tm] = last.front();
+    const Eigen::Vector3d v0 = (T0.translation() - Tm.translation()) / (t0 - tm);
+    const Eigen::Vector3d v1 = (T_W_B1.translation() - T0.translation()) / dt;
+    a_W = (v1 - v0) / (0.5 * (t1 - tm));
+  }
+  const Eigen::Quaterniond q0(T0.rotation()), q1(T_W_B1.rotation());
+  const Eigen::AngleAxisd turn(q0.conjugate() * q1);
+  const Eigen::Vector3d gyro_B = turn.axis() * turn.angle() / dt;
+  constexpr double kG = 9.81, kRateHz = 200.0;
+  const int n = std::max(1, static_cast<int>(std::lround(dt * kRateHz)));
+  for (int i = 1; i <= n; ++i) {
+    const double f = static_cast<double>(i) / n;
+    const Eigen::Quaterniond q = q0.slerp(f, q1);
+    const Eigen::Vector3d f_B = q.conjugate() * (a_W + kG * Eigen::Vector3d::UnitZ()) / kG;
+    sensor_msgs::Imu m;
+    m.header.stamp = ros::Time().fromSec(t0 + f * dt);
+    m.header.frame_id = "livox_frame";
+    m.orientation_covariance[0] = -1.0;  // no orientation, as the Livox driver
+    m.linear_acceleration.x = f_B.x();
+    m.linear_acceleration.y = f_B.y();
+    m.linear_acceleration.z = f_B.z();
+    m.angular_velocity.x = gyro_B.x();
+    m.angular_velocity.y = gyro_B.y();
+    m.angular_velocity.z = gyro_B.z();
+    out.push_back(m);
+  }
+  return out;
+}
+
 }  // namespace
 
 struct BagFrameSink::Writer {
@@ -208,8 +251,9 @@ struct BagFrameSink::Writer {
     bool open = false;  // until close()
   };
   struct Robot {  // its topics' connection headers, sequence numbers and file
-    boost::shared_ptr<ros::M_string> odometry, tf, cloud;
-    uint32_t odometry_seq = 0, cloud_seq = 0;
+    boost::shared_ptr<ros::M_string> odometry, tf, cloud, imu;
+    uint32_t odometry_seq = 0, cloud_seq = 0, imu_seq = 0;
+    std::vector<std::pair<double, Pose>> last_frames;  // (stamp, T_W_B) of the last two frames
     std::string odom_frame, body_frame;
     File* file = nullptr;
   };
@@ -271,6 +315,8 @@ struct BagFrameSink::Writer {
     r.odometry = connectionHeader<nav_msgs::Odometry>(ns + "/Odometry", callerid);
     r.tf = connectionHeader<tf2_msgs::TFMessage>("/tf", callerid);
     r.cloud = connectionHeader<sensor_msgs::PointCloud2>(ns + "/cloud_registered", callerid);
+    if (fastlio())
+      r.imu = connectionHeader<sensor_msgs::Imu>("/livox/imu", "/livox_lidar_publisher");
     r.odom_frame = fastlio() ? "camera_init" : odomFrame(name);
     r.body_frame = fastlio() ? "body" : bodyFrame(name);
     r.file = fastlio() ? create(name, unitBagPath(path, name)) : files.at("").get();
@@ -321,6 +367,16 @@ void BagFrameSink::onFrame(const Frame& frame) {
   Writer::File& file = *robot.file;
   const ros::Time stamp = Writer::time(frame.stamp, file);
   const ros::Time cloud_time = Writer::time(frame.stamp + params_.cloud_delay_s, file);
+
+  if (robot.imu) {  // a stock unit's bag records its IMU too
+    for (sensor_msgs::Imu& m : imuBetween(robot.last_frames, frame.stamp, frame.T_W_B)) {
+      m.header.seq = robot.imu_seq++;
+      Writer::write(file, robot.imu, m.header.stamp, m);
+      ++stats_.messages;
+    }
+    robot.last_frames.emplace_back(frame.stamp, frame.T_W_B);
+    if (robot.last_frames.size() > 2) robot.last_frames.erase(robot.last_frames.begin());
+  }
 
   // FAST-LIO2 publishes Odometry first, then cloud_registered (laserMapping.cpp); twist and
   // covariances stay zero, as FAST-LIO2 leaves them.

@@ -251,5 +251,72 @@ TEST(Pcm, MaximumCliqueIsExactAndDeterministic) {
   EXPECT_TRUE(maximumClique({}).empty());
 }
 
+bool isClique(const ConsistencyGraph& g, const std::vector<size_t>& c) {
+  for (size_t i = 0; i < c.size(); ++i) {
+    for (size_t j = i + 1; j < c.size(); ++j) {
+      if (!g[c[i]][c[j]]) return false;
+    }
+  }
+  return true;
+}
+
+ConsistencyGraph randomGraph(size_t n, double density, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  ConsistencyGraph g(n, std::vector<bool>(n, false));
+  for (size_t i = 0; i < n; ++i) {
+    for (size_t j = i + 1; j < n; ++j) g[i][j] = g[j][i] = u(rng) < density;
+  }
+  return g;
+}
+
+// The lexicographically first of the largest cliques, by enumerating every vertex subset.
+std::vector<size_t> bruteForceClique(const ConsistencyGraph& g) {
+  const size_t n = g.size();
+  std::vector<size_t> best;
+  for (uint32_t mask = 0; mask < (1u << n); ++mask) {
+    std::vector<size_t> c;
+    for (size_t i = 0; i < n; ++i) {
+      if (mask & (1u << i)) c.push_back(i);
+    }
+    if (c.size() < best.size() || !isClique(g, c)) continue;
+    if (c.size() > best.size() || c < best) best = c;
+  }
+  return best;
+}
+
+TEST(Pcm, TheColouringBoundKeepsTheExactAnswer) {
+  for (unsigned seed = 1; seed <= 30; ++seed) {
+    const double density = 0.3 + 0.02 * seed;  // 0.32 .. 0.9
+    const ConsistencyGraph g = randomGraph(14, density, seed);
+    EXPECT_EQ(maximumClique(g), bruteForceClique(g)) << "seed " << seed;
+  }
+}
+
+// Hundreds of mostly consistent loops of one robot pair (the soak test's hour: PCM's search
+// with the size bound alone ran for minutes there): the exact answer, here the 190 consistent
+// loops, and with a budget of one step a valid clique no smaller than the greedy one.
+TEST(Pcm, DenseLoopSetsAreSolvedAndTheBudgetKeepsAClique) {
+  const size_t n = 200;
+  ConsistencyGraph g(n, std::vector<bool>(n, true));
+  for (size_t i = 0; i < n; ++i) g[i][i] = false;
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  for (size_t bad = 0; bad < n; bad += 20) {  // 10 false loops, each consistent with ~30 %
+    for (size_t j = 0; j < n; ++j) {
+      if (j != bad) g[bad][j] = g[j][bad] = u(rng) < 0.3;
+    }
+  }
+  const std::vector<size_t> c = maximumClique(g);
+  EXPECT_TRUE(isClique(g, c));
+  EXPECT_EQ(c.size(), 190u);
+  for (size_t bad = 0; bad < n; bad += 20) {
+    EXPECT_FALSE(std::binary_search(c.begin(), c.end(), bad)) << bad;
+  }
+  const std::vector<size_t> capped = maximumClique(g, 200, 1);
+  EXPECT_TRUE(isClique(g, capped));
+  EXPECT_GE(capped.size(), maximumClique(g, 0).size());
+}
+
 }  // namespace
 }  // namespace dtif

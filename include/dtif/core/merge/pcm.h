@@ -11,9 +11,12 @@ namespace dtif {
 /// Symmetric adjacency matrix, adjacency[i][j] = loops i and j are consistent.
 using ConsistencyGraph = std::vector<std::vector<bool>>;
 
-/// Maximum clique, as sorted vertex indices. Exact (branch and bound) up to `exact_limit`
-/// vertices; above it a greedy clique (vertices by degree) that is maximal but maybe not
-/// maximum. Ties go to the clique of smallest indices, so the result is deterministic.
-std::vector<size_t> maximumClique(const ConsistencyGraph& graph, size_t exact_limit = 200);
+/// Maximum clique, as sorted vertex indices. Exact (branch and bound with a colouring bound)
+/// up to `exact_limit` vertices and `budget` expansions of the search; above the limit, or when
+/// the budget runs out, a greedy clique (vertices by degree) if it is larger than the best found,
+/// maximal but maybe not maximum. Ties go to the clique of smallest indices; deterministic (the
+/// budget counts steps, not time).
+std::vector<size_t> maximumClique(const ConsistencyGraph& graph, size_t exact_limit = 200,
+                                  size_t budget = 20000);
 
 }  // namespace dtif
