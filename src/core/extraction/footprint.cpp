@@ -40,18 +40,9 @@ int64_t tileOf(float v) { return fastCellIndex(v / kTileM); }
 // extent.
 class Tiles {
  public:
-  // Extent of the finite points; false when there is none. tileOf is monotonic, so the tiles of
-  // the extreme coordinates are the extreme tiles.
-  bool init(const Cloud& cloud, size_t* n) {
-    *n = 0;
-    float minx = std::numeric_limits<float>::infinity(), maxx = -minx, miny = minx, maxy = -minx;
-    for (const auto& p : cloud) {
-      if (!finite(p)) continue;
-      ++*n;
-      minx = std::min(minx, p.x), maxx = std::max(maxx, p.x);
-      miny = std::min(miny, p.y), maxy = std::max(maxy, p.y);
-    }
-    if (*n == 0) return false;
+  // Tiles over the extent of the finite points. tileOf is monotonic, so the tiles of the extreme
+  // coordinates are the extreme tiles.
+  bool init(float minx, float maxx, float miny, float maxy) {
     tx0_ = tileOf(minx), tx1_ = tileOf(maxx), ty0_ = tileOf(miny), ty1_ = tileOf(maxy);
     tw_ = static_cast<double>(tx1_ - tx0_) + 1.0, th_ = static_cast<double>(ty1_ - ty0_) + 1.0;
     dense_ = tw_ * th_ <= 4e6;
@@ -104,11 +95,9 @@ struct TileSamples {
   std::vector<std::pair<int64_t, int64_t>> made;  // coordinates of each index (sparse case)
 };
 
-// Every stride-th finite point, bucketed by tile (a counting sort).
-TileSamples sampleTiles(const Cloud& cloud, size_t stride, Tiles* tiles) {
-  TileSamples s;
-  std::vector<int> id_of;
-  std::vector<float> z_of;
+// Every stride-th finite point's coordinates.
+void takeSamples(const Cloud& cloud, size_t stride, HeightCellsPrepass* pre) {
+  pre->stride = stride;
   size_t skip = 0;
   for (const auto& p : cloud) {
     if (!finite(p)) continue;
@@ -117,14 +106,26 @@ TileSamples sampleTiles(const Cloud& cloud, size_t stride, Tiles* tiles) {
       continue;
     }
     skip = stride - 1;
+    pre->sx.push_back(p.x), pre->sy.push_back(p.y), pre->sz.push_back(p.z);
+  }
+}
+
+// The samples bucketed by tile (a counting sort).
+TileSamples sampleTiles(const HeightCellsPrepass& pre, Tiles* tiles) {
+  TileSamples s;
+  std::vector<int> id_of;
+  const std::vector<float>& z_of = pre.sz;
+  id_of.reserve(z_of.size());
+  for (size_t k = 0; k < z_of.size(); ++k) {
+    const float x = pre.sx[k], y = pre.sy[k];
     int id;
     if (tiles->dense()) {
-      id = tiles->denseIndex(p.x, p.y);
+      id = tiles->denseIndex(x, y);
     } else {
-      id = tiles->index(tileOf(p.x), tileOf(p.y), true);
-      if (static_cast<size_t>(id) == s.made.size()) s.made.emplace_back(tileOf(p.x), tileOf(p.y));
+      id = tiles->index(tileOf(x), tileOf(y), true);
+      if (static_cast<size_t>(id) == s.made.size()) s.made.emplace_back(tileOf(x), tileOf(y));
     }
-    id_of.push_back(id), z_of.push_back(p.z);
+    id_of.push_back(id);
   }
   const size_t ntiles = tiles->dense() ? tiles->denseSize() : s.made.size();
   s.start.assign(ntiles + 1, 0);
@@ -156,8 +157,8 @@ float kthOfSortedRuns(std::vector<std::pair<const float*, const float*>>* runs, 
 
 // Local ground per tile (in S): 5th percentile of z inside the window around it, on every
 // stride-th finite point. NaN where the window holds no sample.
-std::vector<float> tileGround(const Cloud& cloud, size_t stride, Tiles* tiles) {
-  TileSamples s = sampleTiles(cloud, stride, tiles);
+std::vector<float> tileGround(const HeightCellsPrepass& pre, Tiles* tiles) {
+  TileSamples s = sampleTiles(pre, tiles);
   const size_t ntiles = s.start.size() - 1;
   for (size_t id = 0; id < ntiles; ++id) {
     std::sort(s.z.begin() + s.start[id], s.z.begin() + s.start[id + 1]);
@@ -188,12 +189,28 @@ std::vector<float> tileGround(const Cloud& cloud, size_t stride, Tiles* tiles) {
 std::vector<std::pair<int64_t, int64_t>> trunkHeightCells(const Cloud& cloud_S, const Pose& T_F_S,
                                                           double cell_m,
                                                           size_t max_ground_samples) {
+  HeightCellsPrepass pre;
+  for (const auto& p : cloud_S) {
+    if (!finite(p)) continue;
+    if (pre.finite++ == 0) pre.minx = pre.maxx = p.x, pre.miny = pre.maxy = p.y;
+    pre.minx = std::min(pre.minx, p.x), pre.maxx = std::max(pre.maxx, p.x);
+    pre.miny = std::min(pre.miny, p.y), pre.maxy = std::max(pre.maxy, p.y);
+  }
+  return trunkHeightCells(cloud_S, T_F_S, cell_m, max_ground_samples, pre);
+}
+
+std::vector<std::pair<int64_t, int64_t>> trunkHeightCells(const Cloud& cloud_S, const Pose& T_F_S,
+                                                          double cell_m, size_t max_ground_samples,
+                                                          const HeightCellsPrepass& given) {
   std::vector<std::pair<int64_t, int64_t>> out;
   Tiles tiles;
-  size_t n = 0;
-  if (!tiles.init(cloud_S, &n) || !(cell_m > 0.0)) return out;
+  const size_t n = given.finite;
+  if (n == 0 || !tiles.init(given.minx, given.maxx, given.miny, given.maxy) || !(cell_m > 0.0))
+    return out;
   const size_t stride = max_ground_samples > 0 ? std::max<size_t>(1, n / max_ground_samples) : 1;
-  const std::vector<float> ground = tileGround(cloud_S, stride, &tiles);
+  HeightCellsPrepass own;
+  if (given.stride != stride) takeSamples(cloud_S, stride, &own);
+  const std::vector<float> ground = tileGround(given.stride == stride ? given : own, &tiles);
   const Eigen::Isometry3f T = T_F_S.cast<float>();
   // The descriptor's own footprint is in S: no transform (an identity one changes no value).
   const bool identity = T_F_S.matrix() == Eigen::Matrix4d::Identity();

@@ -24,6 +24,14 @@
 
 namespace dtif {
 
+/// floor(v) as an int64, the value static_cast<int64_t>(std::floor(v)) has wherever that is
+/// defined, without libm's call (not inlined on baseline x86-64; several run per point).
+inline int64_t floorIndex(double v) {
+  if (!(v > -4.5e15 && v < 4.5e15)) return static_cast<int64_t>(std::floor(v));
+  const int64_t i = static_cast<int64_t>(v);  // truncates towards zero
+  return i - (v < static_cast<double>(i));
+}
+
 /// Horizontal distance of an offset: std::hypot is exact but slow, and the local coordinates
 /// here are small and well scaled [m].
 inline double planarDist(double dx, double dy) { return std::sqrt(dx * dx + dy * dy); }
@@ -68,8 +76,11 @@ struct GroundGrid {
   std::vector<uint32_t> start;       ///< points of cell c: order[start[c]] .. order[start[c+1]-1]
   std::vector<uint32_t> order;       ///< point indices sorted by cell
   std::vector<uint32_t> point_cell;  ///< cell of each point (row-major: gy * nx + gx)
-  std::vector<GroundPlane> plane;    ///< per cell, about the cell centre, local z [m]
-  std::vector<char> seen;  ///< the cell's window held enough ground cells: ground observed
+  /// The points' local coordinates in `order`: x[order[k]] is sx[k]. The per-cell stages read
+  /// these in sequence instead of gathering from all over the cloud [m].
+  std::vector<float> sx, sy, sz;
+  std::vector<GroundPlane> plane;  ///< per cell, about the cell centre, local z [m]
+  std::vector<char> seen;          ///< the cell's window held enough ground cells: ground observed
 
   size_t cells() const { return static_cast<size_t>(nx) * static_cast<size_t>(ny); }
   /// Cell holding the local point (x, y), clamped to the grid. Inline: called per point.
@@ -157,9 +168,19 @@ struct VoxelColumns {
   std::vector<uint64_t> mask;   ///< bit l: layer l of the slab holds a point
   std::vector<char> pass;       ///< dense (min_column_points) and continuous (min_continuity)
   size_t passing = 0;           ///< columns that pass
-  CellHash index;               ///< cellKey(ix, iy) -> column
+  /// Column of each cell: a dense grid over the slab's cells (gx0, gy0: its first cell; gw x gh
+  /// cells; -1: no column) unless that would be large for the slab, else a hash.
+  std::vector<int> grid;
+  int64_t gx0 = 0, gy0 = 0, gw = 0, gh = 0;
+  CellHash index;  ///< cellKey(ix, iy) -> column, when grid is empty
 
   size_t size() const { return ix.size(); }
+  /// Column of cell (ix, iy); -1 when it holds none.
+  int find(int64_t cx, int64_t cy) const {
+    if (grid.empty()) return index.find(cellKey(cx, cy));
+    if (cx < gx0 || cy < gy0 || cx >= gx0 + gw || cy >= gy0 + gh) return -1;
+    return grid[static_cast<size_t>((cy - gy0) * gw + (cx - gx0))];
+  }
 };
 
 /// The slab's voxel columns and which of them pass density and vertical continuity (paper:
