@@ -7,6 +7,7 @@
 #include <unordered_map>
 
 #include "dtif/core/cells.h"
+#include "dtif/core/extraction/extraction_stages.h"
 
 namespace dtif {
 
@@ -214,6 +215,7 @@ std::vector<std::pair<int64_t, int64_t>> trunkHeightCells(const Cloud& cloud_S, 
   const Eigen::Isometry3f T = T_F_S.cast<float>();
   // The descriptor's own footprint is in S: no transform (an identity one changes no value).
   const bool identity = T_F_S.matrix() == Eigen::Matrix4d::Identity();
+  const Divisor by_cell(cell_m);
   for (const auto& p : cloud_S) {
     if (!finite(p)) continue;
     const int id = tiles.pointIndex(p.x, p.y);
@@ -223,8 +225,8 @@ std::vector<std::pair<int64_t, int64_t>> trunkHeightCells(const Cloud& cloud_S, 
     if (h < kMinAboveM || h > kMaxAboveM) continue;
     const Eigen::Vector3f w =
         identity ? Eigen::Vector3f(p.x, p.y, p.z) : T * Eigen::Vector3f(p.x, p.y, p.z);
-    const std::pair<int64_t, int64_t> cell(fastCellIndex(w.x() / cell_m),
-                                           fastCellIndex(w.y() / cell_m));
+    const std::pair<int64_t, int64_t> cell(fastCellIndex(by_cell(w.x())),
+                                           fastCellIndex(by_cell(w.y())));
     if (out.empty() || out.back() != cell) out.push_back(cell);  // neighbours share cells
   }
   std::sort(out.begin(), out.end());

@@ -75,9 +75,9 @@ struct BoxCells {
     hits.assign(low.size(), 0);
   }
   // A point inside the box lies in one of its cells: floor and division are monotonic.
-  void add(double px, double py, double pz, double cell_m) {
-    const size_t k = static_cast<size_t>((floorIndex(py / cell_m) - y0) * width +
-                                         (floorIndex(px / cell_m) - x0));
+  void add(double px, double py, double pz, const Divisor& by_cell) {
+    const size_t k = static_cast<size_t>((floorIndex(by_cell(py)) - y0) * width +
+                                         (floorIndex(by_cell(px)) - x0));
     low[k] = std::min(low[k], pz);
     ++hits[k];
   }
@@ -99,13 +99,14 @@ GroundMap makeGroundMap(const float* x, const float* y, const float* z, size_t n
     return px >= lo.x() && py >= lo.y() && px <= hi.x() && py <= hi.y();
   };
   BoxCells box(lo, hi, cell_m);
+  const Divisor by_cell(cell_m);
   for (size_t i = 0; i < n; ++i) {
     if (!inside(i)) continue;
     const double px = x[i] + origin.x(), py = y[i] + origin.y(), pz = z[i] + origin.z();
     minx = std::min(minx, px), maxx = std::max(maxx, px);
     miny = std::min(miny, py), maxy = std::max(maxy, py);
     minz = std::min(minz, pz), maxz = std::max(maxz, pz);
-    if (box.used) box.add(px, py, pz, cell_m);
+    if (box.used) box.add(px, py, pz, by_cell);
   }
   if (!(minx <= maxx)) return m;
   // A tall extent in z would overflow the 16-bit values: coarser steps keep it in range.

@@ -177,9 +177,10 @@ GroundGrid binGroundGrid(const LocalPoints& pts, const TrunkExtractorParams& p) 
   grid.start.assign(gcells + 1, 0);
   grid.point_cell.resize(n);
   const double x0 = grid.minx, y0 = grid.miny;
+  const Divisor by_g(g);
   for (size_t i = 0; i < n; ++i) {
-    const int gx = std::min(static_cast<int>((X[i] - x0) / g), grid.nx - 1);
-    const int gy = std::min(static_cast<int>((Y[i] - y0) / g), grid.ny - 1);
+    const int gx = std::min(static_cast<int>(by_g(X[i] - x0)), grid.nx - 1);
+    const int gy = std::min(static_cast<int>(by_g(Y[i] - y0)), grid.ny - 1);
     grid.point_cell[i] = static_cast<uint32_t>(gy) * grid.nx + gx;
     ++grid.start[grid.point_cell[i] + 1];
   }

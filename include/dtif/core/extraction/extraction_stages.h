@@ -32,6 +32,22 @@ inline int64_t floorIndex(double v) {
   return i - (v < static_cast<double>(i));
 }
 
+/// x / d for many x: a multiplication by 1 / d when d is a power of two, where it gives the same
+/// quotient (both round the same exact value), a division otherwise.
+class Divisor {
+ public:
+  explicit Divisor(double d) : d_(d) {
+    int e = 0;
+    pow2_ = std::isfinite(d) && std::frexp(std::abs(d), &e) == 0.5 && e > -1000 && e < 1000;
+    inv_ = pow2_ ? 1.0 / d : 0.0;
+  }
+  double operator()(double x) const { return pow2_ ? x * inv_ : x / d_; }
+
+ private:
+  double d_, inv_;
+  bool pow2_;
+};
+
 /// Horizontal distance of an offset: std::hypot is exact but slow, and the local coordinates
 /// here are small and well scaled [m].
 inline double planarDist(double dx, double dy) { return std::sqrt(dx * dx + dy * dy); }
