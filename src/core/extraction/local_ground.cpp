@@ -156,6 +156,13 @@ double GroundGrid::groundAt(double x, double y) const {
 }
 
 GroundGrid binGroundGrid(const LocalPoints& pts, const TrunkExtractorParams& p) {
+  GroundGrid grid;
+  binGroundGrid(pts, p, &grid);
+  return grid;
+}
+
+void binGroundGrid(const LocalPoints& pts, const TrunkExtractorParams& p, GroundGrid* out) {
+  GroundGrid& grid = *out;
   const size_t n = pts.size();
   const std::vector<float>&X = pts.x, &Y = pts.y;
   float minx = X[0], maxx = X[0], miny = Y[0], maxy = Y[0];
@@ -167,7 +174,6 @@ GroundGrid binGroundGrid(const LocalPoints& pts, const TrunkExtractorParams& p) 
   // Guard against a few far outliers blowing up the dense ground grid.
   const double area_cells = (maxx - minx) / g * ((maxy - miny) / g);
   if (area_cells > p.max_ground_cells) g *= std::sqrt(area_cells / p.max_ground_cells);
-  GroundGrid grid;
   grid.minx = minx, grid.miny = miny, grid.cell_m = g;
   grid.nx = static_cast<int>(std::floor((maxx - minx) / g)) + 1;
   grid.ny = static_cast<int>(std::floor((maxy - miny) / g)) + 1;
@@ -193,7 +199,6 @@ GroundGrid binGroundGrid(const LocalPoints& pts, const TrunkExtractorParams& p) 
     grid.order[k] = static_cast<uint32_t>(i);
     grid.sx[k] = X[i], grid.sy[k] = Y[i], grid.sz[k] = pts.z[i];
   }
-  return grid;
 }
 
 GroundCells openGroundCells(const LocalPoints& /*pts: read through grid.sx, sy, sz*/,
@@ -270,14 +275,27 @@ void fitLocalGroundPlanes(const GroundCells& cells, const TrunkExtractorParams& 
 }
 
 GroundGrid estimateLocalGround(const LocalPoints& pts, const TrunkExtractorParams& p) {
-  GroundGrid grid = binGroundGrid(pts, p);
-  GroundCells cells = openGroundCells(pts, grid, p);
-  dropRaisedGroundCells(grid, p, &cells);
-  fitLocalGroundPlanes(cells, p, &grid);
+  GroundGrid grid;
+  estimateLocalGround(pts, p, &grid);
   return grid;
 }
 
+void estimateLocalGround(const LocalPoints& pts, const TrunkExtractorParams& p, GroundGrid* out) {
+  GroundGrid& grid = *out;
+  binGroundGrid(pts, p, &grid);
+  GroundCells cells = openGroundCells(pts, grid, p);
+  dropRaisedGroundCells(grid, p, &cells);
+  fitLocalGroundPlanes(cells, p, &grid);
+}
+
 std::vector<float> heightsAboveGround(const LocalPoints& pts, const GroundGrid& grid) {
+  std::vector<float> h;
+  heightsAboveGround(pts, grid, &h);
+  return h;
+}
+
+void heightsAboveGround(const LocalPoints& pts, const GroundGrid& grid, std::vector<float>* out) {
+  std::vector<float>& h = *out;
   const size_t n = pts.size();
   const int gnx = grid.nx;
   const double g = grid.cell_m;
@@ -291,12 +309,11 @@ std::vector<float> heightsAboveGround(const LocalPoints& pts, const GroundGrid& 
     cells[c] = {grid.plane[c], grid.minx + ((c % gnx) + 0.5) * g,
                 grid.miny + ((c / gnx) + 0.5) * g};
   }
-  std::vector<float> h(n);
+  h.resize(n);
   for (size_t i = 0; i < n; ++i) {
     const Centred& cc = cells[grid.point_cell[i]];
     h[i] = static_cast<float>(pts.z[i] - cc.pl.at(pts.x[i] - cc.x0, pts.y[i] - cc.y0));
   }
-  return h;
 }
 
 Footprint trunkFootprint(const Cloud& cloud, const TrunkExtractorParams& p) {

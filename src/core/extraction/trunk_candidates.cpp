@@ -112,16 +112,13 @@ size_t CellHash::hash(uint64_t k) {
 namespace {
 
 // Column cells of the slab points and their extent.
-void slabCells(const LocalPoints& pts, VoxelColumns* cols, std::vector<int64_t>* cx,
-               std::vector<int64_t>* cy, double cs) {
-  cx->resize(cols->slab.size()), cy->resize(cols->slab.size());
+void slabCells(const LocalPoints& pts, VoxelColumns* cols, double cs) {
   int64_t x0 = std::numeric_limits<int64_t>::max(), y0 = x0;
   int64_t x1 = std::numeric_limits<int64_t>::min(), y1 = x1;
-  for (size_t k = 0; k < cols->slab.size(); ++k) {
-    const uint32_t i = cols->slab[k];
-    (*cx)[k] = floorIndex(pts.x[i] / cs), (*cy)[k] = floorIndex(pts.y[i] / cs);
-    x0 = std::min(x0, (*cx)[k]), x1 = std::max(x1, (*cx)[k]);
-    y0 = std::min(y0, (*cy)[k]), y1 = std::max(y1, (*cy)[k]);
+  for (const uint32_t i : cols->slab) {
+    const int64_t cx = floorIndex(pts.x[i] / cs), cy = floorIndex(pts.y[i] / cs);
+    x0 = std::min(x0, cx), x1 = std::max(x1, cx);
+    y0 = std::min(y0, cy), y1 = std::max(y1, cy);
   }
   // Dense when the grid is small next to the slab (always for survey data; a few far points
   // would make it huge).
@@ -139,19 +136,30 @@ void slabCells(const LocalPoints& pts, VoxelColumns* cols, std::vector<int64_t>*
 VoxelColumns slabColumns(const LocalPoints& pts, const std::vector<float>& h,
                          const TrunkExtractorParams& p) {
   VoxelColumns cols;
+  slabColumns(pts, h, p, &cols);
+  return cols;
+}
+
+void slabColumns(const LocalPoints& pts, const std::vector<float>& h, const TrunkExtractorParams& p,
+                 VoxelColumns* out) {
+  VoxelColumns& cols = *out;
+  cols.slab.clear(), cols.slab_col.clear(), cols.ix.clear(), cols.iy.clear();
+  cols.count.clear(), cols.mask.clear(), cols.pass.clear(), cols.grid.clear();
+  cols.passing = 0;
+  cols.gx0 = cols.gy0 = cols.gw = cols.gh = 0;
   const double cs = p.column_cell_m;
   const int nlayers =
       std::max(1, static_cast<int>(std::ceil((p.slab_max_h_m - p.slab_min_h_m) / p.layer_h_m)));
   for (size_t i = 0; i < pts.size(); ++i)
     if (h[i] >= p.slab_min_h_m && h[i] < p.slab_max_h_m)
       cols.slab.push_back(static_cast<uint32_t>(i));
-  if (cols.slab.empty()) return cols;
-  std::vector<int64_t> cx, cy;
-  slabCells(pts, &cols, &cx, &cy, cs);
+  if (cols.slab.empty()) return;
+  slabCells(pts, &cols, cs);
   cols.slab_col.resize(cols.slab.size());
   // Columns are numbered in order of their first slab point, whichever index holds them.
   for (size_t k = 0; k < cols.slab.size(); ++k) {
-    const int64_t ix = cx[k], iy = cy[k];
+    const uint32_t i = cols.slab[k];
+    const int64_t ix = floorIndex(pts.x[i] / cs), iy = floorIndex(pts.y[i] / cs);
     const int next = static_cast<int>(cols.ix.size());
     int id;
     if (!cols.grid.empty()) {
@@ -168,7 +176,6 @@ VoxelColumns slabColumns(const LocalPoints& pts, const std::vector<float>& h,
     }
     cols.slab_col[k] = id;
     ++cols.count[id];
-    const uint32_t i = cols.slab[k];
     const int layer =
         std::min(nlayers - 1, static_cast<int>((h[i] - p.slab_min_h_m) / p.layer_h_m));
     cols.mask[id] |= uint64_t{1} << layer;
@@ -180,7 +187,6 @@ VoxelColumns slabColumns(const LocalPoints& pts, const std::vector<float>& h,
                    occupied >= p.min_continuity * nlayers;
     cols.passing += cols.pass[c];
   }
-  return cols;
 }
 
 TrunkCandidates clusterColumns(const VoxelColumns& cols, const TrunkExtractorParams& p) {

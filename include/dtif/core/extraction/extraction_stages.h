@@ -119,6 +119,8 @@ struct GroundCells {
 /// The grid's geometry and the counting sort of the points by cell (planes not yet fitted).
 /// Needs at least one point.
 GroundGrid binGroundGrid(const LocalPoints& pts, const TrunkExtractorParams& p);
+/// The same into *grid, reusing its arrays' storage (extraction keeps them between submaps).
+void binGroundGrid(const LocalPoints& pts, const TrunkExtractorParams& p, GroundGrid* grid);
 
 /// Ground points per cell: the points of "open" sub-columns (ground_sub_cell_m), those with
 /// nothing between ground_open_gap_m and ground_open_top_m above their lowest point, within
@@ -141,9 +143,13 @@ void fitLocalGroundPlanes(const GroundCells& cells, const TrunkExtractorParams& 
 
 /// The local ground (Zhang et al.; no ground segmentation): the four steps above.
 GroundGrid estimateLocalGround(const LocalPoints& pts, const TrunkExtractorParams& p);
+/// The same into *grid, reusing its arrays' storage.
+void estimateLocalGround(const LocalPoints& pts, const TrunkExtractorParams& p, GroundGrid* grid);
 
 /// Height of every point above its cell's ground plane [m].
 std::vector<float> heightsAboveGround(const LocalPoints& pts, const GroundGrid& grid);
+/// The same into *h, reusing its storage.
+void heightsAboveGround(const LocalPoints& pts, const GroundGrid& grid, std::vector<float>* h);
 
 /// DATASET.md's overlap cells of the cloud in S as a footprint of footprint_cell_m cells, the
 /// ground percentiles on at most footprint_max_samples points. Empty when footprint_cell_m is 0.
@@ -203,6 +209,9 @@ struct VoxelColumns {
 /// "high-density voxel columns with sufficient vertical continuity"). No slab point: no column.
 VoxelColumns slabColumns(const LocalPoints& pts, const std::vector<float>& h,
                          const TrunkExtractorParams& p);
+/// The same into *cols, reusing its arrays' storage.
+void slabColumns(const LocalPoints& pts, const std::vector<float>& h, const TrunkExtractorParams& p,
+                 VoxelColumns* cols);
 
 /// Slab points grouped by trunk candidate.
 struct TrunkCandidates {
