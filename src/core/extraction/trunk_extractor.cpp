@@ -242,7 +242,7 @@ bool firstPass(const Cloud& cloud, const PointBounds& b, size_t fp_stride, Local
 }
 
 // The largest arrays of an extraction, kept per thread between submaps: reused storage needs no
-// fresh pages (page faults on ~50 MB cost ~10 % of a 1 M-point extraction). Held: ~45 bytes per
+// fresh pages (page faults on ~50 MB cost ~10 % of a 1 M-point extraction). Held: ~40 bytes per
 // point of the largest cloud the thread has extracted.
 struct Workspace {
   LocalPoints pts;
