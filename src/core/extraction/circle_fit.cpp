@@ -94,8 +94,11 @@ long ransacCircle(const std::vector<Eigen::Vector2d>& xy, const CircleFitParams&
   std::uniform_int_distribution<size_t> pick(0, n - 1);
   const double tol = params.inlier_m;
   long best_score = -1;
-  size_t scored = 0;
-  for (size_t m = 0; m < n; m += stride) ++scored;
+  // The scored points, contiguous: the scoring loop below runs up to `iterations` times over
+  // them and vectorises on a plain array.
+  std::vector<double> sx, sy;
+  for (size_t m = 0; m < n; m += stride) sx.push_back(xy[m].x()), sy.push_back(xy[m].y());
+  const size_t scored = sx.size();
   int needed = params.iterations;
   for (int it = 0; it < std::min(needed, params.iterations); ++it) {
     const size_t i = pick(rng), j = pick(rng), k = pick(rng);
@@ -107,13 +110,22 @@ long ransacCircle(const std::vector<Eigen::Vector2d>& xy, const CircleFitParams&
     const double in_lo = r > tol ? (r - tol) * (r - tol) : 0.0, in_hi = (r + tol) * (r + tol);
     const double inside = r > 2.0 * tol ? (r - 2.0 * tol) * (r - 2.0 * tol) : -1.0;
     long score = 0;
-    for (size_t m = 0; m < n; m += stride) {
-      const double dx = xy[m].x() - cx, dy = xy[m].y() - cy;
-      const double d2 = dx * dx + dy * dy;
-      if (d2 > in_lo && d2 < in_hi)
-        ++score;
-      else if (d2 < inside)
-        --score;
+    // In blocks, leaving as soon as the points left cannot lift the score above the best: such
+    // a hypothesis changes nothing below.
+    constexpr size_t kBlock = 32;
+    for (size_t m0 = 0; m0 < scored; m0 += kBlock) {
+      if (score + static_cast<long>(scored - m0) <= best_score) break;
+      const size_t m1 = std::min(scored, m0 + kBlock);
+      // Branch-free counts (inside < in_lo: a point is an inlier, inside, or neither), which the
+      // compiler vectorises.
+      int64_t in = 0, out = 0;
+      for (size_t m = m0; m < m1; ++m) {
+        const double dx = sx[m] - cx, dy = sy[m] - cy;
+        const double d2 = dx * dx + dy * dy;
+        in += static_cast<int64_t>((d2 > in_lo) & (d2 < in_hi));
+        out += static_cast<int64_t>(d2 < inside);
+      }
+      score += static_cast<long>(in - out);
     }
     if (score > best_score) {
       best_score = score;

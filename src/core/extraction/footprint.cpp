@@ -7,6 +7,7 @@
 #include <unordered_map>
 
 #include "dtif/core/cells.h"
+#include "dtif/core/extraction/extraction_stages.h"
 
 namespace dtif {
 
@@ -24,34 +25,43 @@ bool finite(const pcl::PointXYZ& p) {
   return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
 }
 
-int64_t tileOf(float v) { return cellIndex(v / kTileM); }
+// cellIndex without libm's floor call (not inlined on baseline x86-64; this runs several times
+// per point): the same value for every argument.
+inline int64_t fastCellIndex(double v) {
+  constexpr double kMax = static_cast<double>(kMaxCellIndex);
+  if (!(v > -kMax && v < kMax)) return cellIndex(v);
+  const int64_t i = static_cast<int64_t>(v);  // truncates towards zero
+  return i - (v < static_cast<double>(i));
+}
+
+int64_t tileOf(float v) { return fastCellIndex(v / kTileM); }
 
 // The local-ground tiles of a cloud, by a dense index over its extent; a cloud spread over
 // kilometres (stray points) falls back to a hash map, so the result never depends on the
 // extent.
 class Tiles {
  public:
-  // Extent of the finite points; false when there is none.
-  bool init(const Cloud& cloud, size_t* n) {
-    *n = 0;
-    for (const auto& p : cloud) {
-      if (!finite(p)) continue;
-      ++*n;
-      tx0_ = std::min(tx0_, tileOf(p.x)), tx1_ = std::max(tx1_, tileOf(p.x));
-      ty0_ = std::min(ty0_, tileOf(p.y)), ty1_ = std::max(ty1_, tileOf(p.y));
-    }
-    if (*n == 0) return false;
+  // Tiles over the extent of the finite points. tileOf is monotonic, so the tiles of the extreme
+  // coordinates are the extreme tiles.
+  bool init(float minx, float maxx, float miny, float maxy) {
+    tx0_ = tileOf(minx), tx1_ = tileOf(maxx), ty0_ = tileOf(miny), ty1_ = tileOf(maxy);
     tw_ = static_cast<double>(tx1_ - tx0_) + 1.0, th_ = static_cast<double>(ty1_ - ty0_) + 1.0;
     dense_ = tw_ * th_ <= 4e6;
+    width_ = dense_ ? static_cast<int64_t>(tw_) : 0;
     return true;
   }
+  bool dense() const { return dense_; }
   // Tiles the dense index holds (0 when sparse: indices are made on insertion).
   size_t denseSize() const { return dense_ ? static_cast<size_t>(tw_ * th_) : 0; }
+  // Dense index of the tile of a point of the cloud (inside the extent by construction).
+  int denseIndex(float x, float y) const {
+    return static_cast<int>((tileOf(y) - ty0_) * width_ + (tileOf(x) - tx0_));
+  }
   // Index of tile (tx, ty); -1 when outside or (sparse, !insert) unknown.
   int index(int64_t tx, int64_t ty, bool insert) {
     if (dense_) {
       if (tx < tx0_ || tx > tx1_ || ty < ty0_ || ty > ty1_) return -1;
-      return static_cast<int>((ty - ty0_) * static_cast<int64_t>(tw_) + (tx - tx0_));
+      return static_cast<int>((ty - ty0_) * width_ + (tx - tx0_));
     }
     const auto it = sparse_.find(packCell(tx, ty));
     if (it != sparse_.end()) return it->second;
@@ -59,6 +69,10 @@ class Tiles {
     const int id = static_cast<int>(sparse_.size());
     sparse_.emplace(packCell(tx, ty), id);
     return id;
+  }
+  // Index of the tile of a point of the cloud; -1 when (sparse) unknown.
+  int pointIndex(float x, float y) {
+    return dense_ ? denseIndex(x, y) : index(tileOf(x), tileOf(y), false);
   }
   // Tile of index id; sparse indices need their coordinates in `made` (in insertion order).
   std::pair<int64_t, int64_t> coords(size_t id,
@@ -69,43 +83,104 @@ class Tiles {
   }
 
  private:
-  int64_t tx0_ = std::numeric_limits<int64_t>::max(), ty0_ = tx0_;
-  int64_t tx1_ = std::numeric_limits<int64_t>::min(), ty1_ = tx1_;
+  int64_t tx0_ = 0, ty0_ = 0, tx1_ = 0, ty1_ = 0, width_ = 0;
   double tw_ = 0.0, th_ = 0.0;
   bool dense_ = false;
   std::unordered_map<int64_t, int> sparse_;
 };
 
-// Local ground per tile (in S): 5th percentile of z inside the window around it, on every
-// stride-th finite point. NaN where the window holds no sample.
-std::vector<float> tileGround(const Cloud& cloud, size_t stride, Tiles* tiles) {
-  std::vector<std::vector<float>> tile_z(tiles->denseSize());
+// Ground samples by tile: tile id's z values are z[start[id]] .. z[start[id + 1] - 1].
+struct TileSamples {
+  std::vector<uint32_t> start;
+  std::vector<float> z;
   std::vector<std::pair<int64_t, int64_t>> made;  // coordinates of each index (sparse case)
-  size_t k = 0;
+};
+
+// Every stride-th finite point's coordinates.
+void takeSamples(const Cloud& cloud, size_t stride, HeightCellsPrepass* pre) {
+  pre->stride = stride;
+  size_t skip = 0;
   for (const auto& p : cloud) {
     if (!finite(p)) continue;
-    if (k++ % stride != 0) continue;
-    const int id = tiles->index(tileOf(p.x), tileOf(p.y), true);
-    if (static_cast<size_t>(id) >= tile_z.size()) {
-      tile_z.resize(id + 1);
-      made.emplace_back(tileOf(p.x), tileOf(p.y));
+    if (skip != 0) {
+      --skip;
+      continue;
     }
-    tile_z[id].push_back(p.z);
+    skip = stride - 1;
+    pre->sx.push_back(p.x), pre->sy.push_back(p.y), pre->sz.push_back(p.z);
   }
-  std::vector<float> ground(tile_z.size(), std::numeric_limits<float>::quiet_NaN()), window;
-  for (size_t id = 0; id < tile_z.size(); ++id) {
-    const auto [tx, ty] = tiles->coords(id, made);
-    window.clear();
+}
+
+// The samples bucketed by tile (a counting sort).
+TileSamples sampleTiles(const HeightCellsPrepass& pre, Tiles* tiles) {
+  TileSamples s;
+  std::vector<int> id_of;
+  const std::vector<float>& z_of = pre.sz;
+  id_of.reserve(z_of.size());
+  for (size_t k = 0; k < z_of.size(); ++k) {
+    const float x = pre.sx[k], y = pre.sy[k];
+    int id;
+    if (tiles->dense()) {
+      id = tiles->denseIndex(x, y);
+    } else {
+      id = tiles->index(tileOf(x), tileOf(y), true);
+      if (static_cast<size_t>(id) == s.made.size()) s.made.emplace_back(tileOf(x), tileOf(y));
+    }
+    id_of.push_back(id);
+  }
+  const size_t ntiles = tiles->dense() ? tiles->denseSize() : s.made.size();
+  s.start.assign(ntiles + 1, 0);
+  for (const int id : id_of) ++s.start[id + 1];
+  for (size_t t = 0; t < ntiles; ++t) s.start[t + 1] += s.start[t];
+  s.z.resize(z_of.size());
+  std::vector<uint32_t> fill(s.start.begin(), s.start.end() - 1);
+  for (size_t k = 0; k < id_of.size(); ++k) s.z[fill[id_of[k]]++] = z_of[k];
+  return s;
+}
+
+// The k-th smallest (0-based) of the union of sorted runs: a merge of their heads, k + 1 steps
+// (k is 5 % of the window; nth_element on a copy of the window cost 4x more).
+float kthOfSortedRuns(std::vector<std::pair<const float*, const float*>>* runs, size_t k) {
+  float v = 0.0f;
+  for (size_t step = 0; step <= k; ++step) {
+    size_t best = 0;
+    for (size_t r = 1; r < runs->size(); ++r) {
+      if (*(*runs)[r].first < *(*runs)[best].first) best = r;
+    }
+    v = *(*runs)[best].first++;
+    if ((*runs)[best].first == (*runs)[best].second) {
+      (*runs)[best] = runs->back();
+      runs->pop_back();
+    }
+  }
+  return v;
+}
+
+// Local ground per tile (in S): 5th percentile of z inside the window around it, on every
+// stride-th finite point. NaN where the window holds no sample.
+std::vector<float> tileGround(const HeightCellsPrepass& pre, Tiles* tiles) {
+  TileSamples s = sampleTiles(pre, tiles);
+  const size_t ntiles = s.start.size() - 1;
+  for (size_t id = 0; id < ntiles; ++id) {
+    std::sort(s.z.begin() + s.start[id], s.z.begin() + s.start[id + 1]);
+  }
+  std::vector<float> ground(ntiles, std::numeric_limits<float>::quiet_NaN());
+  std::vector<std::pair<const float*, const float*>> runs;
+  for (size_t id = 0; id < ntiles; ++id) {
+    const auto [tx, ty] = tiles->coords(id, s.made);
+    runs.clear();
+    size_t total = 0;
     for (int64_t dx = -kWindowTiles; dx <= kWindowTiles; ++dx) {
       for (int64_t dy = -kWindowTiles; dy <= kWindowTiles; ++dy) {
         const int o = tiles->index(tx + dx, ty + dy, false);
-        if (o >= 0) window.insert(window.end(), tile_z[o].begin(), tile_z[o].end());
+        if (o < 0 || s.start[o] == s.start[o + 1]) continue;
+        runs.emplace_back(s.z.data() + s.start[o], s.z.data() + s.start[o + 1]);
+        total += s.start[o + 1] - s.start[o];
       }
     }
-    if (window.empty()) continue;
-    const size_t q = static_cast<size_t>(kGroundPct * static_cast<double>(window.size() - 1));
-    std::nth_element(window.begin(), window.begin() + q, window.end());
-    ground[id] = window[q];
+    if (total == 0) continue;
+    const size_t q = static_cast<size_t>(kGroundPct * static_cast<double>(total - 1));
+    ground[id] = kthOfSortedRuns(&runs, q);
   }
   return ground;
 }
@@ -115,22 +190,43 @@ std::vector<float> tileGround(const Cloud& cloud, size_t stride, Tiles* tiles) {
 std::vector<std::pair<int64_t, int64_t>> trunkHeightCells(const Cloud& cloud_S, const Pose& T_F_S,
                                                           double cell_m,
                                                           size_t max_ground_samples) {
-  std::vector<std::pair<int64_t, int64_t>> out;
-  Tiles tiles;
-  size_t n = 0;
-  if (!tiles.init(cloud_S, &n) || !(cell_m > 0.0)) return out;
-  const size_t stride = max_ground_samples > 0 ? std::max<size_t>(1, n / max_ground_samples) : 1;
-  const std::vector<float> ground = tileGround(cloud_S, stride, &tiles);
-  const Eigen::Isometry3f T = T_F_S.cast<float>();
+  HeightCellsPrepass pre;
   for (const auto& p : cloud_S) {
     if (!finite(p)) continue;
-    const int id = tiles.index(tileOf(p.x), tileOf(p.y), false);
+    if (pre.finite++ == 0) pre.minx = pre.maxx = p.x, pre.miny = pre.maxy = p.y;
+    pre.minx = std::min(pre.minx, p.x), pre.maxx = std::max(pre.maxx, p.x);
+    pre.miny = std::min(pre.miny, p.y), pre.maxy = std::max(pre.maxy, p.y);
+  }
+  return trunkHeightCells(cloud_S, T_F_S, cell_m, max_ground_samples, pre);
+}
+
+std::vector<std::pair<int64_t, int64_t>> trunkHeightCells(const Cloud& cloud_S, const Pose& T_F_S,
+                                                          double cell_m, size_t max_ground_samples,
+                                                          const HeightCellsPrepass& given) {
+  std::vector<std::pair<int64_t, int64_t>> out;
+  Tiles tiles;
+  const size_t n = given.finite;
+  if (n == 0 || !tiles.init(given.minx, given.maxx, given.miny, given.maxy) || !(cell_m > 0.0))
+    return out;
+  const size_t stride = max_ground_samples > 0 ? std::max<size_t>(1, n / max_ground_samples) : 1;
+  HeightCellsPrepass own;
+  if (given.stride != stride) takeSamples(cloud_S, stride, &own);
+  const std::vector<float> ground = tileGround(given.stride == stride ? given : own, &tiles);
+  const Eigen::Isometry3f T = T_F_S.cast<float>();
+  // The descriptor's own footprint is in S: no transform (an identity one changes no value).
+  const bool identity = T_F_S.matrix() == Eigen::Matrix4d::Identity();
+  const Divisor by_cell(cell_m);
+  for (const auto& p : cloud_S) {
+    if (!finite(p)) continue;
+    const int id = tiles.pointIndex(p.x, p.y);
     // No samples in the window (only when subsampling): no ground to measure from.
     if (id < 0 || !std::isfinite(ground[id])) continue;
     const float h = p.z - ground[id];
     if (h < kMinAboveM || h > kMaxAboveM) continue;
-    const Eigen::Vector3f w = T * Eigen::Vector3f(p.x, p.y, p.z);
-    const std::pair<int64_t, int64_t> cell(cellIndex(w.x() / cell_m), cellIndex(w.y() / cell_m));
+    const Eigen::Vector3f w =
+        identity ? Eigen::Vector3f(p.x, p.y, p.z) : T * Eigen::Vector3f(p.x, p.y, p.z);
+    const std::pair<int64_t, int64_t> cell(fastCellIndex(by_cell(w.x())),
+                                           fastCellIndex(by_cell(w.y())));
     if (out.empty() || out.back() != cell) out.push_back(cell);  // neighbours share cells
   }
   std::sort(out.begin(), out.end());

@@ -6,7 +6,6 @@
 #include <algorithm>
 #include <cmath>
 #include <sstream>
-#include <unordered_map>
 #include <unordered_set>
 
 #include "dtif/core/robust.h"
@@ -45,55 +44,152 @@ struct Moments {
   Eigen::Matrix3d sxx = Eigen::Matrix3d::Zero();
 };
 
-// Shapes of the cells of the cloud rotated by R (cells on R's axes: a cell cut obliquely
-// through a stem biases its shape towards the cell's axes, so the caller re-cuts them along
-// the current estimate).
-std::vector<Shape> cellShapes(const Cloud& cloud, const Eigen::Matrix3d& R,
-                              const LevellingParams& p) {
-  std::unordered_map<int64_t, Moments> cells;
+// floor(v) as an int64 without libm's call (not inlined on baseline x86-64; three per point and
+// cut): the same value as static_cast<int64_t>(std::floor(v)) wherever that is defined.
+int64_t floorIndex(double v) {
+  if (!(v > -4.5e15 && v < 4.5e15)) return static_cast<int64_t>(std::floor(v));
+  const int64_t i = static_cast<int64_t>(v);  // truncates towards zero
+  return i - (v < static_cast<double>(i));
+}
+
+// Cell key -> dense index, open addressing with key and index side by side (one cache miss a
+// lookup), doubling at half load.
+class KeyIndex {
+ public:
+  explicit KeyIndex(size_t expected) {
+    size_t cap = 64;
+    while (cap < 2 * expected) cap <<= 1;
+    slots_.assign(cap, Slot{kEmpty, -1});
+  }
+  // Index of key; next (inserted) when absent.
+  int findOrInsert(int64_t key, int next, bool* fresh) {
+    for (size_t h = hash(key) & (slots_.size() - 1);; h = (h + 1) & (slots_.size() - 1)) {
+      if (slots_[h].key == key) {
+        *fresh = false;
+        return slots_[h].index;
+      }
+      if (slots_[h].key == kEmpty) {
+        slots_[h] = Slot{key, next};
+        *fresh = true;
+        if (2 * ++size_ > slots_.size()) grow();
+        return next;
+      }
+    }
+  }
+
+ private:
+  static constexpr int64_t kEmpty = -1;  // packKey is never negative
+  struct Slot {
+    int64_t key;
+    int index;
+  };
+  static size_t hash(int64_t k) {
+    uint64_t x = static_cast<uint64_t>(k);
+    x ^= x >> 33;
+    x *= 0xff51afd7ed558ccdULL;
+    x ^= x >> 33;
+    return static_cast<size_t>(x);
+  }
+  void grow() {
+    std::vector<Slot> old(slots_.size() * 2, Slot{kEmpty, -1});
+    old.swap(slots_);
+    for (const Slot& s : old) {
+      if (s.key == kEmpty) continue;
+      size_t h = hash(s.key) & (slots_.size() - 1);
+      while (slots_[h].key != kEmpty) h = (h + 1) & (slots_.size() - 1);
+      slots_[h] = s;
+    }
+  }
+  std::vector<Slot> slots_;
+  size_t size_ = 0;
+};
+
+// The evenly strided finite points the shape analysis uses (every cut re-reads them: a compact
+// copy instead of a stride through the whole cloud each time).
+std::vector<Eigen::Vector3f> shapeSamples(const Cloud& cloud, const LevellingParams& p) {
   const size_t stride =
       std::max<size_t>(1, cloud.size() / static_cast<size_t>(std::max(1, p.max_points)));
-  cells.reserve(std::min(cloud.size() / stride, size_t{1} << 20) / 2);
-  const double inv = 1.0 / p.voxel_m;
+  std::vector<Eigen::Vector3f> out;
+  out.reserve(cloud.size() / stride + 1);
   for (size_t i = 0; i < cloud.size(); i += stride) {
     const auto& q = cloud[i];
     if (!std::isfinite(q.x) || !std::isfinite(q.y) || !std::isfinite(q.z)) continue;
-    const Eigen::Vector3d x = R * Eigen::Vector3d(q.x, q.y, q.z);
-    Moments& m = cells[packKey(static_cast<int64_t>(std::floor(x.x() * inv)),
-                               static_cast<int64_t>(std::floor(x.y() * inv)),
-                               static_cast<int64_t>(std::floor(x.z() * inv)))];
+    out.emplace_back(q.x, q.y, q.z);
+  }
+  return out;
+}
+
+// Shapes of the cells of the samples rotated by R (cells on R's axes: a cell cut obliquely
+// through a stem biases its shape towards the cell's axes, so the caller re-cuts them along
+// the current estimate). Cells are accumulated in sample order and returned in key order, so
+// the result depends on neither a hash nor its iteration order.
+std::vector<Shape> cellShapes(const std::vector<Eigen::Vector3f>& samples, const Eigen::Matrix3d& R,
+                              const LevellingParams& p, bool slab_only) {
+  KeyIndex index(samples.size() / 8);
+  std::vector<int64_t> keys;
+  std::vector<Moments> cells;
+  const double inv = 1.0 / p.voxel_m;
+  int64_t last_key = -1;  // packKey is never negative; consecutive samples often share a cell
+  int id = -1;
+  for (const Eigen::Vector3f& q : samples) {
+    const Eigen::Vector3d x = R * q.cast<double>();
+    const int64_t key =
+        packKey(floorIndex(x.x() * inv), floorIndex(x.y() * inv), floorIndex(x.z() * inv));
+    if (key != last_key) {
+      bool fresh;
+      id = index.findOrInsert(key, static_cast<int>(cells.size()), &fresh);
+      if (fresh) cells.emplace_back(), keys.push_back(key);
+      last_key = key;
+    }
+    Moments& m = cells[id];
     ++m.n;
     m.sum += x;
-    m.sxx += x * x.transpose();
+    // x x^T, its upper triangle mirrored: the same products, half the work.
+    const double xx = x.x() * x.x(), xy = x.x() * x.y(), xz = x.x() * x.z();
+    const double yy = x.y() * x.y(), yz = x.y() * x.z(), zz = x.z() * x.z();
+    m.sxx(0, 0) += xx, m.sxx(0, 1) += xy, m.sxx(0, 2) += xz;
+    m.sxx(1, 1) += yy, m.sxx(1, 2) += yz, m.sxx(2, 2) += zz;
+  }
+  for (Moments& m : cells) {
+    m.sxx(1, 0) = m.sxx(0, 1), m.sxx(2, 0) = m.sxx(0, 2), m.sxx(2, 1) = m.sxx(1, 2);
   }
   // The lowest populated cell of each 2 m column: heights above it tell stems from canopy.
   auto columnOf = [](const Eigen::Vector3d& mean) {
-    return packKey(static_cast<int64_t>(std::floor(mean.x() / kSupportCellM)),
-                   static_cast<int64_t>(std::floor(mean.y() / kSupportCellM)), 0);
+    return packKey(floorIndex(mean.x() / kSupportCellM), floorIndex(mean.y() / kSupportCellM), 0);
   };
-  std::unordered_map<int64_t, double> lowest;
-  for (const auto& [key, m] : cells) {
+  KeyIndex column_index(cells.size() / 16);
+  std::vector<double> lowest;
+  std::vector<int> column(cells.size(), -1);
+  for (size_t c = 0; c < cells.size(); ++c) {
+    const Moments& m = cells[c];
     if (m.n < p.min_voxel_points) continue;
     const Eigen::Vector3d mean = m.sum / m.n;
-    auto [it, fresh] = lowest.emplace(columnOf(mean), mean.z());
-    if (!fresh) it->second = std::min(it->second, mean.z());
+    bool fresh;
+    const int col =
+        column_index.findOrInsert(columnOf(mean), static_cast<int>(lowest.size()), &fresh);
+    if (fresh) lowest.push_back(mean.z());
+    lowest[col] = std::min(lowest[col], mean.z());
+    column[c] = col;
   }
   std::vector<std::pair<int64_t, Shape>> keyed;
-  for (const auto& [key, m] : cells) {
+  for (size_t c = 0; c < cells.size(); ++c) {
+    const Moments& m = cells[c];
     if (m.n < p.min_voxel_points) continue;
     const Eigen::Vector3d mean = m.sum / m.n;
+    const double h = mean.z() - lowest[column[c]];
+    // The upright fit reads only the slab's cells: no eigen-decomposition for the others.
+    if (slab_only && (h < p.slab_min_h_m || h > p.slab_max_h_m)) continue;
     const Eigen::Matrix3d cov = m.sxx / m.n - mean * mean.transpose();
     const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov);
     const Eigen::Vector3d l = es.eigenvalues();  // ascending
     const int64_t support = columnOf(mean);
-    const double h = mean.z() - lowest.at(support);
     if (l(2) >= kLinear * std::max(l(1), 1e-12)) {
-      keyed.push_back({key, {Shape::kLine, es.eigenvectors().col(2), support, h}});
+      keyed.push_back({keys[c], {Shape::kLine, es.eigenvectors().col(2), support, h}});
     } else if (l(1) >= kPlanar * std::max(l(0), 1e-12)) {
-      keyed.push_back({key, {Shape::kPlate, es.eigenvectors().col(0), support, h}});
+      keyed.push_back({keys[c], {Shape::kPlate, es.eigenvectors().col(0), support, h}});
     }
   }
-  // Key order: the result does not depend on the hash map's iteration order.
+  // Key order: the result does not depend on the order cells were first seen.
   std::sort(keyed.begin(), keyed.end(),
             [](const auto& a, const auto& b) { return a.first < b.first; });
   std::vector<Shape> shapes;
@@ -196,14 +292,14 @@ double angleBetween(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
 // or the ground biases its shape towards the cell's own axes, a bias that shrinks with the
 // angle between them and gravity. Returns the fit with its up in S.
 template <class Fitter>
-UprightFit cutAndFit(const Cloud& cloud_S, Eigen::Vector3d up, const LevellingParams& params,
-                     const Fitter& fitter) {
+UprightFit cutAndFit(const std::vector<Eigen::Vector3f>& samples_S, Eigen::Vector3d up,
+                     const LevellingParams& params, bool slab_only, const Fitter& fitter) {
   constexpr int kMaxRecuts = 3;
   constexpr double kConvergedDeg = 0.3;
   UprightFit fit;
   for (int cut = 0; cut < kMaxRecuts; ++cut) {
     const Eigen::Matrix3d R_cut = levelRotation(up).toRotationMatrix();
-    fit = fitter(cellShapes(cloud_S, R_cut, params));
+    fit = fitter(cellShapes(samples_S, R_cut, params, slab_only));
     const Eigen::Vector3d next = R_cut.transpose() * fit.up;
     const double moved = angleBetween(next, up);
     up = next;
@@ -241,12 +337,13 @@ GravityObservation observeGravity(const Cloud& cloud_S, const Eigen::Vector3d& p
                                   const LevellingParams& params) {
   GravityObservation obs;
   const Eigen::Vector3d z = Eigen::Vector3d::UnitZ();
-  UprightFit fit = cutAndFit(cloud_S, prior_S.normalized(), params,
+  const std::vector<Eigen::Vector3f> samples = shapeSamples(cloud_S, params);
+  UprightFit fit = cutAndFit(samples, prior_S.normalized(), params, /*slab_only=*/true,
                              [&](const std::vector<Shape>& s) { return fitUpright(s, z, params); });
   if (fit.support >= params.min_support_cells) {
     obs.sigma_deg = std::max(kMinSigmaDeg, fit.rms_rad / std::sqrt(fit.support) / kDeg);
   } else {
-    fit = cutAndFit(cloud_S, prior_S.normalized(), params,
+    fit = cutAndFit(samples, prior_S.normalized(), params, /*slab_only=*/false,
                     [&](const std::vector<Shape>& s) { return fitGround(s, z); });
     if (fit.support < params.min_support_cells) return obs;
     obs.from_ground = true;

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "core/byte_io.h"
+#include "dtif/core/extraction/extraction_stages.h"
 
 namespace dtif {
 
@@ -53,6 +54,37 @@ bool GroundMap::at(double x, double y, double* z_m) const {
   return true;
 }
 
+namespace {
+
+// The lowest point (z + origin) and the point count of every cell of the box lo..hi, binned in
+// the same pass that bounds the points (the box's cells at the map's first cell size).
+struct BoxCells {
+  bool used = false;
+  int64_t x0 = 0, y0 = 0, width = 0, height = 0;
+  std::vector<double> low;
+  std::vector<uint32_t> hits;
+
+  BoxCells(const Eigen::Vector2d& lo, const Eigen::Vector2d& hi, double cell_m) {
+    const double w = std::floor(hi.x() / cell_m) - std::floor(lo.x() / cell_m) + 1.0;
+    const double h = std::floor(hi.y() / cell_m) - std::floor(lo.y() / cell_m) + 1.0;
+    if (!(w >= 1.0 && h >= 1.0 && w * h <= 4e6)) return;  // a stray box: two passes
+    used = true;
+    x0 = floorIndex(lo.x() / cell_m), y0 = floorIndex(lo.y() / cell_m);
+    width = static_cast<int64_t>(w), height = static_cast<int64_t>(h);
+    low.assign(static_cast<size_t>(width * height), std::numeric_limits<double>::infinity());
+    hits.assign(low.size(), 0);
+  }
+  // A point inside the box lies in one of its cells: floor and division are monotonic.
+  void add(double px, double py, double pz, const Divisor& by_cell) {
+    const size_t k = static_cast<size_t>((floorIndex(by_cell(py)) - y0) * width +
+                                         (floorIndex(by_cell(px)) - x0));
+    low[k] = std::min(low[k], pz);
+    ++hits[k];
+  }
+};
+
+}  // namespace
+
 GroundMap makeGroundMap(const float* x, const float* y, const float* z, size_t n,
                         const Eigen::Vector3d& origin, const Eigen::Vector2d& lo,
                         const Eigen::Vector2d& hi, double cell_m, double z_step_m,
@@ -66,12 +98,15 @@ GroundMap makeGroundMap(const float* x, const float* y, const float* z, size_t n
     const double px = x[i] + origin.x(), py = y[i] + origin.y();
     return px >= lo.x() && py >= lo.y() && px <= hi.x() && py <= hi.y();
   };
+  BoxCells box(lo, hi, cell_m);
+  const Divisor by_cell(cell_m);
   for (size_t i = 0; i < n; ++i) {
     if (!inside(i)) continue;
     const double px = x[i] + origin.x(), py = y[i] + origin.y(), pz = z[i] + origin.z();
     minx = std::min(minx, px), maxx = std::max(maxx, px);
     miny = std::min(miny, py), maxy = std::max(maxy, py);
     minz = std::min(minz, pz), maxz = std::max(maxz, pz);
+    if (box.used) box.add(px, py, pz, by_cell);
   }
   if (!(minx <= maxx)) return m;
   // A tall extent in z would overflow the 16-bit values: coarser steps keep it in range.
@@ -83,6 +118,7 @@ GroundMap makeGroundMap(const float* x, const float* y, const float* z, size_t n
     m.height = static_cast<int32_t>(std::floor(maxy / cell_m)) - m.y0 + 1;
     if (m.width <= kMaxGroundMapSide && m.height <= kMaxGroundMapSide) break;
     cell_m *= 2.0;
+    box.used = false;  // binned at the finer size: bin again
   }
   m.cell_m = cell_m;
   m.z_step_m = z_step_m;
@@ -90,14 +126,27 @@ GroundMap makeGroundMap(const float* x, const float* y, const float* z, size_t n
   std::vector<float> low(static_cast<size_t>(m.width) * m.height,
                          std::numeric_limits<float>::infinity());
   std::vector<uint32_t> hits(low.size(), 0);
-  for (size_t i = 0; i < n; ++i) {
-    if (!inside(i)) continue;
-    const int64_t ix = static_cast<int64_t>(std::floor((x[i] + origin.x()) / cell_m)) - m.x0;
-    const int64_t iy = static_cast<int64_t>(std::floor((y[i] + origin.y()) / cell_m)) - m.y0;
-    if (ix < 0 || iy < 0 || ix >= m.width || iy >= m.height) continue;  // rounding at the edge
-    const size_t k = static_cast<size_t>(iy) * m.width + static_cast<size_t>(ix);
-    low[k] = std::min(low[k], static_cast<float>(z[i] + origin.z() - m.z0_m));
-    ++hits[k];
+  if (box.used) {
+    // The map's cells within the box's (the points' extent lies inside the box). The float of
+    // (z - z0) is monotonic in z: that of the lowest z is the lowest of them.
+    for (int32_t r = 0; r < m.height; ++r) {
+      for (int32_t c = 0; c < m.width; ++c) {
+        const size_t b = static_cast<size_t>((m.y0 + r - box.y0) * box.width + (m.x0 + c - box.x0));
+        const size_t k = static_cast<size_t>(r) * m.width + c;
+        hits[k] = box.hits[b];
+        if (hits[k] > 0) low[k] = static_cast<float>(box.low[b] - m.z0_m);
+      }
+    }
+  } else {
+    for (size_t i = 0; i < n; ++i) {
+      if (!inside(i)) continue;
+      const int64_t ix = static_cast<int64_t>(std::floor((x[i] + origin.x()) / cell_m)) - m.x0;
+      const int64_t iy = static_cast<int64_t>(std::floor((y[i] + origin.y()) / cell_m)) - m.y0;
+      if (ix < 0 || iy < 0 || ix >= m.width || iy >= m.height) continue;  // rounding at the edge
+      const size_t k = static_cast<size_t>(iy) * m.width + static_cast<size_t>(ix);
+      low[k] = std::min(low[k], static_cast<float>(z[i] + origin.z() - m.z0_m));
+      ++hits[k];
+    }
   }
   m.z.resize(low.size());
   for (size_t k = 0; k < low.size(); ++k) {

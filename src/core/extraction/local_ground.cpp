@@ -25,8 +25,8 @@ struct SubColumns {
 };
 
 // Ground evidence of cell c (which holds points): its open sub-columns and their ground points.
-void groundOfCell(const LocalPoints& pts, const GroundGrid& grid, size_t c,
-                  const TrunkExtractorParams& p, SubColumns* s, GroundCells* cells) {
+void groundOfCell(const GroundGrid& grid, size_t c, const TrunkExtractorParams& p, SubColumns* s,
+                  GroundCells* cells) {
   const uint32_t b = grid.start[c], e = grid.start[c + 1];
   const int ns = s->ns;
   const double x0 = grid.minx + static_cast<double>(c % grid.nx) * grid.cell_m;
@@ -35,22 +35,21 @@ void groundOfCell(const LocalPoints& pts, const GroundGrid& grid, size_t c,
   std::fill(s->sopen.begin(), s->sopen.end(), 1);
   s->sidx.resize(e - b);
   for (uint32_t k = b; k < e; ++k) {
-    const uint32_t i = grid.order[k];
-    const int sx = std::clamp(static_cast<int>((pts.x[i] - x0) / s->sub), 0, ns - 1);
-    const int sy = std::clamp(static_cast<int>((pts.y[i] - y0) / s->sub), 0, ns - 1);
+    const int sx = std::clamp(static_cast<int>((grid.sx[k] - x0) / s->sub), 0, ns - 1);
+    const int sy = std::clamp(static_cast<int>((grid.sy[k] - y0) / s->sub), 0, ns - 1);
     const int sc = sy * ns + sx;
     s->sidx[k - b] = sc;
-    s->smin[sc] = std::min(s->smin[sc], pts.z[i]);
+    s->smin[sc] = std::min(s->smin[sc], grid.sz[k]);
   }
   for (uint32_t k = b; k < e; ++k) {
     const int sc = s->sidx[k - b];
-    const float dz = pts.z[grid.order[k]] - s->smin[sc];
+    const float dz = grid.sz[k] - s->smin[sc];
     if (dz > p.ground_open_gap_m && dz <= p.ground_open_top_m) s->sopen[sc] = 0;
   }
   s->zs.clear();
   for (uint32_t k = b; k < e; ++k) {
     const int sc = s->sidx[k - b];
-    const float z = pts.z[grid.order[k]];
+    const float z = grid.sz[k];
     if (s->sopen[sc] && z - s->smin[sc] <= p.ground_band_m) s->zs.push_back(z);
   }
   int nopen = 0;
@@ -157,6 +156,13 @@ double GroundGrid::groundAt(double x, double y) const {
 }
 
 GroundGrid binGroundGrid(const LocalPoints& pts, const TrunkExtractorParams& p) {
+  GroundGrid grid;
+  binGroundGrid(pts, p, &grid);
+  return grid;
+}
+
+void binGroundGrid(const LocalPoints& pts, const TrunkExtractorParams& p, GroundGrid* out) {
+  GroundGrid& grid = *out;
   const size_t n = pts.size();
   const std::vector<float>&X = pts.x, &Y = pts.y;
   float minx = X[0], maxx = X[0], miny = Y[0], maxy = Y[0];
@@ -168,29 +174,35 @@ GroundGrid binGroundGrid(const LocalPoints& pts, const TrunkExtractorParams& p) 
   // Guard against a few far outliers blowing up the dense ground grid.
   const double area_cells = (maxx - minx) / g * ((maxy - miny) / g);
   if (area_cells > p.max_ground_cells) g *= std::sqrt(area_cells / p.max_ground_cells);
-  GroundGrid grid;
   grid.minx = minx, grid.miny = miny, grid.cell_m = g;
   grid.nx = static_cast<int>(std::floor((maxx - minx) / g)) + 1;
   grid.ny = static_cast<int>(std::floor((maxy - miny) / g)) + 1;
   const size_t gcells = grid.cells();
-  // Counting sort of the points by ground cell.
+  // Counting sort of the points by ground cell. cellOf, without its floor: every offset from the
+  // grid's corner is >= 0 here, where truncation is the floor.
   grid.start.assign(gcells + 1, 0);
   grid.point_cell.resize(n);
+  const double x0 = grid.minx, y0 = grid.miny;
+  const Divisor by_g(g);
   for (size_t i = 0; i < n; ++i) {
-    int gx, gy;
-    grid.cellOf(X[i], Y[i], &gx, &gy);
+    const int gx = std::min(static_cast<int>(by_g(X[i] - x0)), grid.nx - 1);
+    const int gy = std::min(static_cast<int>(by_g(Y[i] - y0)), grid.ny - 1);
     grid.point_cell[i] = static_cast<uint32_t>(gy) * grid.nx + gx;
     ++grid.start[grid.point_cell[i] + 1];
   }
   for (size_t c = 0; c < gcells; ++c) grid.start[c + 1] += grid.start[c];
   grid.order.resize(n);
   std::vector<uint32_t> fill(grid.start.begin(), grid.start.end() - 1);
-  for (size_t i = 0; i < n; ++i) grid.order[fill[grid.point_cell[i]]++] = static_cast<uint32_t>(i);
-  return grid;
+  grid.sx.resize(n), grid.sy.resize(n), grid.sz.resize(n);
+  for (size_t i = 0; i < n; ++i) {
+    const uint32_t k = fill[grid.point_cell[i]]++;
+    grid.order[k] = static_cast<uint32_t>(i);
+    grid.sx[k] = X[i], grid.sy[k] = Y[i], grid.sz[k] = pts.z[i];
+  }
 }
 
-GroundCells openGroundCells(const LocalPoints& pts, const GroundGrid& grid,
-                            const TrunkExtractorParams& p) {
+GroundCells openGroundCells(const LocalPoints& /*pts: read through grid.sx, sy, sz*/,
+                            const GroundGrid& grid, const TrunkExtractorParams& p) {
   const size_t gcells = grid.cells();
   GroundCells cells;
   cells.low.assign(gcells, std::numeric_limits<float>::quiet_NaN());
@@ -205,7 +217,7 @@ GroundCells openGroundCells(const LocalPoints& pts, const GroundGrid& grid,
   for (size_t c = 0; c < gcells; ++c) {
     if (grid.start[c] == grid.start[c + 1]) continue;
     cells.any[c] = 1;
-    groundOfCell(pts, grid, c, p, &s, &cells);
+    groundOfCell(grid, c, p, &s, &cells);
   }
   return cells;
 }
@@ -263,25 +275,45 @@ void fitLocalGroundPlanes(const GroundCells& cells, const TrunkExtractorParams& 
 }
 
 GroundGrid estimateLocalGround(const LocalPoints& pts, const TrunkExtractorParams& p) {
-  GroundGrid grid = binGroundGrid(pts, p);
-  GroundCells cells = openGroundCells(pts, grid, p);
-  dropRaisedGroundCells(grid, p, &cells);
-  fitLocalGroundPlanes(cells, p, &grid);
+  GroundGrid grid;
+  estimateLocalGround(pts, p, &grid);
   return grid;
 }
 
+void estimateLocalGround(const LocalPoints& pts, const TrunkExtractorParams& p, GroundGrid* out) {
+  GroundGrid& grid = *out;
+  binGroundGrid(pts, p, &grid);
+  GroundCells cells = openGroundCells(pts, grid, p);
+  dropRaisedGroundCells(grid, p, &cells);
+  fitLocalGroundPlanes(cells, p, &grid);
+}
+
 std::vector<float> heightsAboveGround(const LocalPoints& pts, const GroundGrid& grid) {
+  std::vector<float> h;
+  heightsAboveGround(pts, grid, &h);
+  return h;
+}
+
+void heightsAboveGround(const LocalPoints& pts, const GroundGrid& grid, std::vector<float>* out) {
+  std::vector<float>& h = *out;
   const size_t n = pts.size();
   const int gnx = grid.nx;
   const double g = grid.cell_m;
-  std::vector<float> h(n);
-  for (size_t i = 0; i < n; ++i) {
-    const uint32_t c = grid.point_cell[i];
-    const GroundPlane& pl = grid.plane[c];
-    const double x0 = grid.minx + ((c % gnx) + 0.5) * g, y0 = grid.miny + ((c / gnx) + 0.5) * g;
-    h[i] = static_cast<float>(pts.z[i] - pl.at(pts.x[i] - x0, pts.y[i] - y0));
+  // Each cell's plane about its centre, once per cell instead of two divisions per point.
+  struct Centred {
+    GroundPlane pl;
+    double x0, y0;
+  };
+  std::vector<Centred> cells(grid.cells());
+  for (size_t c = 0; c < cells.size(); ++c) {
+    cells[c] = {grid.plane[c], grid.minx + ((c % gnx) + 0.5) * g,
+                grid.miny + ((c / gnx) + 0.5) * g};
   }
-  return h;
+  h.resize(n);
+  for (size_t i = 0; i < n; ++i) {
+    const Centred& cc = cells[grid.point_cell[i]];
+    h[i] = static_cast<float>(pts.z[i] - cc.pl.at(pts.x[i] - cc.x0, pts.y[i] - cc.y0));
+  }
 }
 
 Footprint trunkFootprint(const Cloud& cloud, const TrunkExtractorParams& p) {

@@ -3,6 +3,7 @@
 // counting sorts instead of kd-trees: the descriptor is timed (DESIGN.md).
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numeric>
 
 #include "dtif/core/extraction/extraction_stages.h"
@@ -31,7 +32,7 @@ std::vector<int> labelPassingColumns(const VoxelColumns& cols, const TrunkExtrac
     for (int dy = -reach; dy <= reach; ++dy) {
       for (int dx = -reach; dx <= reach; ++dx) {
         if (dy < 0 || (dy == 0 && dx <= 0)) continue;  // each pair once
-        const int o = cols.index.find(cellKey(cols.ix[c] + dx, cols.iy[c] + dy));
+        const int o = cols.find(cols.ix[c] + dx, cols.iy[c] + dy);
         if (o < 0 || !cols.pass[o]) continue;
         const int ra = findRoot(parent, static_cast<int>(c)), rb = findRoot(parent, o);
         if (ra != rb) parent[std::max(ra, rb)] = std::min(ra, rb);
@@ -55,7 +56,7 @@ void attachFailingColumns(const VoxelColumns& cols, std::vector<int>* col_label)
     if (cols.pass[c]) continue;
     for (int dy = -1; dy <= 1 && (*col_label)[c] < 0; ++dy) {
       for (int dx = -1; dx <= 1; ++dx) {
-        const int o = cols.index.find(cellKey(cols.ix[c] + dx, cols.iy[c] + dy));
+        const int o = cols.find(cols.ix[c] + dx, cols.iy[c] + dy);
         if (o >= 0 && cols.pass[o]) {
           (*col_label)[c] = (*col_label)[o];
           break;
@@ -108,26 +109,68 @@ size_t CellHash::hash(uint64_t k) {
   return static_cast<size_t>(k);
 }
 
+namespace {
+
+// Column cells of the slab points and their extent.
+void slabCells(const LocalPoints& pts, VoxelColumns* cols, double cs) {
+  int64_t x0 = std::numeric_limits<int64_t>::max(), y0 = x0;
+  int64_t x1 = std::numeric_limits<int64_t>::min(), y1 = x1;
+  for (const uint32_t i : cols->slab) {
+    const int64_t cx = floorIndex(pts.x[i] / cs), cy = floorIndex(pts.y[i] / cs);
+    x0 = std::min(x0, cx), x1 = std::max(x1, cx);
+    y0 = std::min(y0, cy), y1 = std::max(y1, cy);
+  }
+  // Dense when the grid is small next to the slab (always for survey data; a few far points
+  // would make it huge).
+  const double cells = (static_cast<double>(x1) - x0 + 1.0) * (static_cast<double>(y1) - y0 + 1.0);
+  if (cells <= std::max(65536.0, 8.0 * static_cast<double>(cols->slab.size()))) {
+    cols->gx0 = x0, cols->gy0 = y0, cols->gw = x1 - x0 + 1, cols->gh = y1 - y0 + 1;
+    cols->grid.assign(static_cast<size_t>(cols->gw * cols->gh), -1);
+  } else {
+    cols->index = CellHash(cols->slab.size());
+  }
+}
+
+}  // namespace
+
 VoxelColumns slabColumns(const LocalPoints& pts, const std::vector<float>& h,
                          const TrunkExtractorParams& p) {
   VoxelColumns cols;
+  slabColumns(pts, h, p, &cols);
+  return cols;
+}
+
+void slabColumns(const LocalPoints& pts, const std::vector<float>& h, const TrunkExtractorParams& p,
+                 VoxelColumns* out) {
+  VoxelColumns& cols = *out;
+  cols.slab.clear(), cols.slab_col.clear(), cols.ix.clear(), cols.iy.clear();
+  cols.count.clear(), cols.mask.clear(), cols.pass.clear(), cols.grid.clear();
+  cols.passing = 0;
+  cols.gx0 = cols.gy0 = cols.gw = cols.gh = 0;
   const double cs = p.column_cell_m;
   const int nlayers =
       std::max(1, static_cast<int>(std::ceil((p.slab_max_h_m - p.slab_min_h_m) / p.layer_h_m)));
   for (size_t i = 0; i < pts.size(); ++i)
     if (h[i] >= p.slab_min_h_m && h[i] < p.slab_max_h_m)
       cols.slab.push_back(static_cast<uint32_t>(i));
-  if (cols.slab.empty()) return cols;
-  cols.index = CellHash(cols.slab.size());
+  if (cols.slab.empty()) return;
+  slabCells(pts, &cols, cs);
   cols.slab_col.resize(cols.slab.size());
+  // Columns are numbered in order of their first slab point, whichever index holds them.
   for (size_t k = 0; k < cols.slab.size(); ++k) {
     const uint32_t i = cols.slab[k];
-    const int64_t ix = static_cast<int64_t>(std::floor(pts.x[i] / cs));
-    const int64_t iy = static_cast<int64_t>(std::floor(pts.y[i] / cs));
-    bool inserted;
-    const int id =
-        cols.index.findOrInsert(cellKey(ix, iy), static_cast<int>(cols.ix.size()), &inserted);
-    if (inserted) {
+    const int64_t ix = floorIndex(pts.x[i] / cs), iy = floorIndex(pts.y[i] / cs);
+    const int next = static_cast<int>(cols.ix.size());
+    int id;
+    if (!cols.grid.empty()) {
+      int& slot = cols.grid[static_cast<size_t>((iy - cols.gy0) * cols.gw + (ix - cols.gx0))];
+      if (slot < 0) slot = next;
+      id = slot;
+    } else {
+      bool inserted;
+      id = cols.index.findOrInsert(cellKey(ix, iy), next, &inserted);
+    }
+    if (id == next) {
       cols.ix.push_back(ix), cols.iy.push_back(iy);
       cols.count.push_back(0), cols.mask.push_back(0);
     }
@@ -144,7 +187,6 @@ VoxelColumns slabColumns(const LocalPoints& pts, const std::vector<float>& h,
                    occupied >= p.min_continuity * nlayers;
     cols.passing += cols.pass[c];
   }
-  return cols;
 }
 
 TrunkCandidates clusterColumns(const VoxelColumns& cols, const TrunkExtractorParams& p) {

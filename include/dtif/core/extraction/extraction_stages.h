@@ -24,6 +24,30 @@
 
 namespace dtif {
 
+/// floor(v) as an int64, the value static_cast<int64_t>(std::floor(v)) has wherever that is
+/// defined, without libm's call (not inlined on baseline x86-64; several run per point).
+inline int64_t floorIndex(double v) {
+  if (!(v > -4.5e15 && v < 4.5e15)) return static_cast<int64_t>(std::floor(v));
+  const int64_t i = static_cast<int64_t>(v);  // truncates towards zero
+  return i - (v < static_cast<double>(i));
+}
+
+/// x / d for many x: a multiplication by 1 / d when d is a power of two, where it gives the same
+/// quotient (both round the same exact value), a division otherwise.
+class Divisor {
+ public:
+  explicit Divisor(double d) : d_(d) {
+    int e = 0;
+    pow2_ = std::isfinite(d) && std::frexp(std::abs(d), &e) == 0.5 && e > -1000 && e < 1000;
+    inv_ = pow2_ ? 1.0 / d : 0.0;
+  }
+  double operator()(double x) const { return pow2_ ? x * inv_ : x / d_; }
+
+ private:
+  double d_, inv_;
+  bool pow2_;
+};
+
 /// Horizontal distance of an offset: std::hypot is exact but slow, and the local coordinates
 /// here are small and well scaled [m].
 inline double planarDist(double dx, double dy) { return std::sqrt(dx * dx + dy * dy); }
@@ -68,8 +92,11 @@ struct GroundGrid {
   std::vector<uint32_t> start;       ///< points of cell c: order[start[c]] .. order[start[c+1]-1]
   std::vector<uint32_t> order;       ///< point indices sorted by cell
   std::vector<uint32_t> point_cell;  ///< cell of each point (row-major: gy * nx + gx)
-  std::vector<GroundPlane> plane;    ///< per cell, about the cell centre, local z [m]
-  std::vector<char> seen;  ///< the cell's window held enough ground cells: ground observed
+  /// The points' local coordinates in `order`: x[order[k]] is sx[k]. The per-cell stages read
+  /// these in sequence instead of gathering from all over the cloud [m].
+  std::vector<float> sx, sy, sz;
+  std::vector<GroundPlane> plane;  ///< per cell, about the cell centre, local z [m]
+  std::vector<char> seen;          ///< the cell's window held enough ground cells: ground observed
 
   size_t cells() const { return static_cast<size_t>(nx) * static_cast<size_t>(ny); }
   /// Cell holding the local point (x, y), clamped to the grid. Inline: called per point.
@@ -92,6 +119,8 @@ struct GroundCells {
 /// The grid's geometry and the counting sort of the points by cell (planes not yet fitted).
 /// Needs at least one point.
 GroundGrid binGroundGrid(const LocalPoints& pts, const TrunkExtractorParams& p);
+/// The same into *grid, reusing its arrays' storage (extraction keeps them between submaps).
+void binGroundGrid(const LocalPoints& pts, const TrunkExtractorParams& p, GroundGrid* grid);
 
 /// Ground points per cell: the points of "open" sub-columns (ground_sub_cell_m), those with
 /// nothing between ground_open_gap_m and ground_open_top_m above their lowest point, within
@@ -114,9 +143,13 @@ void fitLocalGroundPlanes(const GroundCells& cells, const TrunkExtractorParams& 
 
 /// The local ground (Zhang et al.; no ground segmentation): the four steps above.
 GroundGrid estimateLocalGround(const LocalPoints& pts, const TrunkExtractorParams& p);
+/// The same into *grid, reusing its arrays' storage.
+void estimateLocalGround(const LocalPoints& pts, const TrunkExtractorParams& p, GroundGrid* grid);
 
 /// Height of every point above its cell's ground plane [m].
 std::vector<float> heightsAboveGround(const LocalPoints& pts, const GroundGrid& grid);
+/// The same into *h, reusing its storage.
+void heightsAboveGround(const LocalPoints& pts, const GroundGrid& grid, std::vector<float>* h);
 
 /// DATASET.md's overlap cells of the cloud in S as a footprint of footprint_cell_m cells, the
 /// ground percentiles on at most footprint_max_samples points. Empty when footprint_cell_m is 0.
@@ -157,15 +190,28 @@ struct VoxelColumns {
   std::vector<uint64_t> mask;   ///< bit l: layer l of the slab holds a point
   std::vector<char> pass;       ///< dense (min_column_points) and continuous (min_continuity)
   size_t passing = 0;           ///< columns that pass
-  CellHash index;               ///< cellKey(ix, iy) -> column
+  /// Column of each cell: a dense grid over the slab's cells (gx0, gy0: its first cell; gw x gh
+  /// cells; -1: no column) unless that would be large for the slab, else a hash.
+  std::vector<int> grid;
+  int64_t gx0 = 0, gy0 = 0, gw = 0, gh = 0;
+  CellHash index;  ///< cellKey(ix, iy) -> column, when grid is empty
 
   size_t size() const { return ix.size(); }
+  /// Column of cell (ix, iy); -1 when it holds none.
+  int find(int64_t cx, int64_t cy) const {
+    if (grid.empty()) return index.find(cellKey(cx, cy));
+    if (cx < gx0 || cy < gy0 || cx >= gx0 + gw || cy >= gy0 + gh) return -1;
+    return grid[static_cast<size_t>((cy - gy0) * gw + (cx - gx0))];
+  }
 };
 
 /// The slab's voxel columns and which of them pass density and vertical continuity (paper:
 /// "high-density voxel columns with sufficient vertical continuity"). No slab point: no column.
 VoxelColumns slabColumns(const LocalPoints& pts, const std::vector<float>& h,
                          const TrunkExtractorParams& p);
+/// The same into *cols, reusing its arrays' storage.
+void slabColumns(const LocalPoints& pts, const std::vector<float>& h, const TrunkExtractorParams& p,
+                 VoxelColumns* cols);
 
 /// Slab points grouped by trunk candidate.
 struct TrunkCandidates {

@@ -49,4 +49,20 @@ std::vector<std::pair<int64_t, int64_t>> trunkHeightCells(const Cloud& cloud_S, 
                                                           double cell_m,
                                                           size_t max_ground_samples = 0);
 
+/// What trunkHeightCells reads in its first passes over a cloud, gathered by a caller that
+/// passes over the cloud anyway (extraction), so trunkHeightCells passes over it once more only.
+struct HeightCellsPrepass {
+  size_t finite = 0;               ///< finite points of the cloud
+  float minx = 0.0f, maxx = 0.0f;  ///< extent of the finite points [m]
+  float miny = 0.0f, maxy = 0.0f;  ///< [m]
+  size_t stride = 0;               ///< samples: every stride-th finite point, from the first
+  std::vector<float> sx, sy, sz;   ///< the samples' coordinates [m]
+};
+
+/// trunkHeightCells with the extent and ground samples of `pre` (the same cells); its samples
+/// are used when their stride is the one max_ground_samples asks for, else taken again.
+std::vector<std::pair<int64_t, int64_t>> trunkHeightCells(const Cloud& cloud_S, const Pose& T_F_S,
+                                                          double cell_m, size_t max_ground_samples,
+                                                          const HeightCellsPrepass& pre);
+
 }  // namespace dtif

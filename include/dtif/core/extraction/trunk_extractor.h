@@ -229,8 +229,10 @@ struct CircleFit {
 CircleFit fitCircleRobust(const std::vector<Eigen::Vector2d>& xy, const CircleFitParams& params);
 
 /// Extracts trunk landmarks from a gravity-aligned cloud in the submap frame.
-/// Pure function: thread-safe, deterministic. Non-finite points are ignored; an empty or
-/// degenerate cloud yields an empty result, never an exception.
+/// Thread-safe and deterministic: the result depends on the cloud and params only. Each thread
+/// keeps its largest working arrays between calls (~40 bytes per point of the largest cloud it
+/// extracted) so that the next submap needs no fresh pages. Non-finite points are ignored; an
+/// empty or degenerate cloud yields an empty result, never an exception.
 TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorParams& params);
 
 }  // namespace dtif
