@@ -8,7 +8,8 @@
 #     every descriptor and loop published and samples each process's memory (VmRSS), open file
 #     descriptors and threads every DTIF_SOAK_PERIOD_S of wall time; rosbag play at the rate;
 #  3. after the last submap: database size, map-merge info and the database file (bytes per
-#     entry); then dtif eval on the dataset (the offline reference for the loops, once) and
+#     entry); scripts/soak_reload.sh: that file loaded by a fresh base station (the memory the
+#     database takes without the run's history); then dtif eval on the dataset (the offline reference for the loops, once) and
 #     dtif score on the loop log (loops against ground truth and against eval's);
 #  4. scripts/soak_report.py: accounting, memory and lag verdicts, plots (rss.png, lag.png),
 #     summary.md; exits non-zero when memory does not level off, the lag reaches the limit or
@@ -17,7 +18,7 @@
 # .ws/soak/<scene>/run (the plots of the docs: cp .ws/soak/soak/run/{rss,lag}.png docs/soak_*).
 # Environment: DTIF_SOAK_RATE (default 5), DTIF_SOAK_BAG_S (play only the first N s of bag time,
 # e.g. 300 for a quick check; default: all), DTIF_SOAK_PERIOD_S (default 5),
-# DTIF_SOAK_MAX_LAG_S (default 1.0).
+# DTIF_SOAK_MAX_LAG_S (default 1.0, wall time), DTIF_SOAK_CALL_S (longest service call, 60).
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 SCENE="${1:-${DTIF_REPO}/config/soak/soak.yaml}"
@@ -102,10 +103,13 @@ for _ in $(seq 1 120); do
   [ $(( $(date +%s) - $(stat -c %Y "${LOG}") )) -ge 10 ] && break
   sleep 1
 done
-rosservice call /loop_closure/database_size > "${RUN}/database_size.yaml" 2>&1 || true
-rosservice call /map_merge/get_map_info > "${RUN}/map_info.yaml" 2>&1 || true
-rosservice call /loop_closure/save_database "path: '${RUN}/database.bin'" \
-  > "${RUN}/save_database.yaml" 2>&1 || true
+# Each call bounded (rosservice ignores SIGTERM: -k): a service whose nodelet holds its lock in
+# a long computation (the map merge's re-solve) must not hang the test.
+call() { timeout -k 2 "${DTIF_SOAK_CALL_S:-60}" rosservice call "$@"; }
+call /loop_closure/database_size > "${RUN}/database_size.yaml" 2>&1 || true
+call /map_merge/get_map_info > "${RUN}/map_info.yaml" 2>&1 || true
+call /loop_closure/save_database "path: '${RUN}/database.bin'" > "${RUN}/save_database.yaml" 2>&1 \
+  || true
 sleep "${PERIOD_S}"  # one more sample of every process after the run
 kill -INT "${MONITOR_PID}" 2>/dev/null || true
 wait "${MONITOR_PID}" 2>/dev/null || true
@@ -116,6 +120,8 @@ trap - EXIT
 awk -v b="${PLAY_S}" -v t0="${t0}" -v t1="${t1}" -v r="${RATE}" -v d="${DELAY_S}" 'BEGIN {
   printf "dtif soak: played %.0f s of bag in %.0f s of wall time (rate %s)\n", b, t1 - t0 - d, r
 }' | tee "${RUN}/played.txt"
+# The saved database in a fresh base station: its memory without the run's history.
+bash "${DTIF_REPO}/scripts/soak_reload.sh" "${RUN}" "${ROBOT_LIST}" || true
 
 # dtif eval after the replay (the offline reference for the loops; not while the nodelets run).
 if [ ! -f "${OUT}/eval/summary.json" ] || [ "${OUT}/simulated" -nt "${OUT}/eval/summary.json" ]; then
