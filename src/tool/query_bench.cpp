@@ -131,6 +131,16 @@ int replay(const std::string& db, const std::string& only) {
   return 0;
 }
 
+/// LoopDetector::memoryBytes per entry (a build without it, e.g. the commit before it: "-").
+template <class D>
+auto memoryPerEntry(const D& det) -> decltype(det.memoryBytes(), std::string()) {
+  return std::to_string(det.memoryBytes() / std::max<size_t>(1, det.size()));
+}
+template <class D, class... Ignored>
+std::string memoryPerEntry(const D&, Ignored...) {
+  return "-";
+}
+
 /// The database's entries, then perturbed copies of them (other robots) up to n.
 std::vector<DescPtr> fill(const std::vector<DescPtr>& real, size_t n,
                           const dtif::DtifParams& params) {
@@ -158,8 +168,9 @@ int scale(const std::string& db, const std::vector<size_t>& sizes) {
   for (size_t i = step / 2; i < real.size(); i += step) queries.push_back(real[i]);
   std::printf(
       "| Database | Query ms mean | median | max | Screening ms | Correspondences ms | Solver ms "
-      "| Verification ms | Matched | Loops | File bytes/entry | Save s | Load s | RSS MiB |\n"
-      "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+      "| Verification ms | Matched | Loops | Memory bytes/entry | File bytes/entry | Save s | Load "
+      "s | RSS MiB |\n"
+      "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   for (size_t size : sizes) {
     const std::vector<DescPtr> entries = fill(real, size, params);
     dtif::LoopDetector det(params.loop);
@@ -189,11 +200,12 @@ int scale(const std::string& db, const std::vector<size_t>& sizes) {
     std::vector<double> sorted = t;
     std::sort(sorted.begin(), sorted.end());
     std::printf(
-        "| %zu | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.1f | %zu | %.0f | %.3f | %.3f "
+        "| %zu | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.1f | %zu | %s | %.0f | %.3f | "
+        "%.3f "
         "| %.0f |\n",
         det.size(), std::accumulate(t.begin(), t.end(), 0.0) * k, sorted[sorted.size() / 2],
         sorted.back(), screen * k, match * k, solver * k, verify * k, matched * k, loops,
-        bytes / det.size(), save_s, load_s, procMiB("VmRSS"));
+        memoryPerEntry(det).c_str(), bytes / det.size(), save_s, load_s, procMiB("VmRSS"));
     std::fflush(stdout);
   }
   std::printf("peak RSS (VmHWM) %.0f MiB\n", procMiB("VmHWM"));
