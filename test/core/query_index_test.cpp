@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
+#include <cmath>
 #include <map>
 #include <random>
 #include <string>
@@ -12,6 +14,7 @@
 #include "core/loop_test_utils.h"
 #include "dtif/core/database/loop_detector.h"
 #include "dtif/core/database/loop_pair.h"
+#include "dtif/core/matching/matcher.h"
 #include "dtif/core/matching/pair_vote_stages.h"
 
 namespace dtif {
@@ -166,6 +169,70 @@ TEST(QueryIndex, VoteTableEqualsAnOrderedMapThroughGrowth) {
   }
   EXPECT_EQ(acc.find(5, 1000, 1000), nullptr);
   EXPECT_EQ(pair_vote_stages::VoteAccumulator{}.find(0, 0, 0), nullptr);
+}
+
+/// matchTriangles as it was before the squared-distance bound: every trunk pair's hypot sorted.
+std::vector<MatchTriangle> referenceMatchTriangles(const Descriptor& d, int k) {
+  const int n = static_cast<int>(d.trunks.size());
+  const int kk = std::min(k, n - 1);
+  auto key = [](int a, int b, int c) {
+    std::array<int, 3> t{a, b, c};
+    std::sort(t.begin(), t.end());
+    return t;
+  };
+  std::vector<std::array<int, 3>> keys, faces;
+  for (const Triangle& t : d.triangles) faces.push_back(key(t.v[0], t.v[1], t.v[2]));
+  keys = faces;
+  for (int i = 0; i < n; ++i) {
+    std::vector<std::pair<double, int>> nn;
+    for (int j = 0; j < n; ++j) {
+      if (j != i)
+        nn.emplace_back(std::hypot(d.trunks[i].x - d.trunks[j].x, d.trunks[i].y - d.trunks[j].y),
+                        j);
+    }
+    std::partial_sort(nn.begin(), nn.begin() + kk, nn.end());
+    for (int a = 0; a < kk; ++a)
+      for (int b = a + 1; b < kk; ++b) keys.push_back(key(i, nn[a].second, nn[b].second));
+  }
+  std::sort(faces.begin(), faces.end());
+  std::sort(keys.begin(), keys.end());
+  keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+  std::vector<MatchTriangle> out;
+  for (const auto& t : keys) {
+    const Triangle tri = makeCanonicalTriangle(d.trunks, t[0], t[1], t[2]);
+    if (tri.len[2] <= 1e-3) continue;
+    const double s = 0.5 * (tri.len[0] + tri.len[1] + tri.len[2]);
+    const double area2 = s * (s - tri.len[0]) * (s - tri.len[1]) * (s - tri.len[2]);
+    const bool face = std::binary_search(faces.begin(), faces.end(), t);
+    if (!face && (area2 <= 0.0 || std::sqrt(area2) < 0.05 * tri.len[0] * tri.len[0])) continue;
+    out.push_back({tri, face});
+  }
+  std::stable_sort(out.begin(), out.end(), [](const MatchTriangle& a, const MatchTriangle& b) {
+    return a.t.len[0] < b.t.len[0];
+  });
+  return out;
+}
+
+TEST(QueryIndex, NeighbourTrianglesEqualTheFullDistanceSort) {
+  // Random stands, and a perfect grid: there every trunk has four neighbours at exactly the same
+  // distance, so ties decide which of them are the k nearest.
+  std::vector<Descriptor> ds;
+  for (const test::PairCase& pc : test::overlappingPairs(4, 19)) ds.push_back(pc.q);
+  Trunks grid;
+  for (int x = 0; x < 9; ++x)
+    for (int y = 0; y < 9; ++y) grid.push_back({3.0 * x, 3.0 * y, 0.0, 0.12});
+  ds.push_back(test::describe(grid, "grid", 0, 0.0));
+  for (const Descriptor& d : ds) {
+    ASSERT_TRUE(d.valid);
+    for (int k : {1, 3, 4, 6}) {
+      const std::vector<MatchTriangle> a = matchTriangles(d, k), b = referenceMatchTriangles(d, k);
+      ASSERT_EQ(a.size(), b.size()) << "k " << k;
+      for (size_t i = 0; i < a.size(); ++i) {
+        EXPECT_EQ(a[i].t.v, b[i].t.v) << "k " << k << " triangle " << i;
+        EXPECT_EQ(a[i].delaunay, b[i].delaunay);
+      }
+    }
+  }
 }
 
 }  // namespace

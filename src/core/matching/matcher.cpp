@@ -5,6 +5,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <sstream>
 
 #include "dtif/core/matching/matcher_stages.h"
@@ -51,10 +52,28 @@ std::vector<MatchTriangle> matchTriangles(const Descriptor& d, int k) {
   };
   for (const Triangle& t : d.triangles) keys.push_back(key(t.v[0], t.v[1], t.v[2]));
   std::vector<std::pair<double, int>> nn;
+  std::vector<double> d2(static_cast<size_t>(n)), kth;
   for (int i = 0; i < n; ++i) {
+    // The kk nearest by (hypot, index). hypot only for the trunks whose squared distance is
+    // within a hair of the kk-th smallest: any other has kk trunks clearly nearer, so it
+    // cannot be among them (the hair covers the rounding of either distance).
+    bool finite = true;
+    for (int j = 0; j < n; ++j) {
+      const double dx = d.trunks[i].x - d.trunks[j].x, dy = d.trunks[i].y - d.trunks[j].y;
+      d2[j] = dx * dx + dy * dy;
+      finite = finite && std::isfinite(d2[j]);
+    }
+    double bound = std::numeric_limits<double>::infinity();
+    if (finite) {
+      kth.clear();
+      for (int j = 0; j < n; ++j)
+        if (j != i) kth.push_back(d2[j]);
+      std::nth_element(kth.begin(), kth.begin() + (kk - 1), kth.end());
+      bound = kth[kk - 1] * (1.0 + 1e-9);
+    }
     nn.clear();
     for (int j = 0; j < n; ++j) {
-      if (j == i) continue;
+      if (j == i || (finite && d2[j] > bound)) continue;
       nn.emplace_back(std::hypot(d.trunks[i].x - d.trunks[j].x, d.trunks[i].y - d.trunks[j].y), j);
     }
     std::partial_sort(nn.begin(), nn.begin() + kk, nn.end());
