@@ -141,8 +141,7 @@ TEST(PairVoteStages, OnePairVotesForThePoseAndItsHalfTurn) {
   EXPECT_EQ(acc.n_yaw, 180);
   ASSERT_EQ(acc.bins.size(), 2u);
   int found = 0;
-  for (const auto& kv : acc.bins) {
-    const pair_vote_stages::VoteBin& bin = kv.second;
+  for (const pair_vote_stages::VoteBin& bin : acc.bins) {
     EXPECT_EQ(bin.count, 1.0);
     EXPECT_EQ(acc.find(bin.iyaw, bin.ix, bin.iy), &bin);
     // yaw 90 deg maps the midpoint (1, 0) onto (1.2, 2.1) with t = (1.2, 1.1); the half turn

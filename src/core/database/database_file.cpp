@@ -174,6 +174,7 @@ void LoopDetector::replaceContents(DatabaseContents contents) {
   odometry_ = std::move(contents.odometry);
   loops_ = std::move(contents.loops);
   triangles_.assign(entries_.size(), nullptr);
+  rebuildIndex();
 }
 
 }  // namespace dtif

@@ -188,10 +188,46 @@ LoopDetector::LoopDetector(const LoopDetectorParams& params) : params_(params) {
 
 bool LoopDetector::insert(std::shared_ptr<const Descriptor> d, const EntryOdometry& odometry) {
   if (!d || !d->valid || entries_.size() >= kMaxDatabaseEntries) return false;
+  indexEntry(*d);
   entries_.push_back(std::move(d));
   odometry_.push_back(odometry);
   triangles_.push_back(nullptr);
   return true;
+}
+
+void LoopDetector::indexEntry(const Descriptor& d) {
+  ScreenRow row;
+  const auto it = robot_ids_.emplace(d.robot, static_cast<uint32_t>(robots_.size())).first;
+  if (it->second == robots_.size()) robots_.push_back(d.robot);
+  row.robot = it->second;
+  row.edge_n = static_cast<uint32_t>(d.edge_hist.size());
+  row.radius_n = static_cast<uint32_t>(d.radius_hist.size());
+  row.offset = hists_.size();
+  hists_.insert(hists_.end(), d.edge_hist.begin(), d.edge_hist.end());
+  hists_.insert(hists_.end(), d.radius_hist.begin(), d.radius_hist.end());
+  row.stamp = d.stamp;
+  row.submap_id = d.submap_id;
+  screen_.push_back(row);
+}
+
+void LoopDetector::rebuildIndex() {
+  screen_.clear();
+  hists_.clear();
+  robots_.clear();
+  robot_ids_.clear();
+  for (const auto& d : entries_) indexEntry(*d);
+}
+
+size_t LoopDetector::memoryBytes() const {
+  size_t bytes = screen_.capacity() * sizeof(ScreenRow) + hists_.capacity() * sizeof(float);
+  for (const auto& d : entries_) {
+    bytes += sizeof(Descriptor) + d->trunks.capacity() * sizeof(TrunkLandmark) +
+             d->triangles.capacity() * sizeof(Triangle) +
+             (d->edge_hist.capacity() + d->radius_hist.capacity()) * sizeof(float) +
+             d->footprint.bits.capacity() + d->ground_map.z.capacity() * sizeof(int16_t) +
+             d->robot.capacity();
+  }
+  return bytes;
 }
 
 std::optional<Loop> LoopDetector::query(const Descriptor& q, QueryStats* stats) const {
@@ -208,17 +244,29 @@ std::optional<Loop> LoopDetector::query(const Descriptor& q, QueryStats* stats) 
   };
   std::vector<Cand> cands;
   const MatcherParams& mp = params_.matcher;
-  for (size_t i = 0; i < entries_.size(); ++i) {
-    const Descriptor& c = *entries_[i];
+  // The query's robot as an index entry's robot (none of them when it is new).
+  const auto q_id = robot_ids_.find(q.robot);
+  const uint32_t q_robot =
+      q_id == robot_ids_.end() ? static_cast<uint32_t>(robots_.size()) : q_id->second;
+  // histogramIntersection on the flat rows: 0 for a different binning or an empty histogram.
+  auto intersect = [this](const std::vector<float>& a, size_t offset, uint32_t n) {
+    if (a.size() != n || a.empty()) return 0.0;
+    const float* b = hists_.data() + offset;
+    double s = 0.0;
+    for (size_t k = 0; k < n; ++k) s += std::min(a[k], b[k]);
+    return s;
+  };
+  for (size_t i = 0; i < screen_.size(); ++i) {
+    const ScreenRow& c = screen_[i];
     // A query's own submap is never its loop, whatever the time window.
-    if (!eligibleLoopPair(q.robot, q.stamp, c.robot, c.stamp, params_.database.exclude_recent_s) ||
-        (c.robot == q.robot && c.submap_id == q.submap_id)) {
+    if (!eligibleLoopPair(q_robot, q.stamp, c.robot, c.stamp, params_.database.exclude_recent_s) ||
+        (c.robot == q_robot && c.submap_id == q.submap_id)) {
       continue;
     }
     ++st.eligible;
-    const double se = histogramIntersection(q.edge_hist, c.edge_hist);
+    const double se = intersect(q.edge_hist, c.offset, c.edge_n);
     if (se < mp.min_edge_hist_sim) continue;
-    const double sr = histogramIntersection(q.radius_hist, c.radius_hist);
+    const double sr = intersect(q.radius_hist, c.offset + c.edge_n, c.radius_n);
     if (sr < mp.min_radius_hist_sim) continue;
     cands.push_back({0.5 * (se + sr), i});
   }

@@ -5,6 +5,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <sstream>
 
 #include "dtif/core/matching/matcher_stages.h"
@@ -17,6 +18,18 @@ namespace {
 inline bool consistent(float a, float b, double rel, double abs_tol) {
   const double diff = std::fabs(static_cast<double>(a) - b);
   return diff <= abs_tol || diff <= rel * std::max(a, b);
+}
+
+/// consistentEdges(q, c, params) == 7 with an early exit at the first inconsistent edge or
+/// radius: the only question for a pair that cannot give weak support.
+inline bool fullyConsistent(const Triangle& q, const Triangle& c, const MatcherParams& params) {
+  for (int a = 0; a < 3; ++a) {
+    if (!consistent(q.len[a], c.len[a], params.edge_rel_tol, params.edge_abs_tol_m)) return false;
+  }
+  for (int b = 0; b < 3; ++b) {
+    if (!consistent(q.r[b], c.r[b], params.radius_rel_tol, params.radius_abs_tol_m)) return false;
+  }
+  return true;
 }
 
 }  // namespace
@@ -39,10 +52,28 @@ std::vector<MatchTriangle> matchTriangles(const Descriptor& d, int k) {
   };
   for (const Triangle& t : d.triangles) keys.push_back(key(t.v[0], t.v[1], t.v[2]));
   std::vector<std::pair<double, int>> nn;
+  std::vector<double> d2(static_cast<size_t>(n)), kth;
   for (int i = 0; i < n; ++i) {
+    // The kk nearest by (hypot, index). hypot only for the trunks whose squared distance is
+    // within a hair of the kk-th smallest: any other has kk trunks clearly nearer, so it
+    // cannot be among them (the hair covers the rounding of either distance).
+    bool finite = true;
+    for (int j = 0; j < n; ++j) {
+      const double dx = d.trunks[i].x - d.trunks[j].x, dy = d.trunks[i].y - d.trunks[j].y;
+      d2[j] = dx * dx + dy * dy;
+      finite = finite && std::isfinite(d2[j]);
+    }
+    double bound = std::numeric_limits<double>::infinity();
+    if (finite) {
+      kth.clear();
+      for (int j = 0; j < n; ++j)
+        if (j != i) kth.push_back(d2[j]);
+      std::nth_element(kth.begin(), kth.begin() + (kk - 1), kth.end());
+      bound = kth[kk - 1] * (1.0 + 1e-9);
+    }
     nn.clear();
     for (int j = 0; j < n; ++j) {
-      if (j == i) continue;
+      if (j == i || (finite && d2[j] > bound)) continue;
       nn.emplace_back(std::hypot(d.trunks[i].x - d.trunks[j].x, d.trunks[i].y - d.trunks[j].y), j);
     }
     std::partial_sort(nn.begin(), nn.begin() + kk, nn.end());
@@ -177,10 +208,12 @@ VertexSupport accumulateSupport(const std::vector<MatchTriangle>& tq,
     for (auto it = first; it != tc.end() && it->t.len[0] <= hi; ++it) {
       const Triangle& c = it->t;
       ++*triangle_pairs;
-      const int mask = consistentEdges(q, c, params);  // Eq. (3.4): chi_a per canonical edge
+      const bool faces = mq.delaunay && it->delaunay;
+      // Eq. (3.4): chi_a per canonical edge; only a pair of faces needs the partial mask.
+      const int mask = faces ? consistentEdges(q, c, params) : fullyConsistent(q, c, params) * 7;
       if (mask == 7) {
         for (int b = 0; b < 3; ++b) bump(sup.strong, q.v[b], c.v[b]);  // Eq. (3.6)
-      } else if (mask != 0 && mq.delaunay && it->delaunay) {
+      } else if (mask != 0 && faces) {
         // Neighbour triangles share their edges many times over: their partial matches would
         // pile up weak support on every edge; only Delaunay faces give weak support (Eq. 3.7).
         for (int a = 0; a < 3; ++a) {  // Eq. (3.7)
@@ -216,15 +249,16 @@ std::vector<Correspondence> weightedCorrespondences(const VertexSupport& support
     cr.w = 1.0 + params.alpha_s * std::log1p(s) + params.alpha_w * std::log1p(w);  // Eq. (3.9)
     out.push_back(cr);
   }
-  // Eq. (3.10), heaviest first; ties by index so the order is deterministic.
-  std::sort(out.begin(), out.end(), [](const Correspondence& a, const Correspondence& b) {
-    if (a.w != b.w) return a.w > b.w;
-    if (a.iq != b.iq) return a.iq < b.iq;
-    return a.ic < b.ic;
-  });
-  if (static_cast<int>(out.size()) > params.max_correspondences) {
-    out.resize(params.max_correspondences);
-  }
+  // Eq. (3.10), heaviest first; ties by index so the order is total and deterministic (the
+  // heaviest K sorted are then the first K of the whole list sorted).
+  const size_t keep = std::min(out.size(), static_cast<size_t>(params.max_correspondences));
+  std::partial_sort(out.begin(), out.begin() + keep, out.end(),
+                    [](const Correspondence& a, const Correspondence& b) {
+                      if (a.w != b.w) return a.w > b.w;
+                      if (a.iq != b.iq) return a.iq < b.iq;
+                      return a.ic < b.ic;
+                    });
+  out.resize(keep);
   return out;
 }
 

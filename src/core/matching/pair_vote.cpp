@@ -4,7 +4,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
-#include <unordered_map>
 
 #include "dtif/core/matching/pair_vote_stages.h"
 
@@ -48,9 +47,47 @@ std::vector<TrunkPair> trunkPairs(const Descriptor& d, double max_len) {
   return out;
 }
 
+void VoteAccumulator::reserve(size_t n) {
+  size_t cap = 16;
+  while (cap < 2 * n) cap *= 2;  // at most half full
+  keys_.assign(cap, -1);
+  index_.assign(cap, -1);
+  mask_ = cap - 1;
+  bins.clear();
+  bins.reserve(n);
+}
+
+size_t VoteAccumulator::slot(int64_t key) const {
+  // Fibonacci hashing, then linear probing to the key or the first free slot.
+  size_t k =
+      static_cast<size_t>((static_cast<uint64_t>(key) * 0x9E3779B97F4A7C15ull) >> 20) & mask_;
+  while (keys_[k] != -1 && keys_[k] != key) k = (k + 1) & mask_;
+  return k;
+}
+
 const VoteBin* VoteAccumulator::find(int64_t iyaw, int64_t ix, int64_t iy) const {
-  const auto it = bins.find(packBin(iyaw, ix, iy));
-  return it == bins.end() ? nullptr : &it->second;
+  if (keys_.empty()) return nullptr;
+  const size_t k = slot(packBin(iyaw, ix, iy));
+  return index_[k] < 0 ? nullptr : &bins[static_cast<size_t>(index_[k])];
+}
+
+VoteBin& VoteAccumulator::at(int64_t iyaw, int64_t ix, int64_t iy) {
+  if (2 * (bins.size() + 1) > keys_.size()) {  // full: rehash into a table twice the size
+    std::vector<VoteBin> old;
+    old.swap(bins);
+    reserve(std::max<size_t>(16, 2 * old.size()));
+    for (const VoteBin& b : old) at(b.iyaw, b.ix, b.iy) = b;
+  }
+  const int64_t key = packBin(iyaw, ix, iy);
+  const size_t k = slot(key);
+  if (index_[k] < 0) {
+    keys_[k] = key;
+    index_[k] = static_cast<int32_t>(bins.size());
+    bins.push_back(VoteBin{});
+    VoteBin& b = bins.back();
+    b.iyaw = iyaw, b.ix = ix, b.iy = iy;
+  }
+  return bins[static_cast<size_t>(index_[k])];
 }
 
 VoteAccumulator accumulateVotes(const std::vector<TrunkPair>& pq, const std::vector<TrunkPair>& pc,
@@ -78,8 +115,9 @@ VoteAccumulator accumulateVotes(const std::vector<TrunkPair>& pq, const std::vec
   };
   size_t n_compatible = 0;
   forCompatible([&](const TrunkPair&, const TrunkPair&) { ++n_compatible; });
-  std::unordered_map<int64_t, VoteBin>& bins = acc.bins;
-  bins.reserve(2 * n_compatible);
+  // Most votes scatter into bins of their own; the table grows from a guess (a memset of a
+  // table sized for every vote would cost more than the votes).
+  acc.reserve(std::min<size_t>(2 * n_compatible, size_t{1} << 14));
   // A proposal: T_c_q turns by yaw (cos cy, sin sy) and maps the query pair's midpoint onto the
   // candidate's.
   auto vote = [&](double cy, double sy, const Eigen::Vector2d& mq, const Eigen::Vector2d& mc) {
@@ -91,8 +129,7 @@ VoteAccumulator accumulateVotes(const std::vector<TrunkPair>& pq, const std::vec
     const int64_t iyaw = std::min<int64_t>(static_cast<int64_t>(yaw / yaw_bin), n_yaw - 1);
     const int64_t ix = static_cast<int64_t>(std::floor(t.x() / xy_bin));
     const int64_t iy = static_cast<int64_t>(std::floor(t.y() / xy_bin));
-    VoteBin& b = bins[packBin(iyaw, ix, iy)];
-    b.iyaw = iyaw, b.ix = ix, b.iy = iy;
+    VoteBin& b = acc.at(iyaw, ix, iy);
     b.count += 1.0, b.cos_sum += cy, b.sin_sum += sy, b.t_sum += t;
   };
   forCompatible([&](const TrunkPair& a, const TrunkPair& b) {
@@ -109,7 +146,7 @@ VoteAccumulator accumulateVotes(const std::vector<TrunkPair>& pq, const std::vec
 std::vector<ScoredSeed> scoreSeeds(const VoteAccumulator& acc) {
   std::vector<const VoteBin*> seeds;
   seeds.reserve(acc.bins.size());
-  for (const auto& kv : acc.bins) seeds.push_back(&kv.second);
+  for (const VoteBin& b : acc.bins) seeds.push_back(&b);
   auto fuller = [](const VoteBin* x, const VoteBin* y) {
     if (x->count != y->count) return x->count > y->count;
     if (x->iyaw != y->iyaw) return x->iyaw < y->iyaw;

@@ -3,8 +3,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <sstream>
 
+#include "dtif/core/cells.h"
 #include "dtif/core/extraction/footprint.h"
 #include "dtif/core/pose/rigid2d.h"
 #include "dtif/core/verification/elevation.h"
@@ -64,17 +66,41 @@ void coLocated(const std::vector<P2>& a, const std::vector<P2>& b, double radius
   }
 }
 
-/// Mutually nearest trunk pairs within `radius` under T_c_q.
+/// Mutually nearest trunk pairs within `radius` under T_c_q. Ties go as in a scan of every
+/// (i, j) in index order that takes the later of equal distances: to the larger index.
+/// Candidates come from a sorted list of grid cells a little larger than `radius` (the pairs
+/// within it lie in the 3 x 3 cells around), not from all nq x nc pairs.
 std::vector<std::pair<int, int>> mutualPairs(const std::vector<P2>& pq, const std::vector<P2>& pc,
                                              double radius) {
   const double r2 = radius * radius;
+  const double cell = radius * (1.0 + 1e-6);
+  struct Cell {
+    int64_t iy, ix;
+    int j;
+    bool operator<(const Cell& o) const {
+      return iy != o.iy ? iy < o.iy : (ix != o.ix ? ix < o.ix : j < o.j);
+    }
+  };
+  std::vector<Cell> cells;
+  cells.reserve(pc.size());
+  for (size_t j = 0; j < pc.size(); ++j) {
+    cells.push_back(
+        {cellIndex(pc[j].y() / cell), cellIndex(pc[j].x() / cell), static_cast<int>(j)});
+  }
+  std::sort(cells.begin(), cells.end());
   std::vector<int> nq(pq.size(), -1), nc(pc.size(), -1);
-  std::vector<double> dq(pq.size(), r2), dc(pc.size(), r2);
+  std::vector<double> dc(pc.size(), r2);
   for (size_t i = 0; i < pq.size(); ++i) {
-    for (size_t j = 0; j < pc.size(); ++j) {
-      const double d = (pq[i] - pc[j]).squaredNorm();
-      if (d <= dq[i]) dq[i] = d, nq[i] = static_cast<int>(j);
-      if (d <= dc[j]) dc[j] = d, nc[j] = static_cast<int>(i);
+    const int64_t iy = cellIndex(pq[i].y() / cell), ix = cellIndex(pq[i].x() / cell);
+    double best = r2;
+    for (int64_t y = iy - 1; y <= iy + 1; ++y) {
+      auto it = std::lower_bound(cells.begin(), cells.end(), Cell{y, ix - 1, -1});
+      for (; it != cells.end() && it->iy == y && it->ix <= ix + 1; ++it) {
+        const int j = it->j;
+        const double d = (pq[i] - pc[j]).squaredNorm();
+        if (d < best || (d == best && j > nq[i])) best = d, nq[i] = j;
+        if (d <= dc[j]) dc[j] = d, nc[j] = static_cast<int>(i);
+      }
     }
   }
   std::vector<std::pair<int, int>> out;

@@ -3,10 +3,12 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <cstdint>
 #include <functional>
 #include <memory>
 #include <optional>
 #include <string>
+#include <unordered_map>
 #include <utility>
 #include <vector>
 
@@ -140,6 +142,9 @@ class LoopDetector {
   bool insert(std::shared_ptr<const Descriptor> d, const EntryOdometry& odometry = {});
 
   size_t size() const { return entries_.size(); }
+  /// Bytes the database holds: the screening index and the entries' descriptors (trunks,
+  /// triangles, histograms; match triangles cached for matching not counted).
+  size_t memoryBytes() const;
   const std::vector<std::shared_ptr<const Descriptor>>& entries() const { return entries_; }
   /// The odometry pose of entries()[i], as inserted or loaded.
   const EntryOdometry& odometry(size_t i) const { return odometry_.at(i); }
@@ -171,6 +176,23 @@ class LoopDetector {
   /// matchTriangles of each entry, computed when the entry is first matched and then reused
   /// (the neighbour triangles of a descriptor do not depend on the query).
   mutable std::vector<std::shared_ptr<const std::vector<MatchTriangle>>> triangles_;
+
+  /// The screening index: what query's screening reads of every entry, in flat arrays (one
+  /// pass over contiguous memory instead of a pointer chase and a robot-name comparison per
+  /// entry). Parallel to entries_; insert and replaceContents maintain it.
+  struct ScreenRow {
+    uint32_t robot = 0;  ///< into robots_
+    uint32_t edge_n = 0, radius_n = 0;
+    size_t offset = 0;  ///< of the edge histogram in hists_; the radius histogram follows
+    double stamp = 0.0;
+    int64_t submap_id = -1;
+  };
+  std::vector<ScreenRow> screen_;
+  std::vector<float> hists_;
+  std::vector<std::string> robots_;
+  std::unordered_map<std::string, uint32_t> robot_ids_;  ///< robots_ by name
+  void indexEntry(const Descriptor& d);
+  void rebuildIndex();
 };
 
 }  // namespace dtif

@@ -6,7 +6,6 @@
 
 #include <Eigen/Core>
 #include <cstdint>
-#include <unordered_map>
 #include <vector>
 
 #include "dtif/core/descriptor/descriptor.h"
@@ -36,14 +35,26 @@ struct VoteBin {
 };
 
 /// The vote accumulator: bins of yaw_bin [rad] x xy_bin [m] x xy_bin [m], yaw wrapping at n_yaw.
+/// A flat open-addressing table over the packed indices (a submap pair casts ~10^5 votes: one
+/// allocation, not one per bin).
 struct VoteAccumulator {
   int64_t n_yaw = 1;
-  double yaw_bin = 0.0;                       ///< [rad]
-  double xy_bin = 0.0;                        ///< [m]
-  std::unordered_map<int64_t, VoteBin> bins;  ///< by packed indices
+  double yaw_bin = 0.0;       ///< [rad]
+  double xy_bin = 0.0;        ///< [m]
+  std::vector<VoteBin> bins;  ///< the bins with votes, first vote first
 
   /// The bin at (iyaw, ix, iy), nullptr when it has no vote.
   const VoteBin* find(int64_t iyaw, int64_t ix, int64_t iy) const;
+  /// The bin at (iyaw, ix, iy), added when it has no vote yet.
+  VoteBin& at(int64_t iyaw, int64_t ix, int64_t iy);
+  /// Sizes the table for up to n bins (before the first at()).
+  void reserve(size_t n);
+
+ private:
+  size_t slot(int64_t key) const;
+  std::vector<int64_t> keys_;   ///< per slot its packed indices (-1: free)
+  std::vector<int32_t> index_;  ///< per slot its bin in bins
+  size_t mask_ = 0;
 };
 
 /// Every length-compatible pair of a query pair and a candidate pair (Cons_l of Eq. 3.4 on the

@@ -1,0 +1,239 @@
+// The loop query's indexes against brute force: the database's screening index (candidates,
+// eligibility) after inserts, a reload and replaceContents, and the pose votes' flat table.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <map>
+#include <random>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include "core/loop_test_utils.h"
+#include "dtif/core/database/loop_detector.h"
+#include "dtif/core/database/loop_pair.h"
+#include "dtif/core/matching/matcher.h"
+#include "dtif/core/matching/pair_vote_stages.h"
+
+namespace dtif {
+namespace {
+
+/// Descriptors of random stands under a few robots, stamps 10 s apart per robot.
+std::vector<std::shared_ptr<const Descriptor>> randomEntries(int pairs, uint32_t seed) {
+  std::vector<std::shared_ptr<const Descriptor>> out;
+  const char* robots[] = {"alpha", "bravo", "charlie"};
+  int k = 0;
+  for (const test::PairCase& pc : test::overlappingPairs(pairs, seed)) {
+    for (const Descriptor* d : {&pc.c, &pc.q}) {
+      auto e = std::make_shared<Descriptor>(*d);
+      e->robot = robots[k % 3];
+      e->submap_id = k;
+      e->stamp = 10.0 * (k / 3);
+      out.push_back(e);
+      ++k;
+    }
+  }
+  return out;
+}
+
+/// What query's screening keeps, computed entry by entry from the descriptors: (eligible,
+/// screened in, candidate ids best first).
+std::tuple<size_t, size_t, std::vector<int64_t>> bruteScreening(
+    const std::vector<std::shared_ptr<const Descriptor>>& db, const Descriptor& q,
+    const LoopDetectorParams& p) {
+  std::vector<std::pair<double, size_t>> cands;
+  size_t eligible = 0;
+  for (size_t i = 0; i < db.size(); ++i) {
+    const Descriptor& c = *db[i];
+    if (!eligibleLoopPair(q.robot, q.stamp, c.robot, c.stamp, p.database.exclude_recent_s) ||
+        (c.robot == q.robot && c.submap_id == q.submap_id)) {
+      continue;
+    }
+    ++eligible;
+    const double se = histogramIntersection(q.edge_hist, c.edge_hist);
+    const double sr = histogramIntersection(q.radius_hist, c.radius_hist);
+    if (se < p.matcher.min_edge_hist_sim || sr < p.matcher.min_radius_hist_sim) continue;
+    cands.emplace_back(0.5 * (se + sr), i);
+  }
+  const size_t screened = cands.size();
+  std::sort(cands.begin(), cands.end(), [](const auto& a, const auto& b) {
+    return a.first > b.first || (a.first == b.first && a.second < b.second);
+  });
+  std::vector<int64_t> ids;
+  for (size_t k = 0; k < cands.size() && k < static_cast<size_t>(p.database.max_candidates); ++k)
+    ids.push_back(db[cands[k].second]->submap_id);
+  return {eligible, screened, ids};
+}
+
+LoopDetectorParams screeningParams() {
+  LoopDetectorParams p;
+  p.database.max_candidates = 4;  // the ranking decides which few are kept
+  p.database.exclude_recent_s = 25.0;
+  p.matcher.min_edge_hist_sim = 0.3;
+  p.matcher.vote_fallback = false;  // matching is not under test
+  return p;
+}
+
+void expectScreeningLikeBruteForce(const LoopDetector& det,
+                                   const std::vector<std::shared_ptr<const Descriptor>>& db,
+                                   const std::vector<std::shared_ptr<const Descriptor>>& queries) {
+  for (const auto& q : queries) {
+    QueryStats st;
+    det.query(*q, &st);
+    const auto [eligible, screened, ids] = bruteScreening(db, *q, det.params());
+    EXPECT_EQ(st.eligible, eligible) << q->robot << "/" << q->submap_id;
+    EXPECT_EQ(st.screened_in, screened) << q->robot << "/" << q->submap_id;
+    EXPECT_EQ(st.candidates, ids) << q->robot << "/" << q->submap_id;
+  }
+}
+
+TEST(QueryIndex, ScreeningEqualsBruteForceAfterInsertReloadAndReplace) {
+  const auto entries = randomEntries(12, 77);
+  const LoopDetectorParams p = screeningParams();
+  LoopDetector det(p);
+  std::vector<std::shared_ptr<const Descriptor>> db;
+  // Queries: entries already in (their own submap and recent ones of their robot excluded)
+  // and a robot the database has never seen.
+  std::vector<std::shared_ptr<const Descriptor>> queries;
+  for (size_t i = 0; i < entries.size(); ++i) {
+    if (i % 5 == 0) {
+      queries.push_back(entries[i]);
+      auto stranger = std::make_shared<Descriptor>(*entries[i]);
+      stranger->robot = "delta";
+      queries.push_back(stranger);
+    }
+    ASSERT_TRUE(det.insert(entries[i]));
+    db.push_back(entries[i]);
+    if (i % 8 == 7) expectScreeningLikeBruteForce(det, db, queries);  // grows with inserts
+  }
+  expectScreeningLikeBruteForce(det, db, queries);
+
+  const std::string path = ::testing::TempDir() + "/dtif_query_index.bin";
+  det.save(path);
+  LoopDetector loaded(p);
+  loaded.insert(entries[3]);  // replaced by the load, index included
+  loaded.load(path);
+  ASSERT_EQ(loaded.size(), db.size());
+  expectScreeningLikeBruteForce(loaded, loaded.entries(), queries);
+
+  // Replaced by a smaller database: the index holds only the new entries.
+  DatabaseContents half;
+  half.entries.assign(db.begin(), db.begin() + db.size() / 2);
+  half.odometry.resize(half.entries.size());
+  loaded.replaceContents(half);
+  expectScreeningLikeBruteForce(loaded, half.entries, queries);
+  EXPECT_GT(loaded.memoryBytes(), 0u);
+  EXPECT_LT(loaded.memoryBytes(), det.memoryBytes());
+}
+
+TEST(QueryIndex, ScreeningSkipsEntriesOfAnotherHistogramBinning) {
+  auto entries = randomEntries(3, 5);
+  auto odd = std::make_shared<Descriptor>(*entries[1]);
+  odd->edge_hist.push_back(0.0f);  // another binning: intersection 0, never screened in
+  odd->submap_id = 100;
+  LoopDetectorParams p = screeningParams();
+  p.matcher.min_edge_hist_sim = 0.0;
+  p.matcher.min_radius_hist_sim = 0.0;
+  LoopDetector det(p);
+  std::vector<std::shared_ptr<const Descriptor>> db{entries[0], odd, entries[2]};
+  for (const auto& d : db) det.insert(d);
+  expectScreeningLikeBruteForce(det, db, {entries[3], entries[4], entries[5]});
+}
+
+TEST(QueryIndex, VoteTableEqualsAnOrderedMapThroughGrowth) {
+  std::mt19937 rng(11);
+  std::uniform_int_distribution<int64_t> yaw(0, 179), xy(-300, 300);
+  pair_vote_stages::VoteAccumulator acc;
+  acc.reserve(4);  // grows many times over
+  std::map<std::tuple<int64_t, int64_t, int64_t>, double> ref;
+  std::vector<std::tuple<int64_t, int64_t, int64_t>> first_seen;
+  for (int k = 0; k < 20000; ++k) {
+    // Bins clustered near a few poses as well as scattered ones, as pose votes are.
+    const bool near = k % 3 == 0;
+    const auto key = std::make_tuple(near ? yaw(rng) % 4 : yaw(rng), near ? xy(rng) % 3 : xy(rng),
+                                     near ? 7 : xy(rng));
+    const auto [iyaw, ix, iy] = key;
+    pair_vote_stages::VoteBin& b = acc.at(iyaw, ix, iy);
+    EXPECT_EQ(std::make_tuple(b.iyaw, b.ix, b.iy), key);
+    b.count += 1.0;
+    if (ref[key]++ == 0.0) first_seen.push_back(key);
+  }
+  ASSERT_EQ(acc.bins.size(), ref.size());
+  for (size_t i = 0; i < acc.bins.size(); ++i) {  // first vote first, through every rehash
+    const pair_vote_stages::VoteBin& b = acc.bins[i];
+    EXPECT_EQ(std::make_tuple(b.iyaw, b.ix, b.iy), first_seen[i]);
+    EXPECT_EQ(b.count, ref.at(first_seen[i]));
+    EXPECT_EQ(acc.find(b.iyaw, b.ix, b.iy), &b);
+  }
+  EXPECT_EQ(acc.find(5, 1000, 1000), nullptr);
+  EXPECT_EQ(pair_vote_stages::VoteAccumulator{}.find(0, 0, 0), nullptr);
+}
+
+/// matchTriangles as it was before the squared-distance bound: every trunk pair's hypot sorted.
+std::vector<MatchTriangle> referenceMatchTriangles(const Descriptor& d, int k) {
+  const int n = static_cast<int>(d.trunks.size());
+  const int kk = std::min(k, n - 1);
+  auto key = [](int a, int b, int c) {
+    std::array<int, 3> t{a, b, c};
+    std::sort(t.begin(), t.end());
+    return t;
+  };
+  std::vector<std::array<int, 3>> keys, faces;
+  for (const Triangle& t : d.triangles) faces.push_back(key(t.v[0], t.v[1], t.v[2]));
+  keys = faces;
+  for (int i = 0; i < n; ++i) {
+    std::vector<std::pair<double, int>> nn;
+    for (int j = 0; j < n; ++j) {
+      if (j != i)
+        nn.emplace_back(std::hypot(d.trunks[i].x - d.trunks[j].x, d.trunks[i].y - d.trunks[j].y),
+                        j);
+    }
+    std::partial_sort(nn.begin(), nn.begin() + kk, nn.end());
+    for (int a = 0; a < kk; ++a)
+      for (int b = a + 1; b < kk; ++b) keys.push_back(key(i, nn[a].second, nn[b].second));
+  }
+  std::sort(faces.begin(), faces.end());
+  std::sort(keys.begin(), keys.end());
+  keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+  std::vector<MatchTriangle> out;
+  for (const auto& t : keys) {
+    const Triangle tri = makeCanonicalTriangle(d.trunks, t[0], t[1], t[2]);
+    if (tri.len[2] <= 1e-3) continue;
+    const double s = 0.5 * (tri.len[0] + tri.len[1] + tri.len[2]);
+    const double area2 = s * (s - tri.len[0]) * (s - tri.len[1]) * (s - tri.len[2]);
+    const bool face = std::binary_search(faces.begin(), faces.end(), t);
+    if (!face && (area2 <= 0.0 || std::sqrt(area2) < 0.05 * tri.len[0] * tri.len[0])) continue;
+    out.push_back({tri, face});
+  }
+  std::stable_sort(out.begin(), out.end(), [](const MatchTriangle& a, const MatchTriangle& b) {
+    return a.t.len[0] < b.t.len[0];
+  });
+  return out;
+}
+
+TEST(QueryIndex, NeighbourTrianglesEqualTheFullDistanceSort) {
+  // Random stands, and a perfect grid: there every trunk has four neighbours at exactly the same
+  // distance, so ties decide which of them are the k nearest.
+  std::vector<Descriptor> ds;
+  for (const test::PairCase& pc : test::overlappingPairs(4, 19)) ds.push_back(pc.q);
+  Trunks grid;
+  for (int x = 0; x < 9; ++x)
+    for (int y = 0; y < 9; ++y) grid.push_back({3.0 * x, 3.0 * y, 0.0, 0.12});
+  ds.push_back(test::describe(grid, "grid", 0, 0.0));
+  for (const Descriptor& d : ds) {
+    ASSERT_TRUE(d.valid);
+    for (int k : {1, 3, 4, 6}) {
+      const std::vector<MatchTriangle> a = matchTriangles(d, k), b = referenceMatchTriangles(d, k);
+      ASSERT_EQ(a.size(), b.size()) << "k " << k;
+      for (size_t i = 0; i < a.size(); ++i) {
+        EXPECT_EQ(a[i].t.v, b[i].t.v) << "k " << k << " triangle " << i;
+        EXPECT_EQ(a[i].delaunay, b[i].delaunay);
+      }
+    }
+  }
+}
+
+}  // namespace
+}  // namespace dtif
