@@ -47,8 +47,11 @@ std::vector<MergeSubmap> drift(const std::string& robot, int n, double yaw_bias,
   for (int k = 0; k < n; ++k) {
     if (k > 0) {
       const Pose step = gtPose(robot, k - 1).inverse() * gtPose(robot, k);
-      T_O_S = T_O_S * step *
-              test::makePose(nt(*rng), nt(*rng), nt(*rng), nr(*rng), nr(*rng), yaw_bias + nr(*rng));
+      // One draw per statement, in the order gcc evaluated these arguments (last first), so the
+      // data are the same whatever the compiler.
+      double v[6];
+      for (int i = 5; i >= 0; --i) v[i] = i < 3 ? nt(*rng) : nr(*rng);
+      T_O_S = T_O_S * step * test::makePose(v[0], v[1], v[2], v[3], v[4], yaw_bias + v[5]);
     }
     MergeSubmap s;
     s.robot = robot;
