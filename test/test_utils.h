@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <filesystem>
+#include <random>
 #include <string>
 
 #include "dtif/core/types.h"
@@ -19,6 +20,17 @@ inline Pose makePose(double x, double y, double z, double roll, double pitch, do
                    .toRotationMatrix();
   T.translation() = Eigen::Vector3d(x, y, z);
   return T;
+}
+
+/// A vector of three random draws, one per statement: z first, then y, then x, the order gcc
+/// evaluated `Eigen::Vector3d(dx(rng), dy(rng), dz(rng))` in, so the tests' data (and the
+/// thresholds checked on them) are the same whatever the compiler.
+template <class Dx, class Dy, class Dz>
+Eigen::Vector3d randomVector(std::mt19937& rng, Dx& dx, Dy& dy, Dz& dz) {
+  const double z = dz(rng);
+  const double y = dy(rng);
+  const double x = dx(rng);
+  return {x, y, z};
 }
 
 /// An empty folder of this process under the system's temporary folder (removed first if it

@@ -17,6 +17,7 @@
 #include <sstream>
 
 #include "dtif/core/file_io.h"
+#include "dtif/io/pcd_reader.h"
 
 namespace dtif {
 namespace fs = std::filesystem;
@@ -25,10 +26,7 @@ namespace {
 // Bounds of files from outside (docs/limits.md).
 constexpr uint64_t kMaxCsvBytes = uint64_t{256} << 20;
 constexpr uint64_t kMaxPcdBytes = uint64_t{4} << 30;
-constexpr long long kMaxPcdPoints = 100000000;  // trunk_extraction.max_points' upper bound
 }  // namespace
-
-Cloud::Ptr readPcdChecked(const std::string& path);
 
 namespace {
 
@@ -161,137 +159,6 @@ void closeChecked(std::ofstream& os, const std::string& path) {
   if (!os) fail(path, "write failed");
 }
 
-/// PCL's reader crashes on some malformed files, so the header is checked here first: the
-/// fields, their sizes/types/counts, the point count and that the data section is long enough.
-// Every data row of an ASCII PCD holds `values` numbers (PCL reads a garbage row as a point).
-void checkPcdAsciiRows(std::istream& in, const std::string& path, long long values,
-                       long long points) {
-  std::string line, tok;
-  long long rows = 0, n = 0;
-  while (std::getline(in, line)) {
-    ++n;
-    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
-    std::istringstream ss(line);
-    long long k = 0;
-    while (ss >> tok) {
-      char* end = nullptr;
-      std::strtod(tok.c_str(), &end);
-      if (end == tok.c_str() || *end != '\0') {
-        fail(path, "ASCII data row " + std::to_string(n) + ": '" + tok.substr(0, 20) +
-                       "' is not a number");
-      }
-      ++k;
-    }
-    if (k != values) {
-      fail(path, "ASCII data row " + std::to_string(n) + " has " + std::to_string(k) +
-                     " values, the header says " + std::to_string(values));
-    }
-    ++rows;
-  }
-  if (rows != points) {
-    fail(path,
-         "ASCII data has " + std::to_string(rows) + " rows, POINTS says " + std::to_string(points));
-  }
-}
-
-void checkPcdHeader(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) fail(path, "cannot open file");
-  in.seekg(0, std::ios::end);
-  const std::streamoff file_size = in.tellg();
-  in.seekg(0);
-  std::map<std::string, std::vector<std::string>> h;
-  std::string line, data;
-  while (data.empty() && std::getline(in, line)) {
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    if (line.empty() || line[0] == '#') continue;
-    // A header is ASCII text: control or 8-bit bytes in it (found by fuzz_pcd: PCL then asked
-    // for a 100 TB string) mean binary junk, refused before PCL reads the file.
-    if (std::any_of(line.begin(), line.end(),
-                    [](unsigned char c) { return (c < 0x20 && c != '\t') || c >= 0x7f; })) {
-      fail(path, "not a PCD file (binary bytes in the header)");
-    }
-    std::istringstream ss(line);
-    std::string key, v;
-    ss >> key;
-    std::vector<std::string> values;
-    while (ss >> v) values.push_back(v);
-    if (key == "DATA") {
-      data = values.empty() ? "?" : values[0];
-    } else if (key == "VERSION" || key == "FIELDS" || key == "SIZE" || key == "TYPE" ||
-               key == "COUNT" || key == "WIDTH" || key == "HEIGHT" || key == "VIEWPOINT" ||
-               key == "POINTS") {
-      h[key] = values;
-    } else {
-      fail(path, "not a PCD file (unexpected header line '" + line.substr(0, 40) + "')");
-    }
-  }
-  if (data.empty()) fail(path, "not a PCD file (no DATA line)");
-  const auto& fields = h["FIELDS"];
-  const auto& sizes = h["SIZE"];
-  const auto& types = h["TYPE"];
-  auto counts = h["COUNT"];
-  if (counts.empty()) counts.assign(fields.size(), "1");
-  if (fields.empty() || sizes.size() != fields.size() || types.size() != fields.size() ||
-      counts.size() != fields.size()) {
-    fail(path, "malformed PCD header (FIELDS, SIZE, TYPE and COUNT disagree)");
-  }
-  // Bounded counts (docs/limits.md), so no product below overflows.
-  auto toCount = [&](const std::string& s, const char* what, long long max) -> long long {
-    char* end = nullptr;
-    errno = 0;
-    const long long v = std::strtoll(s.c_str(), &end, 10);
-    if (s.empty() || *end != '\0' || v < 0 || errno == ERANGE) {
-      fail(path, std::string("malformed PCD ") + what);
-    }
-    if (v > max) {
-      fail(path,
-           std::string("PCD ") + what + " " + s + " exceeds the limit of " + std::to_string(max));
-    }
-    return v;
-  };
-  long long point_step = 0, values = 0;
-  for (size_t i = 0; i < fields.size(); ++i) {
-    const long long sz = toCount(sizes[i], "SIZE", 8);
-    if (sz != 1 && sz != 2 && sz != 4 && sz != 8) fail(path, "malformed PCD SIZE");
-    if (types[i] != "F" && types[i] != "I" && types[i] != "U") fail(path, "malformed PCD TYPE");
-    const long long count = toCount(counts[i], "COUNT", 4096);
-    point_step += sz * count;
-    values += count;
-  }
-  if (fields.size() > 256) fail(path, "PCD has more than 256 fields");
-  long long points = 0;
-  if (!h["POINTS"].empty()) {
-    points = toCount(h["POINTS"][0], "POINTS", kMaxPcdPoints);
-  } else if (!h["WIDTH"].empty()) {
-    points = toCount(h["WIDTH"][0], "WIDTH", kMaxPcdPoints) *
-             (h["HEIGHT"].empty() ? 1 : toCount(h["HEIGHT"][0], "HEIGHT", kMaxPcdPoints));
-    if (points > kMaxPcdPoints) fail(path, "PCD WIDTH x HEIGHT exceeds the point limit");
-  } else {
-    fail(path, "malformed PCD header (no POINTS or WIDTH)");
-  }
-  const std::streamoff data_start = in.tellg();
-  const long long remaining = data_start < 0 ? 0 : file_size - data_start;
-  if (data == "binary") {
-    if (points * point_step > remaining) fail(path, "truncated PCD (binary data too short)");
-  } else if (data == "binary_compressed") {
-    if (points > 0) {
-      uint32_t sizes_hdr[2] = {0, 0};
-      if (remaining < 8 || !in.read(reinterpret_cast<char*>(sizes_hdr), 8)) {
-        fail(path, "truncated PCD (no compressed block)");
-      }
-      if (sizes_hdr[0] > remaining - 8) fail(path, "truncated PCD (compressed data too short)");
-      if (static_cast<long long>(sizes_hdr[1]) != points * point_step) {
-        fail(path, "malformed PCD (compressed size disagrees with POINTS)");
-      }
-    }
-  } else if (data == "ascii") {
-    checkPcdAsciiRows(in, path, values, points);
-  } else {
-    fail(path, "malformed PCD (DATA must be ascii, binary or binary_compressed)");
-  }
-}
-
 }  // namespace
 
 Dataset readDataset(const std::string& dir) {
@@ -373,81 +240,12 @@ Cloud::Ptr loadPcd(const std::string& path) {
   const std::string problem = regularFileProblem(path, kMaxPcdBytes);
   if (!problem.empty()) fail(path, problem);
   try {
-    return readPcdChecked(path);
+    return readPcdFile(path);
   } catch (const DatasetError&) {
     throw;
-  } catch (const std::exception& e) {  // PCL's and the library's (bad_alloc, length_error)
+  } catch (const std::exception& e) {  // the library's (bad_alloc, length_error)
     fail(path, std::string("cannot read the point cloud: ") + e.what());
   }
-}
-
-namespace {
-
-// The value of field f of point i as a float, whatever its PCD type.
-float fieldValue(const pcl::PCLPointCloud2& blob, const pcl::PCLPointField& f, size_t i) {
-  const uint8_t* p = blob.data.data() + i * blob.point_step + f.offset;
-  auto get = [p](auto v) {
-    std::memcpy(&v, p, sizeof(v));
-    return static_cast<float>(v);
-  };
-  switch (f.datatype) {
-    case pcl::PCLPointField::INT8:
-      return get(int8_t());
-    case pcl::PCLPointField::UINT8:
-      return get(uint8_t());
-    case pcl::PCLPointField::INT16:
-      return get(int16_t());
-    case pcl::PCLPointField::UINT16:
-      return get(uint16_t());
-    case pcl::PCLPointField::INT32:
-      return get(int32_t());
-    case pcl::PCLPointField::UINT32:
-      return get(uint32_t());
-    case pcl::PCLPointField::FLOAT64:
-      return get(double());
-    default:
-      return get(float());
-  }
-}
-
-}  // namespace
-
-Cloud::Ptr readPcdChecked(const std::string& path) {
-  checkPcdHeader(path);
-  pcl::PCLPointCloud2 blob;
-  pcl::PCDReader reader;
-  // PCL prints its own diagnostics; our one-line error below is what the user needs.
-  if (reader.read(path, blob) < 0) fail(path, "unreadable or malformed PCD file");
-  // x, y and z of any numeric type (FLOAT64 from CloudCompare or PDAL, integer ones): PCL's
-  // own conversion copies their bytes as float32 and reads nonsense.
-  const pcl::PCLPointField* xyz[3] = {nullptr, nullptr, nullptr};
-  for (const auto& f : blob.fields) {
-    for (int k = 0; k < 3; ++k) {
-      if (f.name == std::string(1, "xyz"[k])) xyz[k] = &f;
-    }
-  }
-  if (!xyz[0] || !xyz[1] || !xyz[2]) fail(path, "PCD has no x y z fields");
-  const size_t n = static_cast<size_t>(blob.width) * blob.height;
-  if (blob.data.size() < n * blob.point_step) {
-    fail(path, "PCD data shorter than its points (header lines out of the PCD order?)");
-  }
-  for (const pcl::PCLPointField* f : xyz) {
-    const size_t bytes = static_cast<size_t>(pcl::getFieldSize(f->datatype));
-    if (bytes == 0 || f->count != 1 || f->offset + bytes > blob.point_step) {
-      fail(path, "PCD field '" + f->name + "' has an unsupported type or layout");
-    }
-  }
-  Cloud::Ptr out(new Cloud);
-  out->reserve(n);
-  for (size_t i = 0; i < n; ++i) {
-    const pcl::PointXYZ p(fieldValue(blob, *xyz[0], i), fieldValue(blob, *xyz[1], i),
-                          fieldValue(blob, *xyz[2], i));
-    if (std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z)) out->push_back(p);
-  }
-  out->width = static_cast<uint32_t>(out->size());
-  out->height = 1;
-  out->is_dense = true;
-  return out;
 }
 
 Cloud::Ptr loadSubmapCloud(const Dataset& ds, const SubmapRecord& rec) {

@@ -31,11 +31,11 @@ Case makeCase(uint32_t seed, int n, double outliers, const Pose& T, double heigh
   for (int i = 0; i < n; ++i) {
     Correspondence k;
     k.iq = k.ic = i;
-    k.pq = Eigen::Vector3d(uxy(rng), uxy(rng), uz(rng));
+    k.pq = test::randomVector(rng, uxy, uxy, uz);
     if (u01(rng) < outliers) {
-      k.pc = Eigen::Vector3d(uxy(rng), uxy(rng), uz(rng));
+      k.pc = test::randomVector(rng, uxy, uxy, uz);
     } else {
-      k.pc = T * k.pq + Eigen::Vector3d(noise(rng), noise(rng), noise(rng));
+      k.pc = T * k.pq + test::randomVector(rng, noise, noise, noise);
       ++c.inliers;
     }
     c.corrs.push_back(k);

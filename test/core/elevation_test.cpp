@@ -64,8 +64,16 @@ TEST(Elevation, TiltPriorSteadiesFewCloseBases) {
     for (int i = 0; i < 30; ++i) {
       const Trunks world = test::randomStand(rng, 100, 100, 600);
       const Eigen::Vector2d cc(50, 50), qc(56, 47);
-      const Pose T_w_c = tilted(poseXyYaw(cc.x(), cc.y(), 0.5, yaw(rng)), tilt(rng), tilt(rng));
-      const Pose T_w_q = tilted(poseXyYaw(qc.x(), qc.y(), -0.3, yaw(rng)), tilt(rng), tilt(rng));
+      // One draw per statement, in the order gcc evaluated these arguments (last first), so the
+      // data are the same whatever the compiler.
+      const double pitch_c = tilt(rng);
+      const double roll_c = tilt(rng);
+      const double yaw_c = yaw(rng);
+      const Pose T_w_c = tilted(poseXyYaw(cc.x(), cc.y(), 0.5, yaw_c), roll_c, pitch_c);
+      const double pitch_q = tilt(rng);
+      const double roll_q = tilt(rng);
+      const double yaw_q = yaw(rng);
+      const Pose T_w_q = tilted(poseXyYaw(qc.x(), qc.y(), -0.3, yaw_q), roll_q, pitch_q);
       Descriptor c = describe(observe(rng, world, cc, T_w_c, nz), "a", 0, 0.0);
       Descriptor q = describe(observe(rng, world, qc, T_w_q, nz), "b", 1, 0.0);
       hideFar(&c, T_w_c);
@@ -295,8 +303,16 @@ TEST(Elevation, FitsResidualTiltFromSeenBases) {
     for (int i = 0; i < 30; ++i) {
       const Trunks world = test::randomStand(rng, 100, 100, 600);
       const Eigen::Vector2d cc(50, 50), qc(56, 47);
-      const Pose T_w_c = tilted(poseXyYaw(cc.x(), cc.y(), 0.5, yaw(rng)), tilt(rng), tilt(rng));
-      const Pose T_w_q = tilted(poseXyYaw(qc.x(), qc.y(), -0.3, yaw(rng)), tilt(rng), tilt(rng));
+      // One draw per statement, in the order gcc evaluated these arguments (last first), so the
+      // data are the same whatever the compiler.
+      const double pitch_c = tilt(rng);
+      const double roll_c = tilt(rng);
+      const double yaw_c = yaw(rng);
+      const Pose T_w_c = tilted(poseXyYaw(cc.x(), cc.y(), 0.5, yaw_c), roll_c, pitch_c);
+      const double pitch_q = tilt(rng);
+      const double roll_q = tilt(rng);
+      const double yaw_q = yaw(rng);
+      const Pose T_w_q = tilted(poseXyYaw(qc.x(), qc.y(), -0.3, yaw_q), roll_q, pitch_q);
       const Descriptor c = describe(observe(rng, world, cc, T_w_c, nz), "a", 0, 0.0);
       const Descriptor q = describe(observe(rng, world, qc, T_w_q, nz), "b", 1, 0.0);
       const Pose T_c_q = T_w_c.inverse() * T_w_q;

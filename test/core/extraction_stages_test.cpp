@@ -210,8 +210,13 @@ TEST(ExtractionStages, CircleFitOnANoisyHalfArc) {
   std::mt19937 rng(21);
   std::normal_distribution<double> nz(0.0, 0.004);
   std::vector<Eigen::Vector2d> xy;
-  for (double th = -0.5 * kPi; th < 0.5 * kPi; th += 0.02)
-    xy.emplace_back(-3.0 + (0.18 + nz(rng)) * std::cos(th), 4.0 + (0.18 + nz(rng)) * std::sin(th));
+  for (double th = -0.5 * kPi; th < 0.5 * kPi; th += 0.02) {
+    // One draw per statement, in the order gcc evaluated these arguments (last first), so the
+    // data are the same whatever the compiler.
+    const double ry = 0.18 + nz(rng);
+    const double rx = 0.18 + nz(rng);
+    xy.emplace_back(-3.0 + rx * std::cos(th), 4.0 + ry * std::sin(th));
+  }
   CircleFitParams cp;
   const CircleFit f = fitCircleRobust(xy, cp);
   ASSERT_TRUE(f.ok);

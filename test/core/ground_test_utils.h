@@ -27,13 +27,19 @@ inline std::vector<Eigen::Vector3d> hillyGround(std::mt19937& rng, const Eigen::
   std::mt19937 shrub_rng(2024);  // the same shrubs in every view
   std::uniform_real_distribution<double> where(-10.0, 60.0);
   std::vector<Eigen::Vector2d> shrubs;
-  for (int i = 0; i < 200; ++i) shrubs.emplace_back(where(shrub_rng), where(shrub_rng));
+  for (int i = 0; i < 200; ++i) {
+    // One draw per statement, in the order gcc evaluated these arguments (last first), so the
+    // data are the same whatever the compiler.
+    const double y = where(shrub_rng);
+    shrubs.emplace_back(where(shrub_rng), y);
+  }
   std::uniform_real_distribution<double> jitter(-0.07, 0.07);
   std::normal_distribution<double> noise(0.0, 0.01);
   std::vector<Eigen::Vector3d> out;
   for (double x = centre.x() - radius; x <= centre.x() + radius; x += 0.15) {
     for (double y = centre.y() - radius; y <= centre.y() + radius; y += 0.15) {
-      const Eigen::Vector2d p(x + jitter(rng), y + jitter(rng));
+      const double jy = jitter(rng);  // drawn before x, as gcc did: the same data for any compiler
+      const Eigen::Vector2d p(x + jitter(rng), y + jy);
       if ((p - centre).norm() > radius) continue;
       double z = terrainZ(p.x(), p.y());
       bool shrub = false;

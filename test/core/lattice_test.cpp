@@ -34,7 +34,10 @@ PlantationTrial plantationTrial(const LoopDetectorParams& params, uint32_t seed,
   PlantationTrial out;
   for (int i = 0; i < n; ++i) {
     const Trunks world = test::plantation(rng, 180, 180, 3.0, 0.15);
-    const Eigen::Vector2d b(pos(rng), pos(rng));
+    // One draw per statement, in the order gcc evaluated these arguments (last first), so the
+    // data are the same whatever the compiler.
+    const double by = pos(rng);
+    const Eigen::Vector2d b(pos(rng), by);
     const double a = yaw(rng);
     const Eigen::Vector2d qc = b + off(rng) * Eigen::Vector2d(std::cos(a), std::sin(a));
     const Pose T_w_c = poseXyYaw(b.x(), b.y(), 0.0, yaw(rng));
@@ -144,7 +147,12 @@ TEST(Lattice, RejectsDifferentPlacesOfAPlantationGrid) {
   double min_ambiguity = 1.0;
   for (int i = 0; i < 60; ++i) {
     const Trunks world = test::plantation(rng, 180, 180, 3.0, 0.15);
-    Eigen::Vector2d a(pos(rng), pos(rng)), b(pos(rng), pos(rng));
+    // One draw per statement, in the order gcc evaluated these arguments (last first), so the
+    // data are the same whatever the compiler.
+    const double ay = pos(rng);
+    const double ax = pos(rng);
+    const double by = pos(rng);
+    const Eigen::Vector2d a(ax, ay), b(pos(rng), by);
     if ((a - b).norm() < 33.0) continue;
     // Headings near multiples of 90 deg are the hardest: the grids line up.
     const double ya = (i % 2) ? yaw(rng) : 0.5 * M_PI * (i % 4) + 0.01;

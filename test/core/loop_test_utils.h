@@ -22,11 +22,16 @@ inline std::vector<PairCase> overlappingPairs(int n, uint32_t seed) {
       pos(30.0, 70.0), dz(-2.0, 2.0);
   for (int i = 0; i < n; ++i) {
     const Trunks world = test::randomStand(rng, 100, 100, dens(rng));
-    const Eigen::Vector2d cc(pos(rng), pos(rng));
+    // One draw per statement, in the order gcc evaluated these arguments (last first), so the
+    // data are the same whatever the compiler.
+    const double cy = pos(rng);
+    const Eigen::Vector2d cc(pos(rng), cy);
     const double a = yaw(rng), d = off(rng);
     const Eigen::Vector2d qc = cc + d * Eigen::Vector2d(std::cos(a), std::sin(a));
-    const Pose T_w_c = poseXyYaw(cc.x() + 3.0, cc.y() - 2.0, dz(rng), yaw(rng));
-    const Pose T_w_q = poseXyYaw(qc.x() - 1.0, qc.y() + 4.0, dz(rng), yaw(rng));
+    const double yaw_c = yaw(rng);
+    const Pose T_w_c = poseXyYaw(cc.x() + 3.0, cc.y() - 2.0, dz(rng), yaw_c);
+    const double yaw_q = yaw(rng);
+    const Pose T_w_q = poseXyYaw(qc.x() - 1.0, qc.y() + 4.0, dz(rng), yaw_q);
     PairCase pc;
     pc.c = describe(observe(rng, world, cc, T_w_c), "a", 2 * i, 0.0);
     pc.q = describe(observe(rng, world, qc, T_w_q), "b", 2 * i + 1, 0.0);

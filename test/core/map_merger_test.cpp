@@ -47,8 +47,11 @@ std::vector<MergeSubmap> drift(const std::string& robot, int n, double yaw_bias,
   for (int k = 0; k < n; ++k) {
     if (k > 0) {
       const Pose step = gtPose(robot, k - 1).inverse() * gtPose(robot, k);
-      T_O_S = T_O_S * step *
-              test::makePose(nt(*rng), nt(*rng), nt(*rng), nr(*rng), nr(*rng), yaw_bias + nr(*rng));
+      // One draw per statement, in the order gcc evaluated these arguments (last first), so the
+      // data are the same whatever the compiler.
+      double v[6];
+      for (int i = 5; i >= 0; --i) v[i] = i < 3 ? nt(*rng) : nr(*rng);
+      T_O_S = T_O_S * step * test::makePose(v[0], v[1], v[2], v[3], v[4], yaw_bias + v[5]);
     }
     MergeSubmap s;
     s.robot = robot;
@@ -81,7 +84,13 @@ Scenario makeScenario() {
   sc.submaps.insert(sc.submaps.end(), a.begin(), a.end());
   sc.submaps.insert(sc.submaps.end(), b.begin(), b.end());
   std::normal_distribution<double> nt(0.0, 0.01), nr(0.0, 0.001);
-  auto noise = [&] { return test::makePose(nt(rng), nt(rng), nt(rng), nr(rng), nr(rng), nr(rng)); };
+  auto noise = [&] {
+    // One draw per statement, in the order gcc evaluated these arguments (last first), so the
+    // data are the same whatever the compiler.
+    double v[6];
+    for (int k = 5; k >= 0; --k) v[k] = k < 3 ? nt(rng) : nr(rng);
+    return test::makePose(v[0], v[1], v[2], v[3], v[4], v[5]);
+  };
   sc.loops.push_back(makeLoop(sc, kA - 1, 0, noise()));  // a closes its circuit
   for (int k = 0; k + 8 < kA; k += 2) {
     sc.loops.push_back(makeLoop(sc, 100 + k, k + 8, noise()));  // b where a was

@@ -77,7 +77,12 @@ inline Trunks observe(std::mt19937& rng, const Trunks& world, const Eigen::Vecto
   for (const TrunkLandmark& t : world) {
     if (std::hypot(t.x - centre.x(), t.y - centre.y()) > nz.radius_m) continue;
     if (u01(rng) < nz.miss_ratio) continue;
-    const Eigen::Vector3d p = T_s_w * Eigen::Vector3d(t.x + np(rng), t.y + np(rng), t.z + nzz(rng));
+    // One draw per statement, in the order gcc evaluated these arguments (last first), so the
+    // data are the same whatever the compiler.
+    const double dz = nzz(rng);
+    const double dy = np(rng);
+    const double dx = np(rng);
+    const Eigen::Vector3d p = T_s_w * Eigen::Vector3d(t.x + dx, t.y + dy, t.z + dz);
     out.push_back({p.x(), p.y(), p.z(), std::max(0.03, t.r + nr(rng))});
   }
   const int n_false = static_cast<int>(std::round(nz.false_ratio * out.size()));

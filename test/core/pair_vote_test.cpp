@@ -43,7 +43,8 @@ std::vector<SparseOverlap> sparseOverlaps(int n, uint32_t seed) {
   std::vector<SparseOverlap> out;
   for (int i = 0; i < n; ++i) {
     const Trunks world = test::randomStand(rng, 100, 100, 1200);
-    const Eigen::Vector2d cc(pos(rng), pos(rng));
+    const double cy = pos(rng);  // drawn before x, as gcc did: the same data for any compiler
+    const Eigen::Vector2d cc(pos(rng), cy);
     const double a = yaw(rng);
     const Eigen::Vector2d qc = cc + off(rng) * Eigen::Vector2d(std::cos(a), std::sin(a));
     const Pose T_w_c = poseXyYaw(cc.x(), cc.y(), 0.5, yaw(rng));

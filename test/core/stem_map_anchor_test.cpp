@@ -36,7 +36,8 @@ TEST(StemMapAnchor, RecoversAPlanarTransformWithMissedAndFalseTrees) {
   Trunks stems;
   for (size_t i = 0; i < field.size(); ++i) {
     if (i % 4 == 3) continue;
-    const Eigen::Vector3d p = T_M_P * Eigen::Vector3d(field[i].x + n(rng), field[i].y + n(rng), 0);
+    const double dy = n(rng);  // drawn before x, as gcc did: the same data for any compiler
+    const Eigen::Vector3d p = T_M_P * Eigen::Vector3d(field[i].x + n(rng), field[i].y + dy, 0);
     stems.push_back({p.x(), p.y(), 0.3, field[i].dbh / 2.0 + 0.3 * n(rng), true});
   }
   for (int i = 0; i < 8; ++i) stems.push_back({u(rng) - 5, u(rng) + 3, 0.0, d(rng) / 2, true});

@@ -425,9 +425,17 @@ TEST(CircleFit, RecoversCircleFromArcWithOutliers) {
   std::normal_distribution<double> nz(0.0, 0.005);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   std::vector<Eigen::Vector2d> xy;
-  for (double th = 0.3; th < 0.3 + 2.2; th += 0.01)  // 126 deg arc
-    xy.emplace_back(2.0 + (0.25 + nz(rng)) * std::cos(th), -1.0 + (0.25 + nz(rng)) * std::sin(th));
-  for (int i = 0; i < 80; ++i) xy.emplace_back(2.0 + 0.8 * u(rng), -1.0 + 0.8 * u(rng));
+  // One draw per statement, in the order gcc evaluated these arguments (last first), so the
+  // data are the same whatever the compiler.
+  for (double th = 0.3; th < 0.3 + 2.2; th += 0.01) {  // 126 deg arc
+    const double ry = 0.25 + nz(rng);
+    const double rx = 0.25 + nz(rng);
+    xy.emplace_back(2.0 + rx * std::cos(th), -1.0 + ry * std::sin(th));
+  }
+  for (int i = 0; i < 80; ++i) {
+    const double y = -1.0 + 0.8 * u(rng);
+    xy.emplace_back(2.0 + 0.8 * u(rng), y);
+  }
   const CircleFit f = fitCircleRobust(xy, CircleFitParams());
   ASSERT_TRUE(f.ok);
   EXPECT_NEAR(f.cx, 2.0, 0.01);

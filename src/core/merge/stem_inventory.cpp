@@ -7,6 +7,8 @@
 #include <sstream>
 #include <unordered_map>
 
+#include "dtif/core/cells.h"
+
 namespace dtif {
 namespace {
 
@@ -104,8 +106,9 @@ class Clusterer {
   }
 
  private:
-  int64_t cell(double v) const { return static_cast<int64_t>(std::floor(v / p_.cluster_radius_m)); }
-  static int64_t key(int64_t x, int64_t y) { return (x << 32) ^ (y & 0xffffffffLL); }
+  // Saturated and packed without UB (cells.h): UBSan found `x << 32` of a negative index here.
+  int64_t cell(double v) const { return cellIndex(v / p_.cluster_radius_m); }
+  static int64_t key(int64_t x, int64_t y) { return packCell(x, y); }
   int closestDisjoint(int c) const {
     const Cluster& a = clusters_[c];
     int best = -1;
