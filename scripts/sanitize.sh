@@ -18,7 +18,8 @@ if [ ${#TESTS[@]} -eq 0 ]; then
   # (docs/limits.md), so a clang build simulates another forest than the one its thresholds were
   # set on (it fails them there, with no sanitizer finding).
   TESTS=(limits_test descriptor_test describe_test ground_map_test footprint_test gravity_test
-    extraction_stages_test trunk_extractor_test trunk_accumulator_test loop_detector_test
+    imu_gravity_test extraction_stages_test trunk_extractor_test trunk_accumulator_test
+    loop_detector_test query_index_test
     elevation_test verification_test matcher_test pair_vote_test pose_estimator_test
     robot_links_test database_odometry_test voxel_grid_test lattice_test
     map_merger_test stem_inventory_test stemmap_registration_test stem_map_anchor_test
