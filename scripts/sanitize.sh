@@ -3,8 +3,8 @@
 # process, the ROS glue) under AddressSanitizer and UndefinedBehaviorSanitizer (issue #17), in
 # the workspace of their own that scripts/fuzz.sh shares (.ws-san: clang, -O1, so CI can afford
 # it; common.sh's dtif_san_build). Any sanitizer finding fails the test that triggers it; exits
-# non-zero then. The tests' random data are drawn one number per statement, so clang builds the
-# same data as gcc and every test case runs here.
+# non-zero then. The tests' random data and the simulator's are drawn one number per statement,
+# so clang builds the same data as gcc and every test case runs here.
 # Usage: bash scripts/sanitize.sh [gtest-binary-name...]   (default: the list below)
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
@@ -13,10 +13,9 @@ if [ ${#TESTS[@]} -eq 0 ]; then
   # Every gtest binary of test/CMakeLists.txt but the long suites, which run in scripts/test.sh
   # only: simulator_test and sim_bag_test (whole simulated surveys and bags), bag_submaps_test
   # (replays a simulated bag through the assembler: 9 min under ASan), loop_benchmark_test (a
-  # benchmark), the rostest nodes (they need a master), and merge_cmd_test: its dataset comes
-  # from `dtif simulate`, whose simulator still draws several numbers in one expression
-  # (docs/limits.md), so a clang build simulates another forest than the one its thresholds were
-  # set on (it fails them there, with no sanitizer finding).
+  # benchmark) and the rostest nodes (they need a master). merge_cmd_test simulates its dataset
+  # with `dtif simulate`, which draws one number per statement too, so clang simulates the same
+  # forest as gcc (docs/limits.md).
   TESTS=(limits_test descriptor_test describe_test ground_map_test footprint_test gravity_test
     imu_gravity_test extraction_stages_test trunk_extractor_test trunk_accumulator_test
     loop_detector_test query_index_test
@@ -26,7 +25,7 @@ if [ ${#TESTS[@]} -eq 0 ]; then
     config_test dataset_test pcd_reader_test merge_files_test real_data_test evaluation_test
     fpfh_registration_test scan_context_test solvers_test cli_test
     conversions_test submap_assembler_test frame_lock_test frames_test map_frames_test
-    params_test markers_test)
+    params_test markers_test merge_cmd_test)
 fi
 dtif_san_build "${TESTS[@]}"
 # Leaks are reported too; the suppressions are third-party one-time allocations.

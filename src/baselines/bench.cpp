@@ -545,7 +545,10 @@ Descriptor perturbedCopy(const Descriptor& d, uint32_t seed, const DescriptorPar
   std::normal_distribution<double> jitter(0.0, 0.02);
   Pose T = Pose::Identity();
   T.linear() = rotZ(yaw(rng));
-  T.translation() = Eigen::Vector3d(shift(rng), shift(rng), 0.0);
+  // One draw per statement, y first: gcc's order for `Vector3d(shift(rng), shift(rng), 0.0)`.
+  const double shift_y = shift(rng);
+  const double shift_x = shift(rng);
+  T.translation() = Eigen::Vector3d(shift_x, shift_y, 0.0);
   Trunks trunks;
   for (const TrunkLandmark& t : d.trunks) {
     if (u01(rng) < 0.1) continue;

@@ -263,7 +263,12 @@ class WindowScanner {
     Eigen::Vector3d dir_B = pattern_.direction(k_pt);
     if (sp_.divergence_deg > 0) {
       // The beam's footprint: the return comes from somewhere inside it.
-      dir_B += Eigen::Vector3d(jitter(rng), jitter(rng), jitter(rng));
+      // One draw per statement, z first: the order gcc evaluated the three arguments of
+      // `Vector3d(jitter(rng), ...)` in, whatever the compiler.
+      const double jz = jitter(rng);
+      const double jy = jitter(rng);
+      const double jx = jitter(rng);
+      dir_B += Eigen::Vector3d(jx, jy, jz);
       dir_B.normalize();
     }
     const Eigen::Vector3d dir_W = T_W_B.linear() * dir_B;

@@ -274,13 +274,15 @@ class DriftingOdometry {
                    std::mt19937_64& rng)
       : n01_(0.0, 1.0), R_tilt_(R_tilt) {
     auto signedRate = [&](double lo, double hi) {
-      return (uniform(rng, 0, 1) < 0.5 ? -1.0 : 1.0) * uniform(rng, lo, hi);
+      const double sign = uniform(rng, 0, 1) < 0.5 ? -1.0 : 1.0;
+      return sign * uniform(rng, lo, hi);
     };
-    // One expression, as before the split: the order in which the compiler evaluates the three
-    // arguments decides which draw goes to which axis.
-    drift_ = Eigen::Vector3d(signedRate(op.trans_drift_min, op.trans_drift_max),
-                             signedRate(op.trans_drift_min, op.trans_drift_max),
-                             signedRate(op.trans_drift_min, op.trans_drift_max));
+    // One draw per statement, z first: the order gcc evaluated the three arguments of
+    // `Vector3d(signedRate(...), ...)` in (C++ leaves it open), so every compiler drifts alike.
+    const double drift_z = signedRate(op.trans_drift_min, op.trans_drift_max);
+    const double drift_y = signedRate(op.trans_drift_min, op.trans_drift_max);
+    const double drift_x = signedRate(op.trans_drift_min, op.trans_drift_max);
+    drift_ = Eigen::Vector3d(drift_x, drift_y, drift_z);
     yaw_rate_ = signedRate(op.yaw_drift_min_deg_per_m, op.yaw_drift_max_deg_per_m) * kDeg;
     tilt_r_ = op.tilt_sd_deg * kDeg * n01_(rng);
     tilt_p_ = op.tilt_sd_deg * kDeg * n01_(rng);

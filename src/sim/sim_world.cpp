@@ -26,6 +26,19 @@ double uniform(std::mt19937_64& rng, double a, double b) {
 double gauss(std::mt19937_64& rng, double sd) {
   return std::normal_distribution<double>(0.0, sd)(rng);
 }
+// Two draws for a point or an offset: y first, then x, one draw per statement. That is the order
+// gcc evaluated `Eigen::Vector2d(draw_x, draw_y)` in; C++ leaves it open (clang goes left to
+// right), so drawing in statements keeps every compiler simulating the same forest.
+Eigen::Vector2d uniformIn(std::mt19937_64& rng, const Eigen::Vector2d& size) {
+  const double y = uniform(rng, 0, size.y());
+  const double x = uniform(rng, 0, size.x());
+  return {x, y};
+}
+Eigen::Vector2d gauss2(std::mt19937_64& rng, double sd) {
+  const double y = gauss(rng, sd);
+  const double x = gauss(rng, sd);
+  return {x, y};
+}
 int poisson(std::mt19937_64& rng, double mean) {
   return mean <= 0 ? 0 : std::poisson_distribution<int>(mean)(rng);
 }
@@ -107,13 +120,13 @@ std::vector<StemSeed> generateStems(const StemParams& p, const Eigen::Vector2d& 
     const Eigen::Vector2d ex(std::cos(a), std::sin(a)), ey(-std::sin(a), std::cos(a));
     const Eigen::Vector2d c = 0.5 * size;
     const double reach = size.norm();
-    const Eigen::Vector2d offset(uniform(rng, 0, p.grid_spacing_x_m),
-                                 uniform(rng, 0, p.grid_spacing_y_m));
+    const Eigen::Vector2d offset =
+        uniformIn(rng, Eigen::Vector2d(p.grid_spacing_x_m, p.grid_spacing_y_m));
     for (double u = -reach; u <= reach; u += p.grid_spacing_x_m) {
       for (double v = -reach; v <= reach; v += p.grid_spacing_y_m) {
         Eigen::Vector2d q = c + (u + offset.x()) * ex + (v + offset.y()) * ey;
         if (!inside(q)) continue;
-        q += Eigen::Vector2d(gauss(rng, p.grid_jitter_m), gauss(rng, p.grid_jitter_m));
+        q += gauss2(rng, p.grid_jitter_m);
         if (uniform(rng, 0, 1) < p.grid_missing || !inside(q)) continue;
         seeds.push_back({q, -1});
       }
@@ -124,7 +137,7 @@ std::vector<StemSeed> generateStems(const StemParams& p, const Eigen::Vector2d& 
   if (p.pattern == "clustered") {
     const int nc = std::max(1, poisson(rng, p.clusters_per_ha * area_ha));
     for (int i = 0; i < nc; ++i) {
-      centres.emplace_back(uniform(rng, 0, size.x()), uniform(rng, 0, size.y()));
+      centres.push_back(uniformIn(rng, size));
     }
   }
   for (int i = 0; i < n; ++i) {
@@ -133,11 +146,10 @@ std::vector<StemSeed> generateStems(const StemParams& p, const Eigen::Vector2d& 
       double spacing = p.min_spacing_m;
       if (!centres.empty() && uniform(rng, 0, 1) < p.cluster_fraction) {
         const auto& c = centres[std::uniform_int_distribution<size_t>(0, centres.size() - 1)(rng)];
-        q = c + Eigen::Vector2d(gauss(rng, 0.5 * p.cluster_radius_m),
-                                gauss(rng, 0.5 * p.cluster_radius_m));
+        q = c + gauss2(rng, 0.5 * p.cluster_radius_m);
         spacing *= 0.7;  // clusters are tighter
       } else {
-        q = Eigen::Vector2d(uniform(rng, 0, size.x()), uniform(rng, 0, size.y()));
+        q = uniformIn(rng, size);
       }
       if (inside(q) && farFromAll(seeds, q, spacing)) {
         seeds.push_back({q, -1});
@@ -330,7 +342,7 @@ void World::addSaplings(const UnderstoryParams& up, const StemParams& sp, double
   for (int i = 0; i < n_sap; ++i) {
     Stem s;
     s.sapling = true;
-    s.base_xy = Eigen::Vector2d(uniform(rng, 0, plot_size_.x()), uniform(rng, 0, plot_size_.y()));
+    s.base_xy = uniformIn(rng, plot_size_);
     s.z_base = terrainHeight(s.base_xy.x(), s.base_xy.y());
     // Saplings stay below the trunks' smallest DBH.
     const double dbh_max = std::min(up.sapling_dbh_max_m, 0.9 * sp.dbh_min_m);
@@ -362,7 +374,9 @@ void World::addShrubs(const UnderstoryParams& up, double area_ha, std::mt19937_6
     const double x = uniform(rng, 0, plot_size_.x()), y = uniform(rng, 0, plot_size_.y());
     const double rz = r * uniform(rng, 0.5, 1.0);
     f.centre = Eigen::Vector3d(x, y, terrainHeight(x, y) + 0.8 * rz);
-    f.radii = Eigen::Vector3d(r * uniform(rng, 0.8, 1.2), r * uniform(rng, 0.8, 1.2), rz);
+    const double ry = r * uniform(rng, 0.8, 1.2);  // y first, as in uniformIn
+    const double rx = r * uniform(rng, 0.8, 1.2);
+    f.radii = Eigen::Vector3d(rx, ry, rz);
     f.density = up.shrub_density;
     foliage_.push_back(f);
   }
@@ -375,7 +389,7 @@ void World::addLogs(const UnderstoryParams& up, double area_ha, std::mt19937_64&
   for (int i = 0; i < n_log; ++i) {
     const double len = uniform(rng, 2.0, 10.0), r = uniform(rng, 0.08, 0.3);
     const double az = uniform(rng, -kPi, kPi);
-    const Eigen::Vector2d c(uniform(rng, 0, plot_size_.x()), uniform(rng, 0, plot_size_.y()));
+    const Eigen::Vector2d c = uniformIn(rng, plot_size_);
     const Eigen::Vector2d u(std::cos(az), std::sin(az));
     const Eigen::Vector2d a2 = c - 0.5 * len * u, b2 = c + 0.5 * len * u;
     const Eigen::Vector3d a(a2.x(), a2.y(), terrainHeight(a2.x(), a2.y()) + 0.7 * r);
