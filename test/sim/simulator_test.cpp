@@ -603,7 +603,8 @@ TEST(SimulatorFastLio, TiltedOdometryFrameAndPointFilter) {
 }
 
 TEST(SimulatorFastLio, LevelScenesDrawNoTiltAndBadValuesAreErrors) {
-  for (const Trajectory& tr : Simulator(liteScene(), 5).trajectories()) {
+  const Simulator level(liteScene(), 5);  // named: a temporary's member would dangle in the loop
+  for (const Trajectory& tr : level.trajectories()) {
     EXPECT_EQ(tr.tilt_deg, 0.0);
     EXPECT_EQ(tr.up_O, Eigen::Vector3d::UnitZ());
   }
