@@ -33,6 +33,17 @@ void addGroundMaps(std::mt19937& rng, PairCase* pc) {
       test::hillyGround(rng, T_W_q.translation().head<2>(), 14.0, false, 6.0), T_W_q, 0.5, 0.05);
 }
 
+/// A submap pose at (xy, z) with a random yaw and roll and pitch within +-0.5 deg. One draw per
+/// statement (pitch, roll, yaw: the order gcc evaluated them in when they were arguments), so the
+/// data are the same whatever the compiler.
+Pose randomTiltedPose(std::mt19937& rng, const Eigen::Vector2d& xy, double z) {
+  std::uniform_real_distribution<double> yaw(-M_PI, M_PI), tilt(-0.5, 0.5);
+  const double pitch = tilt(rng);
+  const double roll = tilt(rng);
+  const double heading = yaw(rng);
+  return tilted(poseXyYaw(xy.x(), xy.y(), z, heading), roll, pitch);
+}
+
 /// Only a few stem bases close together seen on both sides (dense understory): the plain
 /// least-squares tilt follows their noise, the 4-DoF model leaves the odometry's tilt; the
 /// prior on the residual tilt (tilt_prior_deg, a MAP fit) does better than both.
@@ -51,7 +62,6 @@ TEST(Elevation, TiltPriorSteadiesFewCloseBases) {
     params.verification.tilt_min_spread_m = 0.0;
     params.verification.tilt_prior_deg = var.prior_deg;
     std::mt19937 rng(11);
-    std::uniform_real_distribution<double> yaw(-M_PI, M_PI), tilt(-0.5, 0.5);
     test::ObservationNoise nz;
     nz.z_sigma_m = 0.05;
     const Eigen::Vector2d seen_centre(53.0, 48.5);  // between the two submaps
@@ -64,16 +74,8 @@ TEST(Elevation, TiltPriorSteadiesFewCloseBases) {
     for (int i = 0; i < 30; ++i) {
       const Trunks world = test::randomStand(rng, 100, 100, 600);
       const Eigen::Vector2d cc(50, 50), qc(56, 47);
-      // One draw per statement, in the order gcc evaluated these arguments (last first), so the
-      // data are the same whatever the compiler.
-      const double pitch_c = tilt(rng);
-      const double roll_c = tilt(rng);
-      const double yaw_c = yaw(rng);
-      const Pose T_w_c = tilted(poseXyYaw(cc.x(), cc.y(), 0.5, yaw_c), roll_c, pitch_c);
-      const double pitch_q = tilt(rng);
-      const double roll_q = tilt(rng);
-      const double yaw_q = yaw(rng);
-      const Pose T_w_q = tilted(poseXyYaw(qc.x(), qc.y(), -0.3, yaw_q), roll_q, pitch_q);
+      const Pose T_w_c = randomTiltedPose(rng, cc, 0.5);
+      const Pose T_w_q = randomTiltedPose(rng, qc, -0.3);
       Descriptor c = describe(observe(rng, world, cc, T_w_c, nz), "a", 0, 0.0);
       Descriptor q = describe(observe(rng, world, qc, T_w_q, nz), "b", 1, 0.0);
       hideFar(&c, T_w_c);
@@ -295,7 +297,6 @@ TEST(Elevation, FitsResidualTiltFromSeenBases) {
     LoopDetectorParams params;
     params.verification.tilt_min_pairs = min_pairs;
     std::mt19937 rng(5);
-    std::uniform_real_distribution<double> yaw(-M_PI, M_PI), tilt(-0.5, 0.5);
     test::ObservationNoise nz;
     nz.z_sigma_m = 0.02;
     int accepted = 0;
@@ -303,16 +304,8 @@ TEST(Elevation, FitsResidualTiltFromSeenBases) {
     for (int i = 0; i < 30; ++i) {
       const Trunks world = test::randomStand(rng, 100, 100, 600);
       const Eigen::Vector2d cc(50, 50), qc(56, 47);
-      // One draw per statement, in the order gcc evaluated these arguments (last first), so the
-      // data are the same whatever the compiler.
-      const double pitch_c = tilt(rng);
-      const double roll_c = tilt(rng);
-      const double yaw_c = yaw(rng);
-      const Pose T_w_c = tilted(poseXyYaw(cc.x(), cc.y(), 0.5, yaw_c), roll_c, pitch_c);
-      const double pitch_q = tilt(rng);
-      const double roll_q = tilt(rng);
-      const double yaw_q = yaw(rng);
-      const Pose T_w_q = tilted(poseXyYaw(qc.x(), qc.y(), -0.3, yaw_q), roll_q, pitch_q);
+      const Pose T_w_c = randomTiltedPose(rng, cc, 0.5);
+      const Pose T_w_q = randomTiltedPose(rng, qc, -0.3);
       const Descriptor c = describe(observe(rng, world, cc, T_w_c, nz), "a", 0, 0.0);
       const Descriptor q = describe(observe(rng, world, qc, T_w_q, nz), "b", 1, 0.0);
       const Pose T_c_q = T_w_c.inverse() * T_w_q;
