@@ -12,7 +12,6 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
-#include "dtif/core/descriptor/describe.h"
 #include "dtif/core/timing.h"
 #include "dtif/eval/front_end.h"
 
