@@ -21,7 +21,7 @@ if [ ${#TESTS[@]} -eq 0 ]; then
     loop_detector_test query_index_test
     elevation_test verification_test matcher_test pair_vote_test pose_estimator_test
     robot_links_test database_odometry_test voxel_grid_test lattice_test
-    map_merger_test stem_inventory_test stemmap_registration_test stem_map_anchor_test
+    map_merger_test factor_cost_test stem_inventory_test stemmap_registration_test stem_map_anchor_test
     config_test dataset_test pcd_reader_test merge_files_test real_data_test evaluation_test
     fpfh_registration_test scan_context_test solvers_test cli_test
     conversions_test submap_assembler_test frame_lock_test frames_test map_frames_test

@@ -241,6 +241,7 @@ MapMerger runMerger(const MergeInput& in, const MergeParams& params,
     st.last = merger.solve();
     const double ms = msSince(t0);
     ++st.solves;
+    st.iterative_solves += st.last.iterative ? 1 : 0;
     st.solve_ms_total += ms;
     st.solve_ms_max = std::max(st.solve_ms_max, ms);
     auto ev = merger.takeEvents();
@@ -364,6 +365,7 @@ void writeMergeSummaryJson(const std::string& path, const MergeSummary& s) {
   j["solves"] = s.run.solves;
   j["solve_ms_mean"] = s.run.solves ? s.run.solve_ms_total / s.run.solves : 0.0;
   j["solve_ms_max"] = s.run.solve_ms_max;
+  j["solves_iterative"] = s.run.iterative_solves;
   j["false_loop_injected"] = s.false_loop_injected;
   if (s.false_loop_injected) j["false_loop_used"] = s.false_loop_used;
   j["score"] = s.score ? scoreJson(*s.score) : nlohmann::json(nullptr);

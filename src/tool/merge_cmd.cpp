@@ -116,7 +116,8 @@ int runMerge(const MergeArgs& a) {
   std::cout << std::fixed << std::setprecision(1) << "graph: " << sum.run.solves
             << " incremental solves, mean "
             << (sum.run.solves ? sum.run.solve_ms_total / sum.run.solves : 0.0) << " ms, max "
-            << sum.run.solve_ms_max << " ms\n";
+            << sum.run.solve_ms_max << " ms (" << sum.run.iterative_solves
+            << " with conjugate gradients: the factor would be dense)\n";
   if (sum.score) std::cout << formatMergeTable(*sum.score);
   if (false_loop) {
     std::cout << "false loop " << false_loop->query_robot << "/" << false_loop->query_id << " -> "

@@ -151,7 +151,7 @@ TEST(Config, ShippedMergeYamlNamesEveryField) {
   MergeParams p;
   p.visit(named);
   p.stems.visit(named);
-  EXPECT_EQ(fields, 19);
+  EXPECT_EQ(fields, 20);
 }
 
 // A merge section reaches the merger's parameters; an invalid value is refused by name.

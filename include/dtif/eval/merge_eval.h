@@ -37,6 +37,7 @@ std::optional<Loop> makeFalseLoop(const Dataset& ds, const MergeInput& in);
 
 struct MergeRunStats {
   size_t solves = 0;
+  size_t iterative_solves = 0;  ///< of them, with conjugate gradients (a dense factor)
   double solve_ms_total = 0.0, solve_ms_max = 0.0;
   MergeSolveStats last;
 };

@@ -45,8 +45,12 @@ struct MergeParams {
   bool pcm = true;
   double pcm_sigmas = 3.0;
   int max_iterations = 30;  ///< Ceres iterations per solve
-  StemFusionParams stems;   ///< YAML section `stems` (its own visit)
-  StemMapParams stem_map;   ///< field stem maps: fixed (fieldStemMapLoopParams)
+  /// The linear solver: sparse Cholesky while its factorisation costs at most this many
+  /// multiply-subtracts per submap-level pattern (AMD's estimate; x 6^3 flops), conjugate
+  /// gradients above (a graph whose loops join every pass over the same paths).
+  double direct_solver_max_work = 1e6;
+  StemFusionParams stems;  ///< YAML section `stems` (its own visit)
+  StemMapParams stem_map;  ///< field stem maps: fixed (fieldStemMapLoopParams)
   std::string validate() const;
 
   template <class V>
@@ -66,6 +70,7 @@ struct MergeParams {
     v("pcm", pcm);
     v("pcm_sigmas", pcm_sigmas);
     v("max_iterations", max_iterations);
+    v("direct_solver_max_work", direct_solver_max_work);
   }
 };
 
@@ -109,6 +114,7 @@ struct LoopVerdict {
 struct MergeSolveStats {
   double pcm_ms = 0.0, solve_ms = 0.0;
   int iterations = 0;
+  bool iterative = false;  ///< conjugate gradients instead of sparse Cholesky (a dense factor)
   double initial_cost = 0.0, final_cost = 0.0;
   size_t loops_used = 0, loops_rejected = 0;
   int components = 0;
