@@ -3,14 +3,23 @@
 // loop every fourth submap; after the graph is built and solved once, loops arrive one at a
 // time and each is followed by a warm-started solve (PCM + Ceres), as online. One thread; the
 // times are the process's CPU time, so that a busy machine does not inflate them.
+// dtif_merge_bench --database FILE [EVERY]: a saved database (e.g. the soak test's) replayed as
+// the map-merge nodelet meets it: submaps in stamp order, each loop once both its submaps are
+// in, a solve after every EVERY submaps (default 6); prints the solve CPU time and the resident
+// memory as the graph grows.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <ctime>
+#include <fstream>
+#include <map>
 #include <random>
 #include <string>
 #include <vector>
 
+#include "dtif/core/database/loop_detector.h"
 #include "dtif/core/merge/map_merger.h"
 
 namespace {
@@ -89,9 +98,99 @@ void bench(int n) {
               first.iterations, sum / 10.0, worst);
 }
 
+// VmRSS or VmHWM of this process [MB].
+double statusMb(const char* key) {
+  std::ifstream f("/proc/self/status");
+  std::string line;
+  while (std::getline(f, line)) {
+    if (line.rfind(key, 0) == 0) return std::atof(line.c_str() + std::strlen(key)) / 1024.0;
+  }
+  return 0.0;
+}
+
+struct Replay {
+  std::vector<size_t> order;             // entries in (stamp, robot) order
+  std::vector<std::vector<size_t>> due;  // per order position: loops whose submaps are both in
+};
+
+Replay replayOrder(const dtif::LoopDetector& db) {
+  Replay r;
+  for (size_t i = 0; i < db.size(); ++i) {
+    if (db.odometry(i).known()) r.order.push_back(i);
+  }
+  std::stable_sort(r.order.begin(), r.order.end(), [&](size_t a, size_t b) {
+    const dtif::Descriptor &da = *db.entries()[a], &dbb = *db.entries()[b];
+    return da.stamp != dbb.stamp ? da.stamp < dbb.stamp : da.robot < dbb.robot;
+  });
+  std::map<std::pair<std::string, int64_t>, size_t> at;
+  for (size_t k = 0; k < r.order.size(); ++k) {
+    const dtif::Descriptor& d = *db.entries()[r.order[k]];
+    at[{d.robot, d.submap_id}] = k;
+  }
+  r.due.resize(r.order.size());
+  for (size_t l = 0; l < db.loops().size(); ++l) {
+    const dtif::Loop& lc = db.loops()[l];
+    auto q = at.find({lc.query_robot, lc.query_id}),
+         c = at.find({lc.candidate_robot, lc.candidate_id});
+    if (q != at.end() && c != at.end()) r.due[std::max(q->second, c->second)].push_back(l);
+  }
+  return r;
+}
+
+int benchDatabase(const std::string& path, int every) {
+  dtif::LoopDetector db{dtif::LoopDetectorParams{}};
+  db.load(path);
+  const Replay rp = replayOrder(db);
+  dtif::MapMerger merger;
+  std::map<std::pair<std::string, int64_t>, int64_t> global;
+  std::printf(
+      "| submaps | loops used / rejected | solve [ms CPU] | iterations | linear solver | RSS [MB] "
+      "| peak [MB] |\n"
+      "|---|---|---|---|---|---|---|\n");
+  double total = 0.0, worst = 0.0;
+  int solves = 0;
+  for (size_t k = 0; k < rp.order.size(); ++k) {
+    const dtif::Descriptor& d = *db.entries()[rp.order[k]];
+    const int64_t gid = static_cast<int64_t>(k);
+    global[{d.robot, d.submap_id}] = gid;
+    merger.addSubmap({d.robot, gid, d.stamp, db.odometry(rp.order[k]).T_O_S, d.trunks});
+    for (size_t l : rp.due[k]) {
+      dtif::Loop lc = db.loops()[l];
+      lc.query_id = global.at({lc.query_robot, lc.query_id});
+      lc.candidate_id = global.at({lc.candidate_robot, lc.candidate_id});
+      merger.addLoop(lc);
+    }
+    const bool last = k + 1 == rp.order.size();
+    if ((k + 1) % every != 0 && !last) continue;
+    const std::clock_t t0 = std::clock();
+    const dtif::MergeSolveStats st = merger.solve();
+    const double ms = cpuMs(t0);
+    total += ms;
+    worst = std::max(worst, ms);
+    ++solves;
+    const size_t quarter = std::max<size_t>(1, rp.order.size() / 4);
+    if ((k + 1) % quarter < static_cast<size_t>(every) || last) {
+      std::printf("| %zu | %zu / %zu | %.0f | %d | %s | %.0f | %.0f |\n", k + 1, st.loops_used,
+                  st.loops_rejected, ms, st.iterations, st.iterative ? "CG" : "Cholesky",
+                  statusMb("VmRSS:"), statusMb("VmHWM:"));
+    }
+  }
+  std::printf("%d solves: %.0f ms CPU in all, mean %.0f, max %.0f\n", solves, total,
+              total / std::max(1, solves), worst);
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
+  if (argc >= 3 && std::string(argv[1]) == "--database") {
+    try {
+      return benchDatabase(argv[2], argc >= 4 ? std::max(1, std::atoi(argv[3])) : 6);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "dtif_merge_bench: %s: %s\n", argv[2], e.what());
+      return 1;
+    }
+  }
   std::vector<int> sizes;
   for (int i = 1; i < argc; ++i) sizes.push_back(std::atoi(argv[i]));
   if (sizes.empty()) sizes = {1000, 5000};
