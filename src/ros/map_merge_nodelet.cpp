@@ -225,6 +225,10 @@ class MapMergeNodelet : public nodelet::Nodelet {
         loops_in_.clear();
         clouds_in_.clear();
       }
+      if (ds.empty() && ls.empty() && cs.empty()) {
+        releaseFreedMemory(true);  // idle: whatever the last solve freed goes back now
+        continue;
+      }
       try {
         update(ds, ls, cs);
       } catch (const std::exception& e) {
@@ -263,18 +267,25 @@ class MapMergeNodelet : public nodelet::Nodelet {
     reportStemMap();
     assignFrames();
     publishOutputs();
-    releaseFreedMemory();
+    releaseFreedMemory(false);
   }
 
   // Each re-solve builds and frees a Ceres problem of the whole graph; glibc keeps the freed
   // pages in its arenas, so over an hour the resident size climbed ~50 MB above what the map
-  // itself holds (the soak test). Handing them back every 10 s costs a few ms.
-  void releaseFreedMemory() {
+  // itself holds (the soak test). Handing them back costs a few ms: at most every 10 s while
+  // solves follow each other, and once when the worker falls idle after one.
+  void releaseFreedMemory(bool idle) {
 #ifdef __GLIBC__
     const auto now = std::chrono::steady_clock::now();
-    if (now - last_trim_ < std::chrono::seconds(10)) return;
+    if (idle ? !trim_pending_ : now - last_trim_ < std::chrono::seconds(10)) {
+      trim_pending_ = trim_pending_ || !idle;
+      return;
+    }
     last_trim_ = now;
+    trim_pending_ = false;
     malloc_trim(0);
+#else
+    (void)idle;
 #endif
   }
 
@@ -721,6 +732,7 @@ class MapMergeNodelet : public nodelet::Nodelet {
   std::vector<FieldStem> field_;  // the field stem map, if any
   bool stem_map_registered_ = false;
   std::chrono::steady_clock::time_point last_trim_;  // worker thread only
+  bool trim_pending_ = false;                        // worker thread only
   // This nodelet builds no descriptors: it keeps each one's trunks as its sender sent them.
   const DescriptorParams receiver_params_ = loosestDescriptorParams();
 
