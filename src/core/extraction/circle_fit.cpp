@@ -165,6 +165,48 @@ long ransacCircle(const std::vector<Eigen::Vector2d>& xy, const CircleFitParams&
   return best_score;
 }
 
+// Per point of a Gauss-Newton step about the circle (cx, cy, r): distance d to the centre,
+// residual e = d - r, Tukey weight w (constant c) and the Jacobian's (jx, jy) = -(dx, dy) / d.
+struct PointTerms {
+  std::vector<double> d, e, w, jx, jy;
+};
+
+// The terms of every point, two at a time where SSE2 is: the same IEEE operations as
+// planarDist, tukeyWeight and the divisions (x86-64 has no fused multiply-add here), so the
+// same values; the step's sums stay sequential, in point order.
+void pointTerms(const std::vector<Eigen::Vector2d>& xy, double cx, double cy, double r, double c,
+                PointTerms* t) {
+  const size_t n = xy.size();
+  t->d.resize(n), t->e.resize(n), t->w.resize(n), t->jx.resize(n), t->jy.resize(n);
+  size_t m = 0;
+#ifdef __SSE2__
+  const __m128d vcx = _mm_set1_pd(cx), vcy = _mm_set1_pd(cy), vr = _mm_set1_pd(r);
+  const __m128d vc = _mm_set1_pd(c), one = _mm_set1_pd(1.0), sign = _mm_set1_pd(-0.0);
+  for (; m + 2 <= n; m += 2) {
+    // xy is an array of (x, y) pairs: two points are four doubles.
+    const __m128d p0 = _mm_loadu_pd(xy[m].data()), p1 = _mm_loadu_pd(xy[m + 1].data());
+    const __m128d dx = _mm_sub_pd(_mm_unpacklo_pd(p0, p1), vcx);
+    const __m128d dy = _mm_sub_pd(_mm_unpackhi_pd(p0, p1), vcy);
+    const __m128d d = _mm_sqrt_pd(_mm_add_pd(_mm_mul_pd(dx, dx), _mm_mul_pd(dy, dy)));
+    const __m128d e = _mm_sub_pd(d, vr);
+    const __m128d u = _mm_div_pd(e, vc);
+    const __m128d tt = _mm_sub_pd(one, _mm_mul_pd(u, u));
+    const __m128d in = _mm_cmplt_pd(_mm_andnot_pd(sign, e), vc);  // |e| < c
+    _mm_storeu_pd(&t->d[m], d);
+    _mm_storeu_pd(&t->e[m], e);
+    _mm_storeu_pd(&t->w[m], _mm_and_pd(in, _mm_mul_pd(tt, tt)));
+    _mm_storeu_pd(&t->jx[m], _mm_div_pd(_mm_xor_pd(dx, sign), d));
+    _mm_storeu_pd(&t->jy[m], _mm_div_pd(_mm_xor_pd(dy, sign), d));
+  }
+#endif
+  for (; m < n; ++m) {
+    const double dx = xy[m].x() - cx, dy = xy[m].y() - cy;
+    const double d = planarDist(dx, dy);
+    t->d[m] = d, t->e[m] = d - r, t->w[m] = tukeyWeight(d - r, c);
+    t->jx[m] = -dx / d, t->jy[m] = -dy / d;
+  }
+}
+
 // Kasa on the inliers of the RANSAC circle (when plausible), then Tukey-weighted geometric
 // refinement (Gauss-Newton), which removes the Kasa bias on partial arcs.
 Circle refineCircle(const std::vector<Eigen::Vector2d>& xy, const Circle& start,
@@ -181,17 +223,16 @@ Circle refineCircle(const std::vector<Eigen::Vector2d>& xy, const Circle& start,
     cx = kx, cy = ky, r = kr;
   }
   const double c_tukey = 2.0 * tol;
+  PointTerms t;
   for (int it = 0; it < 15; ++it) {
+    pointTerms(xy, cx, cy, r, c_tukey, &t);
     Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
     Eigen::Vector3d g = Eigen::Vector3d::Zero();
     for (size_t m = 0; m < n; ++m) {
-      const double dx = xy[m].x() - cx, dy = xy[m].y() - cy;
-      const double d = planarDist(dx, dy);
-      if (d < 1e-9) continue;
-      const double e = d - r;
-      const double w = tukeyWeight(e, c_tukey);
+      if (t.d[m] < 1e-9) continue;
+      const double e = t.e[m], w = t.w[m];
       if (w <= 0.0) continue;
-      const Eigen::Vector3d J(-dx / d, -dy / d, -1.0);
+      const Eigen::Vector3d J(t.jx[m], t.jy[m], -1.0);
       A += w * J * J.transpose();
       g += w * J * e;
     }
