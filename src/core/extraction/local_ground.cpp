@@ -212,7 +212,7 @@ void binGroundGrid(const LocalPoints& pts, const TrunkExtractorParams& p, Ground
   GroundGrid::SortedPoint* out_pts = grid.sorted.data();
   const float* Z = pts.z.data();
   for (size_t i = 0; i < n; ++i) {
-    out_pts[fill[cell_of(X[i], Y[i])]++] = {X[i], Y[i], Z[i], static_cast<uint32_t>(i)};
+    out_pts[fill[cell_of(X[i], Y[i])]++] = {X[i], Y[i], Z[i]};
   }
 }
 

@@ -92,15 +92,15 @@ struct GroundGrid {
   double cell_m = 0.0;             ///< ground_cell_m, larger when the extent would need more than
                                    ///< max_ground_cells cells (far outliers) [m]
   int nx = 0, ny = 0;              ///< columns and rows
-  /// A point in cell order: its local coordinates [m] and its index in the local points.
+  /// A point in cell order: its local coordinates [m]. Those who need its height compute it
+  /// from its cell's plane (no index back into the local points: this is bound by memory).
   struct SortedPoint {
     float x, y, z;
-    uint32_t i;
   };
   std::vector<uint32_t> start;  ///< points of cell c: sorted[start[c]] .. sorted[start[c+1]-1]
-  /// The points sorted by cell: the per-cell stages read these in sequence instead of gathering
-  /// from all over the cloud, one 16-byte record each (the sort writes one cache line per point,
-  /// not four).
+  /// The points sorted by cell, stable: the per-cell stages read these in sequence instead of
+  /// gathering from all over the cloud, one 12-byte record each (the sort writes one cache line
+  /// per point, not three).
   std::vector<SortedPoint> sorted;
   std::vector<GroundPlane> plane;  ///< per cell, about the cell centre, local z [m]
   std::vector<char> seen;          ///< the cell's window held enough ground cells: ground observed
