@@ -58,7 +58,8 @@ std::vector<std::pair<int64_t, int64_t>> trunkHeightCells(const Cloud& cloud_S, 
 class HeightCellMarks {
  public:
   /// Tile ground from the samples (sx, sy, sz) and the cells of the box [lo, hi] (S) that the
-  /// added points lie in. false (use trunkHeightCells) when either grid would be large.
+  /// added points lie in. false (then use trunkHeightCells) without samples, beyond 1e6 m from
+  /// the origin, or when either grid would be large.
   bool init(const std::vector<float>& sx, const std::vector<float>& sy,
             const std::vector<float>& sz, double cell_m, const Eigen::Vector2d& lo,
             const Eigen::Vector2d& hi);
