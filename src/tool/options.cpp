@@ -109,6 +109,11 @@ void addExtract(CLI::App* dtif, ExtractArgs* a) {
       ->required();
   cmd->add_option("--out", a->out, "also write the trunks (x,y,z,r CSV)")
       ->type_name("<trunks.csv>");
+  cmd->add_option("--repeat", a->repeat,
+                  "describe the cloud n more times and print the thread CPU time per describe "
+                  "(min, median): a benchmark that a busy machine disturbs less than wall time")
+      ->type_name("<n>")
+      ->check(CLI::Range(0, 1000));
   addConfig(cmd, &a->configs);
 }
 

@@ -28,10 +28,11 @@ struct SimulateArgs {
   bool quiet = false;         ///< no summary on stdout
 };
 
-/// dtif extract <cloud.pcd> [--out trunks.csv] [--config params.yaml]...
+/// dtif extract <cloud.pcd> [--out trunks.csv] [--repeat n] [--config params.yaml]...
 struct ExtractArgs {
   std::string cloud;                 ///< PCD submap
   std::string out;                   ///< trunk map CSV to write ("": none)
+  int repeat = 0;                    ///< describe this many more times, for the CPU time
   std::vector<std::string> configs;  ///< parameter files, applied in order
 };
 

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <random>
 
 namespace dtif {
 namespace {
@@ -83,6 +84,53 @@ TEST(Footprint, WideExtentsAreCoarsenedToStayWithinTheBudget) {
   const Footprint g = makeFootprint({{-1, -1}, {-1000, 0}}, 1.0);
   EXPECT_TRUE(g.occupied(static_cast<int64_t>(std::floor(-1.0 / g.cell_m)),
                          static_cast<int64_t>(std::floor(-1.0 / g.cell_m))));
+}
+
+// Rolling ground with stems and shrubs at scattered heights: many cells in and out of the
+// trunk-height band, around coordinates that are not multiples of the cells.
+Cloud bumpyStand(uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  Cloud cloud;
+  for (int i = 0; i < 40000; ++i) {
+    const float x = -13.3f + 31.0f * u(rng), y = 7.9f + 27.0f * u(rng);
+    const float ground = 0.8f * std::sin(0.3f * x) + 0.05f * y;
+    const float z = u(rng) < 0.7f ? ground + 0.05f * u(rng) : ground + 6.0f * u(rng) * u(rng);
+    cloud.push_back(pcl::PointXYZ(x, y, z));
+  }
+  return cloud;
+}
+
+TEST(Footprint, MarksGiveTrunkHeightCells) {
+  // Marked point by point from the samples, in any order: trunkHeightCells' cells, at a
+  // power-of-two cell size and at one that is not, with and without subsampled percentiles.
+  for (const uint32_t seed : {1u, 2u}) {
+    Cloud cloud = bumpyStand(seed);
+    for (const double cell_m : {1.0, 0.3}) {
+      for (const size_t max_samples : {size_t{0}, size_t{5000}}) {
+        const size_t stride = max_samples > 0 ? cloud.size() / max_samples : 1;
+        std::vector<float> sx, sy, sz;
+        for (size_t i = 0; i < cloud.size(); i += stride)
+          sx.push_back(cloud[i].x), sy.push_back(cloud[i].y), sz.push_back(cloud[i].z);
+        HeightCellMarks marks;
+        ASSERT_TRUE(marks.init(sx, sy, sz, cell_m, Eigen::Vector2d(-20.0, 0.0),
+                               Eigen::Vector2d(20.0, 40.0)));
+        for (size_t i = cloud.size(); i-- > 0;) marks.add(cloud[i].x, cloud[i].y, cloud[i].z);
+        EXPECT_TRUE(marks.complete());
+        const Cells expected = trunkHeightCells(cloud, Pose::Identity(), cell_m, max_samples);
+        EXPECT_GT(expected.size(), 50u);
+        EXPECT_EQ(marks.cells(), expected) << "seed " << seed << ", cell " << cell_m;
+      }
+    }
+  }
+}
+
+TEST(Footprint, MarksRefuseFarCoordinates) {
+  // Beyond 1e6 m the margins of the tiles lose metres in float: trunkHeightCells is used.
+  HeightCellMarks marks;
+  const std::vector<float> s = {1.0f, 2.0f};
+  EXPECT_FALSE(marks.init(s, s, s, 1.0, Eigen::Vector2d(2e6, 0.0), Eigen::Vector2d(2e6 + 10, 10)));
+  EXPECT_FALSE(marks.init({}, {}, {}, 1.0, Eigen::Vector2d(0.0, 0.0), Eigen::Vector2d(10, 10)));
 }
 
 TEST(Footprint, TrunkHeightCellsOfAStemOnFlatGround) {

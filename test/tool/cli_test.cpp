@@ -43,7 +43,7 @@ const std::map<std::string, std::vector<std::string>> kCommandOptions{
     {"simulate",
      {"scene", "--out", "--seed", "--png", "--threads", "--bag", "--bag-voxel", "--bag-max-points",
       "--bag-compression", "--quiet"}},
-    {"extract", {"cloud", "--out", "--config"}},
+    {"extract", {"cloud", "--out", "--repeat", "--config"}},
     {"register", {"query", "candidate", "--config"}},
     {"eval", {"dataset", "--out", "--config", "--unit-weights", "--quiet", "--method"}},
     {"merge",

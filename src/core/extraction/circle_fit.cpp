@@ -6,6 +6,10 @@
 #include <cmath>
 #include <random>
 
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
+
 #include "dtif/core/extraction/extraction_stages.h"
 #include "dtif/core/extraction/trunk_extractor.h"
 #include "dtif/core/robust.h"
@@ -84,6 +88,35 @@ struct Circle {
   double cx = 0.0, cy = 0.0, r = 0.0;  // centre and radius [m]
 };
 
+// Inliers minus inside points among the scored points m0..m1-1 of a hypothesis (squared
+// distances to its centre against in_lo, in_hi, inside). Two lanes at a time where SSE2 is: the
+// same IEEE operations per point (x86-64 has no fused multiply-add here), so the same counts.
+long scoreBlock(const double* sx, const double* sy, size_t m0, size_t m1, double cx, double cy,
+                double in_lo, double in_hi, double inside) {
+  int64_t in = 0, out = 0;
+  size_t m = m0;
+#ifdef __SSE2__
+  const __m128d vcx = _mm_set1_pd(cx), vcy = _mm_set1_pd(cy);
+  const __m128d vlo = _mm_set1_pd(in_lo), vhi = _mm_set1_pd(in_hi), vin = _mm_set1_pd(inside);
+  for (; m + 2 <= m1; m += 2) {
+    const __m128d dx = _mm_sub_pd(_mm_loadu_pd(sx + m), vcx);
+    const __m128d dy = _mm_sub_pd(_mm_loadu_pd(sy + m), vcy);
+    const __m128d d2 = _mm_add_pd(_mm_mul_pd(dx, dx), _mm_mul_pd(dy, dy));
+    const int inl = _mm_movemask_pd(_mm_and_pd(_mm_cmpgt_pd(d2, vlo), _mm_cmplt_pd(d2, vhi)));
+    const int ins = _mm_movemask_pd(_mm_cmplt_pd(d2, vin));
+    in += (inl & 1) + (inl >> 1);  // two-bit masks (popcount is a call on baseline x86-64)
+    out += (ins & 1) + (ins >> 1);
+  }
+#endif
+  for (; m < m1; ++m) {
+    const double dx = sx[m] - cx, dy = sy[m] - cy;
+    const double d2 = dx * dx + dy * dy;
+    in += static_cast<int64_t>((d2 > in_lo) & (d2 < in_hi));
+    out += static_cast<int64_t>(d2 < inside);
+  }
+  return static_cast<long>(in - out);
+}
+
 // RANSAC over 3-point circles with an adaptive stop. Score: inliers minus points well inside
 // the circle (a stem is opaque). Returns the best score; <= 0: no usable hypothesis.
 long ransacCircle(const std::vector<Eigen::Vector2d>& xy, const CircleFitParams& params,
@@ -118,14 +151,7 @@ long ransacCircle(const std::vector<Eigen::Vector2d>& xy, const CircleFitParams&
       const size_t m1 = std::min(scored, m0 + kBlock);
       // Branch-free counts (inside < in_lo: a point is an inlier, inside, or neither), which the
       // compiler vectorises.
-      int64_t in = 0, out = 0;
-      for (size_t m = m0; m < m1; ++m) {
-        const double dx = sx[m] - cx, dy = sy[m] - cy;
-        const double d2 = dx * dx + dy * dy;
-        in += static_cast<int64_t>((d2 > in_lo) & (d2 < in_hi));
-        out += static_cast<int64_t>(d2 < inside);
-      }
-      score += static_cast<long>(in - out);
+      score += scoreBlock(sx.data(), sy.data(), m0, m1, cx, cy, in_lo, in_hi, inside);
     }
     if (score > best_score) {
       best_score = score;
@@ -137,6 +163,48 @@ long ransacCircle(const std::vector<Eigen::Vector2d>& xy, const CircleFitParams&
     }
   }
   return best_score;
+}
+
+// Per point of a Gauss-Newton step about the circle (cx, cy, r): distance d to the centre,
+// residual e = d - r, Tukey weight w (constant c) and the Jacobian's (jx, jy) = -(dx, dy) / d.
+struct PointTerms {
+  std::vector<double> d, e, w, jx, jy;
+};
+
+// The terms of every point, two at a time where SSE2 is: the same IEEE operations as
+// planarDist, tukeyWeight and the divisions (x86-64 has no fused multiply-add here), so the
+// same values; the step's sums stay sequential, in point order.
+void pointTerms(const std::vector<Eigen::Vector2d>& xy, double cx, double cy, double r, double c,
+                PointTerms* t) {
+  const size_t n = xy.size();
+  t->d.resize(n), t->e.resize(n), t->w.resize(n), t->jx.resize(n), t->jy.resize(n);
+  size_t m = 0;
+#ifdef __SSE2__
+  const __m128d vcx = _mm_set1_pd(cx), vcy = _mm_set1_pd(cy), vr = _mm_set1_pd(r);
+  const __m128d vc = _mm_set1_pd(c), one = _mm_set1_pd(1.0), sign = _mm_set1_pd(-0.0);
+  for (; m + 2 <= n; m += 2) {
+    // xy is an array of (x, y) pairs: two points are four doubles.
+    const __m128d p0 = _mm_loadu_pd(xy[m].data()), p1 = _mm_loadu_pd(xy[m + 1].data());
+    const __m128d dx = _mm_sub_pd(_mm_unpacklo_pd(p0, p1), vcx);
+    const __m128d dy = _mm_sub_pd(_mm_unpackhi_pd(p0, p1), vcy);
+    const __m128d d = _mm_sqrt_pd(_mm_add_pd(_mm_mul_pd(dx, dx), _mm_mul_pd(dy, dy)));
+    const __m128d e = _mm_sub_pd(d, vr);
+    const __m128d u = _mm_div_pd(e, vc);
+    const __m128d tt = _mm_sub_pd(one, _mm_mul_pd(u, u));
+    const __m128d in = _mm_cmplt_pd(_mm_andnot_pd(sign, e), vc);  // |e| < c
+    _mm_storeu_pd(&t->d[m], d);
+    _mm_storeu_pd(&t->e[m], e);
+    _mm_storeu_pd(&t->w[m], _mm_and_pd(in, _mm_mul_pd(tt, tt)));
+    _mm_storeu_pd(&t->jx[m], _mm_div_pd(_mm_xor_pd(dx, sign), d));
+    _mm_storeu_pd(&t->jy[m], _mm_div_pd(_mm_xor_pd(dy, sign), d));
+  }
+#endif
+  for (; m < n; ++m) {
+    const double dx = xy[m].x() - cx, dy = xy[m].y() - cy;
+    const double d = planarDist(dx, dy);
+    t->d[m] = d, t->e[m] = d - r, t->w[m] = tukeyWeight(d - r, c);
+    t->jx[m] = -dx / d, t->jy[m] = -dy / d;
+  }
 }
 
 // Kasa on the inliers of the RANSAC circle (when plausible), then Tukey-weighted geometric
@@ -155,17 +223,16 @@ Circle refineCircle(const std::vector<Eigen::Vector2d>& xy, const Circle& start,
     cx = kx, cy = ky, r = kr;
   }
   const double c_tukey = 2.0 * tol;
+  PointTerms t;
   for (int it = 0; it < 15; ++it) {
+    pointTerms(xy, cx, cy, r, c_tukey, &t);
     Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
     Eigen::Vector3d g = Eigen::Vector3d::Zero();
     for (size_t m = 0; m < n; ++m) {
-      const double dx = xy[m].x() - cx, dy = xy[m].y() - cy;
-      const double d = planarDist(dx, dy);
-      if (d < 1e-9) continue;
-      const double e = d - r;
-      const double w = tukeyWeight(e, c_tukey);
+      if (t.d[m] < 1e-9) continue;
+      const double e = t.e[m], w = t.w[m];
       if (w <= 0.0) continue;
-      const Eigen::Vector3d J(-dx / d, -dy / d, -1.0);
+      const Eigen::Vector3d J(t.jx[m], t.jy[m], -1.0);
       A += w * J * J.transpose();
       g += w * J * e;
     }

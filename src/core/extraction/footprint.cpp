@@ -89,9 +89,23 @@ class Tiles {
   std::unordered_map<int64_t, int> sparse_;
 };
 
+// What trunkHeightCells reads in its first passes over a cloud.
+struct HeightCellsPrepass {
+  size_t finite = 0;               // finite points of the cloud
+  float minx = 0.0f, maxx = 0.0f;  // extent of the finite points [m]
+  float miny = 0.0f, maxy = 0.0f;  // [m]
+  size_t stride = 0;               // samples: every stride-th finite point, from the first
+  std::vector<float> sx, sy, sz;   // the samples' coordinates [m]
+};
+
+std::vector<std::pair<int64_t, int64_t>> heightCells(const Cloud& cloud_S, const Pose& T_F_S,
+                                                     double cell_m, size_t max_ground_samples,
+                                                     const HeightCellsPrepass& given);
+
 // Ground samples by tile: tile id's z values are z[start[id]] .. z[start[id + 1] - 1].
 struct TileSamples {
   std::vector<uint32_t> start;
+  std::vector<uint32_t> start_end;  // tile id's sorted prefix ends at z[start_end[id]]
   std::vector<float> z;
   std::vector<std::pair<int64_t, int64_t>> made;  // coordinates of each index (sparse case)
 };
@@ -130,6 +144,7 @@ TileSamples sampleTiles(const HeightCellsPrepass& pre, Tiles* tiles) {
   }
   const size_t ntiles = tiles->dense() ? tiles->denseSize() : s.made.size();
   s.start.assign(ntiles + 1, 0);
+  s.start_end.assign(ntiles, 0);
   for (const int id : id_of) ++s.start[id + 1];
   for (size_t t = 0; t < ntiles; ++t) s.start[t + 1] += s.start[t];
   s.z.resize(z_of.size());
@@ -161,26 +176,45 @@ float kthOfSortedRuns(std::vector<std::pair<const float*, const float*>>* runs, 
 std::vector<float> tileGround(const HeightCellsPrepass& pre, Tiles* tiles) {
   TileSamples s = sampleTiles(pre, tiles);
   const size_t ntiles = s.start.size() - 1;
+  // The rank each window asks for; a tile's run needs only its `need` smallest values sorted
+  // (the k-th smallest of a union takes at most k + 1 from any run), so a selection and a sort
+  // of that prefix replace a sort of the whole tile.
+  std::vector<size_t> rank(ntiles, 0), need(ntiles, 0);
+  std::vector<char> any(ntiles, 0);
+  const auto window = [&](size_t id, auto&& visit) {
+    const auto [tx, ty] = tiles->coords(id, s.made);
+    for (int64_t dx = -kWindowTiles; dx <= kWindowTiles; ++dx) {
+      for (int64_t dy = -kWindowTiles; dy <= kWindowTiles; ++dy) {
+        const int o = tiles->index(tx + dx, ty + dy, false);
+        if (o >= 0 && s.start[o] != s.start[o + 1]) visit(static_cast<size_t>(o));
+      }
+    }
+  };
   for (size_t id = 0; id < ntiles; ++id) {
-    std::sort(s.z.begin() + s.start[id], s.z.begin() + s.start[id + 1]);
+    size_t total = 0;
+    window(id, [&](size_t o) { total += s.start[o + 1] - s.start[o]; });
+    if (total == 0) continue;
+    any[id] = 1;
+    rank[id] = static_cast<size_t>(kGroundPct * static_cast<double>(total - 1));
+    window(id, [&](size_t o) { need[o] = std::max(need[o], rank[id] + 1); });
+  }
+  for (size_t id = 0; id < ntiles; ++id) {
+    const auto b = s.z.begin() + s.start[id], e = s.z.begin() + s.start[id + 1];
+    const auto mid = b + static_cast<std::ptrdiff_t>(std::min<size_t>(need[id], e - b));
+    if (mid < e) std::nth_element(b, mid, e);
+    std::sort(b, mid);
+    s.start_end[id] = static_cast<uint32_t>(mid - s.z.begin());
   }
   std::vector<float> ground(ntiles, std::numeric_limits<float>::quiet_NaN());
   std::vector<std::pair<const float*, const float*>> runs;
   for (size_t id = 0; id < ntiles; ++id) {
-    const auto [tx, ty] = tiles->coords(id, s.made);
+    if (!any[id]) continue;
     runs.clear();
-    size_t total = 0;
-    for (int64_t dx = -kWindowTiles; dx <= kWindowTiles; ++dx) {
-      for (int64_t dy = -kWindowTiles; dy <= kWindowTiles; ++dy) {
-        const int o = tiles->index(tx + dx, ty + dy, false);
-        if (o < 0 || s.start[o] == s.start[o + 1]) continue;
-        runs.emplace_back(s.z.data() + s.start[o], s.z.data() + s.start[o + 1]);
-        total += s.start[o + 1] - s.start[o];
-      }
-    }
-    if (total == 0) continue;
-    const size_t q = static_cast<size_t>(kGroundPct * static_cast<double>(total - 1));
-    ground[id] = kthOfSortedRuns(&runs, q);
+    window(id, [&](size_t o) {
+      if (s.start_end[o] > s.start[o])
+        runs.emplace_back(s.z.data() + s.start[o], s.z.data() + s.start_end[o]);
+    });
+    ground[id] = kthOfSortedRuns(&runs, rank[id]);
   }
   return ground;
 }
@@ -197,12 +231,14 @@ std::vector<std::pair<int64_t, int64_t>> trunkHeightCells(const Cloud& cloud_S, 
     pre.minx = std::min(pre.minx, p.x), pre.maxx = std::max(pre.maxx, p.x);
     pre.miny = std::min(pre.miny, p.y), pre.maxy = std::max(pre.maxy, p.y);
   }
-  return trunkHeightCells(cloud_S, T_F_S, cell_m, max_ground_samples, pre);
+  return heightCells(cloud_S, T_F_S, cell_m, max_ground_samples, pre);
 }
 
-std::vector<std::pair<int64_t, int64_t>> trunkHeightCells(const Cloud& cloud_S, const Pose& T_F_S,
-                                                          double cell_m, size_t max_ground_samples,
-                                                          const HeightCellsPrepass& given) {
+namespace {
+
+std::vector<std::pair<int64_t, int64_t>> heightCells(const Cloud& cloud_S, const Pose& T_F_S,
+                                                     double cell_m, size_t max_ground_samples,
+                                                     const HeightCellsPrepass& given) {
   std::vector<std::pair<int64_t, int64_t>> out;
   Tiles tiles;
   const size_t n = given.finite;
@@ -231,6 +267,55 @@ std::vector<std::pair<int64_t, int64_t>> trunkHeightCells(const Cloud& cloud_S, 
   }
   std::sort(out.begin(), out.end());
   out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
+}  // namespace
+
+bool HeightCellMarks::init(const std::vector<float>& sx, const std::vector<float>& sy,
+                           const std::vector<float>& sz, double cell_m, const Eigen::Vector2d& lo,
+                           const Eigen::Vector2d& hi) {
+  // Far from any origin (|coordinate| >= 1e6 m) the float margins below lose metres, and the
+  // cell indices must stay where floorOf is fastCellIndex.
+  const double far = std::max(lo.cwiseAbs().maxCoeff(), hi.cwiseAbs().maxCoeff());
+  if (sx.empty() || !(cell_m > 0.0) || !(far < 1e6) ||
+      !(far / cell_m < static_cast<double>(kMaxCellIndex) / 4.0)) {
+    return false;
+  }
+  // Tiles over the samples' extent and one tile more on each side: beyond, no window holds a
+  // sample. Their ground as trunkHeightCells computes it.
+  HeightCellsPrepass pre;
+  pre.finite = sx.size();
+  pre.minx = *std::min_element(sx.begin(), sx.end()) - 2.5f;
+  pre.maxx = *std::max_element(sx.begin(), sx.end()) + 2.5f;
+  pre.miny = *std::min_element(sy.begin(), sy.end()) - 2.5f;
+  pre.maxy = *std::max_element(sy.begin(), sy.end()) + 2.5f;
+  pre.sx = sx, pre.sy = sy, pre.sz = sz;
+  Tiles tiles;
+  tiles.init(pre.minx, pre.maxx, pre.miny, pre.maxy);
+  if (!tiles.dense()) return false;
+  ground_ = tileGround(pre, &tiles);
+  tx0_ = tileOf(pre.minx), ty0_ = tileOf(pre.miny);
+  tw_ = tileOf(pre.maxx) - tx0_ + 1, th_ = tileOf(pre.maxy) - ty0_ + 1;
+  cell_m_ = cell_m;
+  int e = 0;
+  pow2_ = std::frexp(cell_m, &e) == 0.5 && e > -1000 && e < 1000;  // as Divisor
+  inv_cell_ = pow2_ ? 1.0 / cell_m : 0.0;
+  cx0_ = fastCellIndex(lo.x() / cell_m), cy0_ = fastCellIndex(lo.y() / cell_m);
+  cw_ = fastCellIndex(hi.x() / cell_m) - cx0_ + 1, ch_ = fastCellIndex(hi.y() / cell_m) - cy0_ + 1;
+  if (!(static_cast<double>(cw_) * static_cast<double>(ch_) <= 16e6)) return false;
+  marks_.assign(static_cast<size_t>(cw_ * ch_), 0);
+  outside_ = false;
+  return true;
+}
+
+std::vector<std::pair<int64_t, int64_t>> HeightCellMarks::cells() const {
+  std::vector<std::pair<int64_t, int64_t>> out;
+  for (int64_t cx = 0; cx < cw_; ++cx) {
+    for (int64_t cy = 0; cy < ch_; ++cy) {
+      if (marks_[static_cast<size_t>(cx * ch_ + cy)]) out.emplace_back(cx0_ + cx, cy0_ + cy);
+    }
+  }
   return out;
 }
 

@@ -18,6 +18,7 @@ namespace {
 struct SubColumns {
   int ns = 1;               // sub-columns per cell side
   double sub = 0.0;         // sub-column size [m]
+  Divisor by_sub{1.0};      // x / sub
   std::vector<float> smin;  // lowest point per sub-column [m]
   std::vector<char> sopen;  // nothing in the open gap above the lowest point
   std::vector<int> sidx;    // sub-column of each point of the cell
@@ -35,21 +36,22 @@ void groundOfCell(const GroundGrid& grid, size_t c, const TrunkExtractorParams& 
   std::fill(s->sopen.begin(), s->sopen.end(), 1);
   s->sidx.resize(e - b);
   for (uint32_t k = b; k < e; ++k) {
-    const int sx = std::clamp(static_cast<int>((grid.sx[k] - x0) / s->sub), 0, ns - 1);
-    const int sy = std::clamp(static_cast<int>((grid.sy[k] - y0) / s->sub), 0, ns - 1);
+    const GroundGrid::SortedPoint& q = grid.sorted[k];
+    const int sx = std::clamp(static_cast<int>(s->by_sub(q.x - x0)), 0, ns - 1);
+    const int sy = std::clamp(static_cast<int>(s->by_sub(q.y - y0)), 0, ns - 1);
     const int sc = sy * ns + sx;
     s->sidx[k - b] = sc;
-    s->smin[sc] = std::min(s->smin[sc], grid.sz[k]);
+    s->smin[sc] = std::min(s->smin[sc], q.z);
   }
   for (uint32_t k = b; k < e; ++k) {
     const int sc = s->sidx[k - b];
-    const float dz = grid.sz[k] - s->smin[sc];
+    const float dz = grid.sorted[k].z - s->smin[sc];
     if (dz > p.ground_open_gap_m && dz <= p.ground_open_top_m) s->sopen[sc] = 0;
   }
   s->zs.clear();
   for (uint32_t k = b; k < e; ++k) {
     const int sc = s->sidx[k - b];
-    const float z = grid.sz[k];
+    const float z = grid.sorted[k].z;
     if (s->sopen[sc] && z - s->smin[sc] <= p.ground_band_m) s->zs.push_back(z);
   }
   int nopen = 0;
@@ -85,6 +87,24 @@ struct GroundWindow {
       }
     }
   }
+};
+
+// The ground cell of a local point of the grid's points: cellOf without its floor (every offset
+// from the grid's corner is >= 0 there, where truncation is the floor).
+class PointCell {
+ public:
+  explicit PointCell(const GroundGrid& g)
+      : x0_(g.minx), y0_(g.miny), by_g_(g.cell_m), nx_(g.nx), ny_(g.ny) {}
+  uint32_t operator()(float x, float y) const {
+    const int gx = std::min(static_cast<int>(by_g_(x - x0_)), nx_ - 1);
+    const int gy = std::min(static_cast<int>(by_g_(y - y0_)), ny_ - 1);
+    return static_cast<uint32_t>(gy) * nx_ + gx;
+  }
+
+ private:
+  double x0_, y0_;
+  Divisor by_g_;
+  int nx_, ny_;
 };
 
 }  // namespace
@@ -164,9 +184,10 @@ GroundGrid binGroundGrid(const LocalPoints& pts, const TrunkExtractorParams& p) 
 void binGroundGrid(const LocalPoints& pts, const TrunkExtractorParams& p, GroundGrid* out) {
   GroundGrid& grid = *out;
   const size_t n = pts.size();
-  const std::vector<float>&X = pts.x, &Y = pts.y;
+  const float *X = pts.x.data(), *Y = pts.y.data();
   float minx = X[0], maxx = X[0], miny = Y[0], maxy = Y[0];
-  for (size_t i = 1; i < n; ++i) {
+  if (pts.has_extent) minx = pts.minx, maxx = pts.maxx, miny = pts.miny, maxy = pts.maxy;
+  for (size_t i = pts.has_extent ? n : 1; i < n; ++i) {
     minx = std::min(minx, X[i]), maxx = std::max(maxx, X[i]);
     miny = std::min(miny, Y[i]), maxy = std::max(maxy, Y[i]);
   }
@@ -178,30 +199,24 @@ void binGroundGrid(const LocalPoints& pts, const TrunkExtractorParams& p, Ground
   grid.nx = static_cast<int>(std::floor((maxx - minx) / g)) + 1;
   grid.ny = static_cast<int>(std::floor((maxy - miny) / g)) + 1;
   const size_t gcells = grid.cells();
-  // Counting sort of the points by ground cell. cellOf, without its floor: every offset from the
-  // grid's corner is >= 0 here, where truncation is the floor.
+  // Counting sort of the points by ground cell; the cell is computed again where needed (cheaper
+  // than an array of them, read back twice: this is bound by memory traffic).
   grid.start.assign(gcells + 1, 0);
-  grid.point_cell.resize(n);
-  const double x0 = grid.minx, y0 = grid.miny;
-  const Divisor by_g(g);
-  for (size_t i = 0; i < n; ++i) {
-    const int gx = std::min(static_cast<int>(by_g(X[i] - x0)), grid.nx - 1);
-    const int gy = std::min(static_cast<int>(by_g(Y[i] - y0)), grid.ny - 1);
-    grid.point_cell[i] = static_cast<uint32_t>(gy) * grid.nx + gx;
-    ++grid.start[grid.point_cell[i] + 1];
-  }
+  const PointCell cell_of(grid);
+  // Raw pointers: through the members the compiler reloads them at every point.
+  uint32_t* count = grid.start.data() + 1;
+  for (size_t i = 0; i < n; ++i) ++count[cell_of(X[i], Y[i])];
   for (size_t c = 0; c < gcells; ++c) grid.start[c + 1] += grid.start[c];
-  grid.order.resize(n);
   std::vector<uint32_t> fill(grid.start.begin(), grid.start.end() - 1);
-  grid.sx.resize(n), grid.sy.resize(n), grid.sz.resize(n);
+  grid.sorted.resize(n);
+  GroundGrid::SortedPoint* out_pts = grid.sorted.data();
+  const float* Z = pts.z.data();
   for (size_t i = 0; i < n; ++i) {
-    const uint32_t k = fill[grid.point_cell[i]]++;
-    grid.order[k] = static_cast<uint32_t>(i);
-    grid.sx[k] = X[i], grid.sy[k] = Y[i], grid.sz[k] = pts.z[i];
+    out_pts[fill[cell_of(X[i], Y[i])]++] = {X[i], Y[i], Z[i]};
   }
 }
 
-GroundCells openGroundCells(const LocalPoints& /*pts: read through grid.sx, sy, sz*/,
+GroundCells openGroundCells(const LocalPoints& /*pts: read through grid.sorted*/,
                             const GroundGrid& grid, const TrunkExtractorParams& p) {
   const size_t gcells = grid.cells();
   GroundCells cells;
@@ -212,6 +227,7 @@ GroundCells openGroundCells(const LocalPoints& /*pts: read through grid.sx, sy, 
   SubColumns s;
   s.ns = std::max(1, static_cast<int>(std::lround(grid.cell_m / p.ground_sub_cell_m)));
   s.sub = grid.cell_m / s.ns;
+  s.by_sub = Divisor(s.sub);
   s.smin.resize(static_cast<size_t>(s.ns) * s.ns);
   s.sopen.resize(s.smin.size());
   for (size_t c = 0; c < gcells; ++c) {
@@ -297,8 +313,6 @@ std::vector<float> heightsAboveGround(const LocalPoints& pts, const GroundGrid& 
 void heightsAboveGround(const LocalPoints& pts, const GroundGrid& grid, std::vector<float>* out) {
   std::vector<float>& h = *out;
   const size_t n = pts.size();
-  const int gnx = grid.nx;
-  const double g = grid.cell_m;
   // Each cell's plane about its centre, once per cell instead of two divisions per point.
   struct Centred {
     GroundPlane pl;
@@ -306,13 +320,16 @@ void heightsAboveGround(const LocalPoints& pts, const GroundGrid& grid, std::vec
   };
   std::vector<Centred> cells(grid.cells());
   for (size_t c = 0; c < cells.size(); ++c) {
-    cells[c] = {grid.plane[c], grid.minx + ((c % gnx) + 0.5) * g,
-                grid.miny + ((c / gnx) + 0.5) * g};
+    cells[c].pl = grid.plane[c];
+    grid.cellCentre(c, &cells[c].x0, &cells[c].y0);
   }
   h.resize(n);
+  const PointCell cell_of(grid);
+  const float *X = pts.x.data(), *Y = pts.y.data(), *Z = pts.z.data();
+  float* H = h.data();
   for (size_t i = 0; i < n; ++i) {
-    const Centred& cc = cells[grid.point_cell[i]];
-    h[i] = static_cast<float>(pts.z[i] - cc.pl.at(pts.x[i] - cc.x0, pts.y[i] - cc.y0));
+    const Centred& cc = cells[cell_of(X[i], Y[i])];
+    H[i] = static_cast<float>(Z[i] - cc.pl.at(X[i] - cc.x0, Y[i] - cc.y0));
   }
 }
 

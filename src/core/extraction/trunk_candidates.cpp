@@ -111,12 +111,16 @@ size_t CellHash::hash(uint64_t k) {
 
 namespace {
 
-// Column cells of the slab points and their extent.
-void slabCells(const LocalPoints& pts, VoxelColumns* cols, double cs) {
+// Column cells of the slab points (*cx, *cy) and their extent.
+void slabCells(const LocalPoints& pts, VoxelColumns* cols, double cs, std::vector<int64_t>* cxs,
+               std::vector<int64_t>* cys) {
   int64_t x0 = std::numeric_limits<int64_t>::max(), y0 = x0;
   int64_t x1 = std::numeric_limits<int64_t>::min(), y1 = x1;
-  for (const uint32_t i : cols->slab) {
+  cxs->resize(cols->slab.size()), cys->resize(cols->slab.size());
+  for (size_t k = 0; k < cols->slab.size(); ++k) {
+    const uint32_t i = cols->slab[k];
     const int64_t cx = floorIndex(pts.x[i] / cs), cy = floorIndex(pts.y[i] / cs);
+    (*cxs)[k] = cx, (*cys)[k] = cy;
     x0 = std::min(x0, cx), x1 = std::max(x1, cx);
     y0 = std::min(y0, cy), y1 = std::max(y1, cy);
   }
@@ -150,16 +154,25 @@ void slabColumns(const LocalPoints& pts, const std::vector<float>& h, const Trun
   const double cs = p.column_cell_m;
   const int nlayers =
       std::max(1, static_cast<int>(std::ceil((p.slab_max_h_m - p.slab_min_h_m) / p.layer_h_m)));
-  for (size_t i = 0; i < pts.size(); ++i)
-    if (h[i] >= p.slab_min_h_m && h[i] < p.slab_max_h_m)
-      cols.slab.push_back(static_cast<uint32_t>(i));
+  // Branch-free: about a quarter of the points are in the slab, in no predictable pattern.
+  cols.slab.resize(pts.size());
+  size_t ns = 0;
+  const double lo = p.slab_min_h_m, hi = p.slab_max_h_m;
+  for (size_t i = 0; i < pts.size(); ++i) {
+    cols.slab[ns] = static_cast<uint32_t>(i);
+    ns += static_cast<size_t>((h[i] >= lo) & (h[i] < hi));
+  }
+  cols.slab.resize(ns);
   if (cols.slab.empty()) return;
-  slabCells(pts, &cols, cs);
+  thread_local std::vector<int64_t> cxs_of_thread, cys_of_thread;  // kept between submaps
+  std::vector<int64_t>&cxs = cxs_of_thread, &cys = cys_of_thread;  // each slab point's cell
+  slabCells(pts, &cols, cs, &cxs, &cys);
+  const int64_t *CX = cxs.data(), *CY = cys.data();
   cols.slab_col.resize(cols.slab.size());
   // Columns are numbered in order of their first slab point, whichever index holds them.
   for (size_t k = 0; k < cols.slab.size(); ++k) {
     const uint32_t i = cols.slab[k];
-    const int64_t ix = floorIndex(pts.x[i] / cs), iy = floorIndex(pts.y[i] / cs);
+    const int64_t ix = CX[k], iy = CY[k];
     const int next = static_cast<int>(cols.ix.size());
     int id;
     if (!cols.grid.empty()) {

@@ -145,12 +145,24 @@ void checkBaseAndOutputs(const TrunkExtractorParams& p, Checks* c) {
 // What lies around a stem of local centre (cx, cy) and radius r.
 struct BaseRing {
   std::vector<double> bx, by, bz;  // ground points of the ring (|h| <= base_max_dh_m) [m]
-  std::vector<uint32_t> ring;      // every point over the ring, by its place in grid.order
+  std::vector<uint32_t> ring;      // every point over the ring, by its place in grid.sorted
   double stem_low = std::numeric_limits<double>::infinity();  // lowest stem point [m]
 };
 
-BaseRing gatherBaseRing(const std::vector<float>& h, const GroundGrid& grid, double cx, double cy,
-                        double r, const TrunkExtractorParams& p) {
+// True when no point of ground cell (gx, gy) can lie within r_out (the ring's and the stem
+// shell's outer radius) of (cx, cy): a corner of the ring's box. Inner cells only (edge cells hold
+// the points clamped into the grid), with a millimetre for the rounding of the points' cell.
+bool outsideRing(const GroundGrid& grid, int gx, int gy, double cx, double cy, double r_out) {
+  if (gx == 0 || gy == 0 || gx == grid.nx - 1 || gy == grid.ny - 1) return false;
+  const double x0 = grid.minx + gx * grid.cell_m, y0 = grid.miny + gy * grid.cell_m;
+  const double dx = std::max({x0 - cx, cx - (x0 + grid.cell_m), 0.0});
+  const double dy = std::max({y0 - cy, cy - (y0 + grid.cell_m), 0.0});
+  const double reach = r_out + 1e-3;
+  return dx * dx + dy * dy > reach * reach;
+}
+
+BaseRing gatherBaseRing(const GroundGrid& grid, double cx, double cy, double r,
+                        const TrunkExtractorParams& p) {
   BaseRing b;
   const double r_in = r + p.base_ring_inner_m, r_out = r + p.base_ring_outer_m;
   // Lowest point on the stem itself: a base counts as seen only if the stem is visible
@@ -161,15 +173,23 @@ BaseRing gatherBaseRing(const std::vector<float>& h, const GroundGrid& grid, dou
   grid.cellOf(cx + r_out, cy + r_out, &gx1, &gy1);
   for (int gy = gy0; gy <= gy1; ++gy) {
     for (int gx = gx0; gx <= gx1; ++gx) {
+      if (outsideRing(grid, gx, gy, cx, cy, std::max(r_out, r + p.stem_shell_m))) continue;
       const size_t c = static_cast<size_t>(gy) * grid.nx + gx;
+      // The points' heights from their cell's plane, as heightsAboveGround computes them: no
+      // gather from the height array, in point order.
+      const GroundPlane& pl = grid.plane[c];
+      double x0, y0;
+      grid.cellCentre(c, &x0, &y0);
       for (uint32_t k = grid.start[c]; k < grid.start[c + 1]; ++k) {
-        const double dx = grid.sx[k] - cx, dy = grid.sy[k] - cy;
+        const GroundGrid::SortedPoint& q = grid.sorted[k];
+        const double dx = q.x - cx, dy = q.y - cy;
         const double d2 = dx * dx + dy * dy;
-        if (d2 < r_stem2) b.stem_low = std::min(b.stem_low, static_cast<double>(grid.sz[k]));
+        if (d2 < r_stem2) b.stem_low = std::min(b.stem_low, static_cast<double>(q.z));
         if (d2 < r_in * r_in || d2 > r_out * r_out) continue;
         b.ring.push_back(k);
-        if (std::abs(h[grid.order[k]]) > p.base_max_dh_m) continue;
-        b.bx.push_back(grid.sx[k]), b.by.push_back(grid.sy[k]), b.bz.push_back(grid.sz[k]);
+        const float h = static_cast<float>(q.z - pl.at(q.x - x0, q.y - y0));
+        if (std::abs(h) > p.base_max_dh_m) continue;
+        b.bx.push_back(q.x), b.by.push_back(q.y), b.bz.push_back(q.z);
       }
     }
   }
@@ -200,44 +220,58 @@ const Cloud& keptPoints(const Cloud& cloud, const PointBounds& b, Cloud* kept, s
   return cloud;
 }
 
-// toLocalPoints of a cloud whose finite points all lie inside b and, for its footprint, the
-// extent and every fp_stride-th finite point (HeightCellsPrepass; fp_stride 0: none), in one pass
-// over the cloud, the largest array extraction reads. false when a finite point lies outside b
-// (then nothing is usable).
-bool firstPass(const Cloud& cloud, const PointBounds& b, size_t fp_stride, LocalPoints* pts,
-               HeightCellsPrepass* pre) {
-  pts->x.resize(cloud.size()), pts->y.resize(cloud.size()), pts->z.resize(cloud.size());
-  pts->ox = pts->oy = pts->oz = 0.0;
-  pre->finite = 0;
-  pre->sx.clear(), pre->sy.clear(), pre->sz.clear();
-  size_t n = 0, skip = 0;
+// Every stride-th point of the cloud, the footprint's ground samples when every point is finite;
+// false when a sample is not finite (then they are not those samples).
+bool takeFootprintSamples(const Cloud& cloud, size_t stride, std::vector<float>* sx,
+                          std::vector<float>* sy, std::vector<float>* sz) {
+  sx->clear(), sy->clear(), sz->clear();
+  for (size_t i = 0; i < cloud.size(); i += stride) {
+    const pcl::PointXYZ& q = cloud[i];
+    if (!std::isfinite(q.x) || !std::isfinite(q.y) || !std::isfinite(q.z)) return false;
+    sx->push_back(q.x), sy->push_back(q.y), sz->push_back(q.z);
+  }
+  return true;
+}
+
+// toLocalPoints of a cloud whose finite points all lie inside b, and (marks not null) each
+// finite point added to the footprint's marks, in one pass over the cloud, the largest array
+// extraction reads. *finite counts the finite points. false when a finite point lies outside b
+// (then nothing is usable). Raw pointers and locals: through the members, the compiler reloads
+// them (and the thread's workspace address) at every point.
+bool firstPass(const Cloud& cloud, const PointBounds& b, LocalPoints* pts, HeightCellMarks* marks,
+               size_t* finite) {
+  const size_t size = cloud.size();
+  pts->x.resize(size), pts->y.resize(size), pts->z.resize(size);
+  float *X = pts->x.data(), *Y = pts->y.data(), *Z = pts->z.data();
+  const pcl::PointXYZ* P = cloud.points.data();
+  const double cx = b.centre.x(), cy = b.centre.y(), cz = b.centre.z(), hs = b.half_side_m;
+  double ox = 0.0, oy = 0.0, oz = 0.0;
+  float minx = 0.0f, maxx = 0.0f, miny = 0.0f, maxy = 0.0f;
   bool have_origin = false;
-  pre->stride = fp_stride;
-  for (const auto& pt : cloud.points) {
-    if (!std::isfinite(pt.x) || !std::isfinite(pt.y) || !std::isfinite(pt.z)) continue;
-    if (!b.inside(pt)) return false;
-    if (fp_stride > 0) {
-      if (pre->finite++ == 0) pre->minx = pre->maxx = pt.x, pre->miny = pre->maxy = pt.y;
-      pre->minx = std::min(pre->minx, pt.x), pre->maxx = std::max(pre->maxx, pt.x);
-      pre->miny = std::min(pre->miny, pt.y), pre->maxy = std::max(pre->maxy, pt.y);
-      if (skip == 0) {
-        pre->sx.push_back(pt.x), pre->sy.push_back(pt.y), pre->sz.push_back(pt.z);
-        skip = fp_stride;
-      }
-      --skip;
-    }
+  size_t n = 0, nf = 0;
+  for (size_t i = 0; i < size; ++i) {
+    const float x = P[i].x, y = P[i].y, z = P[i].z;
+    if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) continue;
+    ++nf;
+    if (!(std::abs(x - cx) <= hs && std::abs(y - cy) <= hs && std::abs(z - cz) <= hs)) return false;
+    if (marks) marks->add(x, y, z);
     // As toLocalPoints: absurd magnitudes would overflow the cell indices.
-    if (std::abs(pt.x) > 1e8f || std::abs(pt.y) > 1e8f || std::abs(pt.z) > 1e8f) continue;
-    if (!have_origin) {
-      pts->ox = std::floor(pt.x), pts->oy = std::floor(pt.y), pts->oz = std::floor(pt.z);
-      have_origin = true;
-    }
-    pts->x[n] = static_cast<float>(pt.x - pts->ox);
-    pts->y[n] = static_cast<float>(pt.y - pts->oy);
-    pts->z[n] = static_cast<float>(pt.z - pts->oz);
+    if (std::abs(x) > 1e8f || std::abs(y) > 1e8f || std::abs(z) > 1e8f) continue;
+    if (!have_origin)
+      ox = std::floor(x), oy = std::floor(y), oz = std::floor(z), have_origin = true;
+    const float lx = static_cast<float>(x - ox), ly = static_cast<float>(y - oy);
+    X[n] = lx, Y[n] = ly, Z[n] = static_cast<float>(z - oz);
+    // The ground grid's extent, in the order binGroundGrid would take it.
+    if (n == 0) minx = maxx = lx, miny = maxy = ly;
+    minx = std::min(minx, lx), maxx = std::max(maxx, lx);
+    miny = std::min(miny, ly), maxy = std::max(maxy, ly);
     ++n;
   }
+  pts->ox = ox, pts->oy = oy, pts->oz = oz;
+  pts->minx = minx, pts->maxx = maxx, pts->miny = miny, pts->maxy = maxy;
+  pts->has_extent = n > 0;
   pts->x.resize(n), pts->y.resize(n), pts->z.resize(n);
+  *finite = nf;
   return true;
 }
 
@@ -246,11 +280,28 @@ bool firstPass(const Cloud& cloud, const PointBounds& b, size_t fp_stride, Local
 // point of the largest cloud the thread has extracted.
 struct Workspace {
   LocalPoints pts;
-  HeightCellsPrepass pre;
+  std::vector<float> fsx, fsy, fsz;  // the footprint's ground samples
+  HeightCellMarks marks;
   GroundGrid ground;
   std::vector<float> h;
   VoxelColumns cols;
 };
+
+// The footprint's marks ready for firstPass, or null when the footprint is made otherwise.
+HeightCellMarks* footprintMarks(const Cloud& cloud, const PointBounds& b,
+                                const TrunkExtractorParams& p, Workspace* ws) {
+  if (!(p.footprint_cell_m > 0.0) || cloud.empty()) return nullptr;
+  // The footprint samples every stride-th finite point, the stride from the finite count: here
+  // the cloud's size, checked after the pass.
+  const size_t fp_max = static_cast<size_t>(p.footprint_max_samples);
+  const size_t stride = fp_max > 0 ? std::max<size_t>(1, cloud.size() / fp_max) : 1;
+  if (!takeFootprintSamples(cloud, stride, &ws->fsx, &ws->fsy, &ws->fsz)) return nullptr;
+  const Eigen::Vector2d half = Eigen::Vector2d::Constant(b.half_side_m);
+  const Eigen::Vector2d centre = b.centre.head<2>();
+  if (!ws->marks.init(ws->fsx, ws->fsy, ws->fsz, p.footprint_cell_m, centre - half, centre + half))
+    return nullptr;
+  return &ws->marks;
+}
 
 bool plausibleBark(const CircleFit& fit, const TrunkExtractorParams& p, TrunkExtractionStats* st) {
   if (fit.inlier_ratio < p.min_inlier_ratio || fit.shell_ratio < p.min_shell_ratio ||
@@ -312,13 +363,14 @@ bool stemLeans(const std::vector<Eigen::Vector2d>& band, const std::vector<float
   return false;
 }
 
-StemBase stemBase(const LocalPoints& /*pts: read through grid.sx, sy, sz*/,
-                  const std::vector<float>& h, const GroundGrid& grid, double cx, double cy,
-                  double r, const TrunkExtractorParams& p) {
+StemBase stemBase(const LocalPoints& /*pts: read through grid.sorted*/,
+                  const std::vector<float>& /*h: from grid.plane, as heightsAboveGround*/,
+                  const GroundGrid& grid, double cx, double cy, double r,
+                  const TrunkExtractorParams& p) {
   // Robust plane through the ground points in a ring around the stem, evaluated at the
   // centre. The grid ground only gates which points count as ground. (The paper's 0.44 m z
   // error comes from a weaker base estimate, Sec. 4.B.)
-  const BaseRing b = gatherBaseRing(h, grid, cx, cy, r, p);
+  const BaseRing b = gatherBaseRing(grid, cx, cy, r, p);
   StemBase base;
   int cgx, cgy;
   grid.cellOf(cx, cy, &cgx, &cgy);
@@ -338,7 +390,8 @@ StemBase stemBase(const LocalPoints& /*pts: read through grid.sx, sy, sz*/,
     // 673 good ones.
     int below = 0;
     for (const uint32_t k : b.ring) {
-      below += grid.sz[k] < pl.at(grid.sx[k] - cx, grid.sy[k] - cy) - p.base_below_m;
+      const GroundGrid::SortedPoint& q = grid.sorted[k];
+      below += q.z < pl.at(q.x - cx, q.y - cy) - p.base_below_m;
     }
     ground_below = below > p.max_base_below_points;
   } else {
@@ -458,24 +511,16 @@ TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorPara
     return result;
   }
   // Points beyond what the sensor sees are dropped before any grid is sized; survey data
-  // keeps every point and takes no copy.
+  // keeps every point and takes no copy, and one pass makes the local points and the footprint.
   const PointBounds bounds = pointBounds(cloud, p.max_range_m);
-  // Survey data: one pass makes the local points and the footprint's samples. The footprint
-  // samples every stride-th finite point, the stride from the finite count, taken here to be
-  // the cloud's size (trunkHeightCells samples again when it is not).
-  const size_t fp_max = static_cast<size_t>(p.footprint_max_samples);
-  const size_t fp_stride = !(p.footprint_cell_m > 0.0) ? 0
-                           : fp_max > 0                ? std::max<size_t>(1, cloud.size() / fp_max)
-                                                       : 1;
-  thread_local Workspace ws;
+  thread_local Workspace ws_of_thread;
+  Workspace& ws = ws_of_thread;
+  HeightCellMarks* marks = footprintMarks(cloud, bounds, p, &ws);
   Cloud kept;
   LocalPoints& pts = ws.pts;
-  HeightCellsPrepass& pre = ws.pre;
-  const bool all_inside = firstPass(cloud, bounds, fp_stride, &pts, &pre);
-  if (!all_inside) {
-    pts = toLocalPoints(keptPoints(cloud, bounds, &kept, &st.far_points));
-    pre = HeightCellsPrepass();
-  }
+  size_t finite = 0;
+  const bool all_inside = firstPass(cloud, bounds, &pts, marks, &finite);
+  if (!all_inside) pts = toLocalPoints(keptPoints(cloud, bounds, &kept, &st.far_points));
   const Cloud& in = all_inside ? cloud : kept;
   st.finite_points = pts.size() + st.far_points;
   if (pts.size() < static_cast<size_t>(p.min_fit_points)) return result;
@@ -486,11 +531,9 @@ TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorPara
   heightsAboveGround(pts, ground, &ws.h);
   // DATASET.md's overlap cells, so verification measures an aligned pair's overlap as the
   // protocol does.
-  result.footprint =
-      all_inside && p.footprint_cell_m > 0.0
-          ? makeFootprint(trunkHeightCells(in, Pose::Identity(), p.footprint_cell_m, fp_max, pre),
-                          p.footprint_cell_m)
-          : trunkFootprint(in, p);
+  result.footprint = all_inside && marks && finite == cloud.size() && marks->complete()
+                         ? makeFootprint(marks->cells(), p.footprint_cell_m)
+                         : trunkFootprint(in, p);
 
   const VoxelColumns& cols = ws.cols;
   slabColumns(pts, h, p, &ws.cols);

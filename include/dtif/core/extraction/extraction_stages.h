@@ -58,6 +58,9 @@ inline double planarDist(double dx, double dy) { return std::sqrt(dx * dx + dy *
 struct LocalPoints {
   double ox = 0.0, oy = 0.0, oz = 0.0;  ///< origin in S: floor of the first kept point [m]
   std::vector<float> x, y, z;           ///< local coordinates (S minus origin) [m]
+  /// Horizontal extent of x and y, when a pass that made them noted it (has_extent) [m].
+  float minx = 0.0f, maxx = 0.0f, miny = 0.0f, maxy = 0.0f;
+  bool has_extent = false;
   size_t size() const { return x.size(); }
 };
 
@@ -85,16 +88,20 @@ GroundPlane fitGroundPlane(const double* x, const double* y, const double* z, co
 
 /// Local ground as a dense horizontal grid over the points' extent, in local coordinates.
 struct GroundGrid {
-  float minx = 0.0f, miny = 0.0f;    ///< local corner of cell (0, 0) [m]
-  double cell_m = 0.0;               ///< ground_cell_m, larger when the extent would need more than
-                                     ///< max_ground_cells cells (far outliers) [m]
-  int nx = 0, ny = 0;                ///< columns and rows
-  std::vector<uint32_t> start;       ///< points of cell c: order[start[c]] .. order[start[c+1]-1]
-  std::vector<uint32_t> order;       ///< point indices sorted by cell
-  std::vector<uint32_t> point_cell;  ///< cell of each point (row-major: gy * nx + gx)
-  /// The points' local coordinates in `order`: x[order[k]] is sx[k]. The per-cell stages read
-  /// these in sequence instead of gathering from all over the cloud [m].
-  std::vector<float> sx, sy, sz;
+  float minx = 0.0f, miny = 0.0f;  ///< local corner of cell (0, 0) [m]
+  double cell_m = 0.0;             ///< ground_cell_m, larger when the extent would need more than
+                                   ///< max_ground_cells cells (far outliers) [m]
+  int nx = 0, ny = 0;              ///< columns and rows
+  /// A point in cell order: its local coordinates [m]. Those who need its height compute it
+  /// from its cell's plane (no index back into the local points: this is bound by memory).
+  struct SortedPoint {
+    float x, y, z;
+  };
+  std::vector<uint32_t> start;  ///< points of cell c: sorted[start[c]] .. sorted[start[c+1]-1]
+  /// The points sorted by cell, stable: the per-cell stages read these in sequence instead of
+  /// gathering from all over the cloud, one 12-byte record each (the sort writes one cache line
+  /// per point, not three).
+  std::vector<SortedPoint> sorted;
   std::vector<GroundPlane> plane;  ///< per cell, about the cell centre, local z [m]
   std::vector<char> seen;          ///< the cell's window held enough ground cells: ground observed
 
@@ -103,6 +110,11 @@ struct GroundGrid {
   void cellOf(double x, double y, int* gx, int* gy) const {
     *gx = std::clamp(static_cast<int>(std::floor((x - minx) / cell_m)), 0, nx - 1);
     *gy = std::clamp(static_cast<int>(std::floor((y - miny) / cell_m)), 0, ny - 1);
+  }
+  /// Local centre of cell c, about which its plane is fitted [m].
+  void cellCentre(size_t c, double* x0, double* y0) const {
+    *x0 = minx + (static_cast<double>(c % static_cast<size_t>(nx)) + 0.5) * cell_m;
+    *y0 = miny + (static_cast<double>(c / static_cast<size_t>(nx)) + 0.5) * cell_m;
   }
   /// Height of the local ground under the local point (x, y): its cell's plane [m].
   double groundAt(double x, double y) const;

@@ -3,6 +3,7 @@
 // protocol's overlap (DATASET.md), so verification can measure how much an aligned pair shares.
 #pragma once
 
+#include <Eigen/Core>
 #include <cstdint>
 #include <utility>
 #include <vector>
@@ -49,20 +50,52 @@ std::vector<std::pair<int64_t, int64_t>> trunkHeightCells(const Cloud& cloud_S, 
                                                           double cell_m,
                                                           size_t max_ground_samples = 0);
 
-/// What trunkHeightCells reads in its first passes over a cloud, gathered by a caller that
-/// passes over the cloud anyway (extraction), so trunkHeightCells passes over it once more only.
-struct HeightCellsPrepass {
-  size_t finite = 0;               ///< finite points of the cloud
-  float minx = 0.0f, maxx = 0.0f;  ///< extent of the finite points [m]
-  float miny = 0.0f, maxy = 0.0f;  ///< [m]
-  size_t stride = 0;               ///< samples: every stride-th finite point, from the first
-  std::vector<float> sx, sy, sz;   ///< the samples' coordinates [m]
-};
+/// trunkHeightCells of a cloud, marked point by point by a caller that passes over the cloud
+/// anyway (extraction): the tiles' ground comes first from the ground samples (every stride-th
+/// point of a cloud without non-finite points), then add() marks each point's cell. The same
+/// cells as trunkHeightCells(cloud_S, Identity, cell_m, max_ground_samples) when every point of
+/// the cloud was added, in order or not, and the cloud had no non-finite point.
+class HeightCellMarks {
+ public:
+  /// Tile ground from the samples (sx, sy, sz) and the cells of the box [lo, hi] (S) that the
+  /// added points lie in. false (then use trunkHeightCells) without samples, beyond 1e6 m from
+  /// the origin, or when either grid would be large.
+  bool init(const std::vector<float>& sx, const std::vector<float>& sy,
+            const std::vector<float>& sz, double cell_m, const Eigen::Vector2d& lo,
+            const Eigen::Vector2d& hi);
+  /// Marks the cell of a point (inside the box) when it lies in the trunk-height band.
+  void add(float x, float y, float z) {
+    const int64_t tx = floorOf(static_cast<double>(x) * 0.5) - tx0_;  // x / 2 m tile, exactly
+    const int64_t ty = floorOf(static_cast<double>(y) * 0.5) - ty0_;
+    if (tx < 0 || ty < 0 || tx >= tw_ || ty >= th_) return;           // no sample in the window
+    const float h = z - ground_[static_cast<size_t>(ty * tw_ + tx)];  // NaN: no ground
+    if (!(h >= kMin && h <= kMax)) return;
+    const int64_t cx = floorOf(cellDiv(x)) - cx0_, cy = floorOf(cellDiv(y)) - cy0_;
+    if (cx < 0 || cy < 0 || cx >= cw_ || cy >= ch_) {
+      outside_ = true;  // only by rounding at the box's edge
+      return;
+    }
+    marks_[static_cast<size_t>(cx * ch_ + cy)] = 1;
+  }
+  /// false when a point fell outside the box: then cells() misses it.
+  bool complete() const { return !outside_; }
+  /// The marked cells, sorted, unique.
+  std::vector<std::pair<int64_t, int64_t>> cells() const;
 
-/// trunkHeightCells with the extent and ground samples of `pre` (the same cells); its samples
-/// are used when their stride is the one max_ground_samples asks for, else taken again.
-std::vector<std::pair<int64_t, int64_t>> trunkHeightCells(const Cloud& cloud_S, const Pose& T_F_S,
-                                                          double cell_m, size_t max_ground_samples,
-                                                          const HeightCellsPrepass& pre);
+ private:
+  static int64_t floorOf(double v) {  // floor without libm's call; |v| < 2^40 here
+    const int64_t i = static_cast<int64_t>(v);
+    return i - (v < static_cast<double>(i));
+  }
+  double cellDiv(float v) const { return pow2_ ? v * inv_cell_ : v / cell_m_; }
+  static constexpr double kMin = 0.3, kMax = 3.0;  // the band, as trunkHeightCells compares it
+  double cell_m_ = 1.0, inv_cell_ = 1.0;
+  bool pow2_ = true;
+  int64_t tx0_ = 0, ty0_ = 0, tw_ = 0, th_ = 0;  // tile grid (ground_)
+  int64_t cx0_ = 0, cy0_ = 0, cw_ = 0, ch_ = 0;  // cell grid (marks_, column-major)
+  std::vector<float> ground_;                    // per tile; NaN: no sample in its window
+  std::vector<uint8_t> marks_;
+  bool outside_ = false;
+};
 
 }  // namespace dtif
