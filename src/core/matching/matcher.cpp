@@ -32,6 +32,33 @@ inline bool fullyConsistent(const Triangle& q, const Triangle& c, const MatcherP
   return true;
 }
 
+/// consistentEdges, each radius compared once (every vertex ends two edges); inlined into the
+/// triangle-pair loop, where it runs for every pair of Delaunay faces.
+inline int edgeMask(const Triangle& q, const Triangle& c, const MatcherParams& params) {
+  const double el = params.edge_rel_tol, ea = params.edge_abs_tol_m;
+  const double rl = params.radius_rel_tol, ra = params.radius_abs_tol_m;
+  const int r0 = consistent(q.r[0], c.r[0], rl, ra), r1 = consistent(q.r[1], c.r[1], rl, ra),
+            r2 = consistent(q.r[2], c.r[2], rl, ra);
+  // kEdgeEnds: e1 joins vertices 0 and 2, e2 0 and 1, e3 1 and 2.
+  static_assert(kEdgeEnds[0][0] == 0 && kEdgeEnds[0][1] == 2 && kEdgeEnds[1][0] == 0 &&
+                kEdgeEnds[1][1] == 1 && kEdgeEnds[2][0] == 1 && kEdgeEnds[2][1] == 2);
+  return (consistent(q.len[0], c.len[0], el, ea) & r0 & r2) |
+         ((consistent(q.len[1], c.len[1], el, ea) & r0 & r1) << 1) |
+         ((consistent(q.len[2], c.len[2], el, ea) & r1 & r2) << 2);
+}
+
+/// std::log1p(n) of a support count, from a table for the small counts that nearly all are
+/// (a repetitive stand gives tens of thousands of supported vertex pairs per candidate).
+inline double log1pCount(int n) {
+  static const std::array<double, 256> table = [] {
+    std::array<double, 256> t{};
+    for (size_t k = 0; k < t.size(); ++k) t[k] = std::log1p(static_cast<double>(k));
+    return t;
+  }();
+  return n >= 0 && n < static_cast<int>(table.size()) ? table[static_cast<size_t>(n)]
+                                                      : std::log1p(static_cast<double>(n));
+}
+
 }  // namespace
 
 /// Computed from the trunks on both sides, so nothing extra crosses the radio link.
@@ -165,17 +192,7 @@ bool passesScreening(const Descriptor& query, const Descriptor& candidate,
 }
 
 int consistentEdges(const Triangle& q, const Triangle& c, const MatcherParams& params) {
-  const double rel = params.edge_rel_tol, abs_tol = params.edge_abs_tol_m;
-  int mask = 0;
-  for (int a = 0; a < 3; ++a) {
-    const int u = kEdgeEnds[a][0], v = kEdgeEnds[a][1];
-    if (consistent(q.len[a], c.len[a], rel, abs_tol) &&
-        consistent(q.r[u], c.r[u], params.radius_rel_tol, params.radius_abs_tol_m) &&
-        consistent(q.r[v], c.r[v], params.radius_rel_tol, params.radius_abs_tol_m)) {
-      mask |= 1 << a;
-    }
-  }
-  return mask;
+  return edgeMask(q, c, params);
 }
 
 VertexSupport accumulateSupport(const std::vector<MatchTriangle>& tq,
@@ -210,7 +227,7 @@ VertexSupport accumulateSupport(const std::vector<MatchTriangle>& tq,
       ++*triangle_pairs;
       const bool faces = mq.delaunay && it->delaunay;
       // Eq. (3.4): chi_a per canonical edge; only a pair of faces needs the partial mask.
-      const int mask = faces ? consistentEdges(q, c, params) : fullyConsistent(q, c, params) * 7;
+      const int mask = faces ? edgeMask(q, c, params) : fullyConsistent(q, c, params) * 7;
       if (mask == 7) {
         for (int b = 0; b < 3; ++b) bump(sup.strong, q.v[b], c.v[b]);  // Eq. (3.6)
       } else if (mask != 0 && faces) {
@@ -231,12 +248,28 @@ std::vector<Correspondence> weightedCorrespondences(const VertexSupport& support
                                                     const Descriptor& query,
                                                     const Descriptor& candidate,
                                                     const MatcherParams& params) {
-  std::vector<Correspondence> out;
-  const size_t nc = support.nc;
+  // (omega, flat index) of the supported pairs; only the kept ones become Correspondences.
+  std::vector<std::pair<double, uint32_t>> weighted;
+  weighted.reserve(support.touched.size());
   for (uint32_t k : support.touched) {
     const int s = support.strong[k], w = support.weak[k];
     if (!(s > 0 || w > params.weak_support_min)) continue;  // Eq. (3.8)
-    Correspondence cr;
+    // Eq. (3.9)
+    weighted.emplace_back(1.0 + params.alpha_s * log1pCount(s) + params.alpha_w * log1pCount(w), k);
+  }
+  // Eq. (3.10), heaviest first; ties by index (the flat index orders by query, then candidate
+  // trunk) so the order is total and deterministic (the heaviest K sorted are then the first K
+  // of the whole list sorted).
+  const size_t keep = std::min(weighted.size(), static_cast<size_t>(params.max_correspondences));
+  std::partial_sort(weighted.begin(), weighted.begin() + keep, weighted.end(),
+                    [](const auto& a, const auto& b) {
+                      return a.first != b.first ? a.first > b.first : a.second < b.second;
+                    });
+  std::vector<Correspondence> out(keep);
+  const size_t nc = support.nc;
+  for (size_t i = 0; i < keep; ++i) {
+    const uint32_t k = weighted[i].second;
+    Correspondence& cr = out[i];
     cr.iq = static_cast<int>(k / nc);
     cr.ic = static_cast<int>(k % nc);
     const TrunkLandmark& a = query.trunks[cr.iq];
@@ -244,21 +277,10 @@ std::vector<Correspondence> weightedCorrespondences(const VertexSupport& support
     cr.pq = Eigen::Vector3d(a.x, a.y, a.z);
     cr.pc = Eigen::Vector3d(b.x, b.y, b.z);
     cr.z_ok = a.base_seen && b.base_seen;
-    cr.strong = s;
-    cr.weak = w;
-    cr.w = 1.0 + params.alpha_s * std::log1p(s) + params.alpha_w * std::log1p(w);  // Eq. (3.9)
-    out.push_back(cr);
+    cr.strong = support.strong[k];
+    cr.weak = support.weak[k];
+    cr.w = weighted[i].first;
   }
-  // Eq. (3.10), heaviest first; ties by index so the order is total and deterministic (the
-  // heaviest K sorted are then the first K of the whole list sorted).
-  const size_t keep = std::min(out.size(), static_cast<size_t>(params.max_correspondences));
-  std::partial_sort(out.begin(), out.begin() + keep, out.end(),
-                    [](const Correspondence& a, const Correspondence& b) {
-                      if (a.w != b.w) return a.w > b.w;
-                      if (a.iq != b.iq) return a.iq < b.iq;
-                      return a.ic < b.ic;
-                    });
-  out.resize(keep);
   return out;
 }
 
