@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <optional>
 #include <random>
@@ -17,6 +18,7 @@
 #include "dtif/core/database/loop_detector.h"
 #include "dtif/core/database/loop_pair.h"
 #include "dtif/core/matching/matcher.h"
+#include "dtif/core/matching/matcher_stages.h"
 #include "dtif/core/matching/pair_vote_stages.h"
 
 namespace dtif {
@@ -235,6 +237,39 @@ TEST(QueryIndex, NeighbourTrianglesEqualTheFullDistanceSort) {
       }
     }
   }
+}
+
+TEST(QueryIndex, ConsistencyBoundsDecideLikeTheEdgeAndRadiusTests) {
+  // Each bound and the float just past it, and random values, against consistentEdges on a
+  // triangle that differs from the query's in that one value only.
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> len(0.2f, 30.0f), rad(0.0f, 0.6f), any(0.0f, 40.0f);
+  MatcherParams p;
+  size_t passed = 0, failed = 0;
+  for (int n = 0; n < 2000; ++n) {
+    MatchTriangle q;
+    for (int a = 0; a < 3; ++a) q.t.len[a] = len(rng), q.t.r[a] = rad(rng);
+    if (n % 7 == 0) q.t.r[n % 3] = 0.0f;  // a radius not measured
+    const ConsistencyBounds b = consistencyBounds({q}, p).front();
+    ASSERT_TRUE(b.exact);
+    for (int j = 0; j < 6; ++j) {
+      const float lo = b.lo[j], hi = b.hi[j];
+      const float inf = std::numeric_limits<float>::infinity();
+      for (float v : {lo, std::nextafter(lo, -inf), hi, std::nextafter(hi, inf), any(rng),
+                      j < 3 ? q.t.len[j] : q.t.r[j - 3]}) {
+        Triangle c = q.t;
+        (j < 3 ? c.len[j] : c.r[j - 3]) = v;
+        const int mask = matcher_stages::consistentEdges(q.t, c, p);
+        // A length is consistent when its edge is; a radius when both edges it ends are.
+        const int touched = j < 3 ? 1 << j : j == 3 ? 0b011 : j == 4 ? 0b110 : 0b101;
+        const bool consistent = (mask & touched) == touched;
+        EXPECT_EQ(consistent, v >= lo && v <= hi) << "value " << j << " " << v;
+        (consistent ? passed : failed)++;
+      }
+    }
+  }
+  EXPECT_GT(passed, 10000u);
+  EXPECT_GT(failed, 10000u);
 }
 
 /// Views of one stand: robot "a" along a row, robot "b" along a row 5 m off, 6 m apart.

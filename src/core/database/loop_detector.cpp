@@ -58,10 +58,11 @@ struct Hypothesis {
 /// the triangles gave no hypothesis (its voted pairs replace corrs).
 Hypothesis hypothesize(const Descriptor& q, const Descriptor& c, const LoopDetectorParams& params,
                        const PoseSolver* solver, QueryStats* stats,
-                       const std::vector<MatchTriangle>* tq, const std::vector<MatchTriangle>* tc) {
+                       const std::vector<MatchTriangle>* tq, const std::vector<MatchTriangle>* tc,
+                       const std::vector<ConsistencyBounds>* bq = nullptr) {
   Hypothesis h;
   auto t0 = std::chrono::steady_clock::now();
-  h.corrs = buildCorrespondences(q, c, params.matcher, nullptr, tq, tc);
+  h.corrs = buildCorrespondences(q, c, params.matcher, nullptr, tq, tc, bq);
   if (stats) stats->match_ms += msSince(t0);
   if (static_cast<int>(h.corrs.size()) >= params.verification.min_hypothesis_inliers) {
     h.est = solve(h.corrs, params, solver, stats);
@@ -338,7 +339,11 @@ std::optional<Loop> LoopDetector::query(const Descriptor& q, QueryStats* stats) 
   st.screen_ms = msSince(t0);
 
   std::vector<MatchTriangle> tq;
-  if (!cands.empty()) tq = matchTriangles(q, mp.neighbour_triangles);
+  std::vector<ConsistencyBounds> bq;  // the query's, tested against every candidate's
+  if (!cands.empty()) {
+    tq = matchTriangles(q, mp.neighbour_triangles);
+    bq = consistencyBounds(tq, mp);
+  }
   // Candidates past the best max_vote_candidates are matched without the vote fallback.
   LoopDetectorParams no_votes = params_;
   no_votes.matcher.vote_fallback = false;
@@ -353,8 +358,8 @@ std::optional<Loop> LoopDetector::query(const Descriptor& q, QueryStats* stats) 
     }
     const bool votes = rank < static_cast<size_t>(params_.database.max_vote_candidates);
     matched.push_back(entries_[cd.index].get());
-    hyps[rank] =
-        hypothesize(q, *matched.back(), votes ? params_ : no_votes, &solver_, &st, &tq, tc.get());
+    hyps[rank] = hypothesize(q, *matched.back(), votes ? params_ : no_votes, &solver_, &st, &tq,
+                             tc.get(), &bq);
   }
   return verifyBest(q, matched, hyps, params_, &st);
 }
