@@ -48,18 +48,6 @@ inline int edgeMask(const Triangle& q, const Triangle& c, const MatcherParams& p
          ((consistent(q.len[2], c.len[2], el, ea) & r1 & r2) << 2);
 }
 
-/// std::log1p(n) of a support count, from a table for the small counts that nearly all are
-/// (a repetitive stand gives tens of thousands of supported vertex pairs per candidate).
-inline double log1pCount(int n) {
-  static const std::array<double, 256> table = [] {
-    std::array<double, 256> t{};
-    for (size_t k = 0; k < t.size(); ++k) t[k] = std::log1p(static_cast<double>(k));
-    return t;
-  }();
-  return n >= 0 && n < static_cast<int>(table.size()) ? table[static_cast<size_t>(n)]
-                                                      : std::log1p(static_cast<double>(n));
-}
-
 /// Floats as integers of the same order (negative ones reversed), for searching float bounds.
 int64_t floatKey(float f) {
   int32_t i = 0;
@@ -366,7 +354,7 @@ std::vector<Correspondence> weightedCorrespondences(const VertexSupport& support
     const int s = support.strong[k], w = support.weak[k];
     if (!(s > 0 || w > params.weak_support_min)) continue;  // Eq. (3.8)
     // Eq. (3.9)
-    weighted.emplace_back(1.0 + params.alpha_s * log1pCount(s) + params.alpha_w * log1pCount(w), k);
+    weighted.emplace_back(1.0 + params.alpha_s * std::log1p(s) + params.alpha_w * std::log1p(w), k);
   }
   // Eq. (3.10), heaviest first; ties by index (the flat index orders by query, then candidate
   // trunk) so the order is total and deterministic (the heaviest K sorted are then the first K
