@@ -1,11 +1,14 @@
 // The loop query's indexes against brute force: the database's screening index (candidates,
-// eligibility) after inserts, a reload and replaceContents, and the pose votes' flat table.
+// eligibility) after inserts, a reload and replaceContents, the pose votes' flat table, and
+// the best loop of the candidates (query verifies only those that can beat it).
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <map>
+#include <optional>
 #include <random>
 #include <string>
 #include <tuple>
@@ -15,6 +18,7 @@
 #include "dtif/core/database/loop_detector.h"
 #include "dtif/core/database/loop_pair.h"
 #include "dtif/core/matching/matcher.h"
+#include "dtif/core/matching/matcher_stages.h"
 #include "dtif/core/matching/pair_vote_stages.h"
 
 namespace dtif {
@@ -233,6 +237,109 @@ TEST(QueryIndex, NeighbourTrianglesEqualTheFullDistanceSort) {
       }
     }
   }
+}
+
+TEST(QueryIndex, ConsistencyBoundsDecideLikeTheEdgeAndRadiusTests) {
+  // Each bound and the float just past it, and random values, against consistentEdges on a
+  // triangle that differs from the query's in that one value only.
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> len(0.2f, 30.0f), rad(0.0f, 0.6f), any(0.0f, 40.0f);
+  MatcherParams p;
+  size_t passed = 0, failed = 0;
+  for (int n = 0; n < 2000; ++n) {
+    MatchTriangle q;
+    for (int a = 0; a < 3; ++a) q.t.len[a] = len(rng), q.t.r[a] = rad(rng);
+    if (n % 7 == 0) q.t.r[n % 3] = 0.0f;  // a radius not measured
+    const ConsistencyBounds b = consistencyBounds({q}, p).front();
+    ASSERT_TRUE(b.exact);
+    for (int j = 0; j < 6; ++j) {
+      const float lo = b.lo[j], hi = b.hi[j];
+      const float inf = std::numeric_limits<float>::infinity();
+      for (float v : {lo, std::nextafter(lo, -inf), hi, std::nextafter(hi, inf), any(rng),
+                      j < 3 ? q.t.len[j] : q.t.r[j - 3]}) {
+        Triangle c = q.t;
+        (j < 3 ? c.len[j] : c.r[j - 3]) = v;
+        const int mask = matcher_stages::consistentEdges(q.t, c, p);
+        // A length is consistent when its edge is; a radius when both edges it ends are.
+        const int touched = j < 3 ? 1 << j : j == 3 ? 0b011 : j == 4 ? 0b110 : 0b101;
+        const bool consistent = (mask & touched) == touched;
+        EXPECT_EQ(consistent, v >= lo && v <= hi) << "value " << j << " " << v;
+        (consistent ? passed : failed)++;
+      }
+    }
+  }
+  EXPECT_GT(passed, 10000u);
+  EXPECT_GT(failed, 10000u);
+}
+
+/// Views of one stand: robot "a" along a row, robot "b" along a row 5 m off, 6 m apart.
+std::vector<std::shared_ptr<const Descriptor>> standViews(const Trunks& world, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> yaw(-M_PI, M_PI);
+  std::vector<std::shared_ptr<const Descriptor>> out;
+  for (int k = 0; k < 12; ++k) {
+    const bool a = k % 2 == 0;
+    const Eigen::Vector2d centre(20.0 + 6.0 * (k / 2), a ? 30.0 : 35.0);
+    const double heading = yaw(rng);
+    const Pose T_w_s = test::poseXyYaw(centre.x() + 1.0, centre.y() - 2.0, 0.0, heading);
+    out.push_back(std::make_shared<Descriptor>(
+        test::describe(test::observe(rng, world, centre, T_w_s), a ? "a" : "b", k, 100.0 * k)));
+  }
+  return out;
+}
+
+/// The loop query keeps: every candidate matched and verified in screening order (matchPair),
+/// the highest score kept, the first of equal ones.
+std::optional<Loop> bruteBestLoop(const LoopDetector& det, const Descriptor& q,
+                                  const std::vector<int64_t>& candidates) {
+  LoopDetectorParams no_votes = det.params();
+  no_votes.matcher.vote_fallback = false;
+  std::optional<Loop> best;
+  for (size_t rank = 0; rank < candidates.size(); ++rank) {
+    const auto it = std::find_if(det.entries().begin(), det.entries().end(),
+                                 [&](const auto& d) { return d->submap_id == candidates[rank]; });
+    const bool votes = rank < static_cast<size_t>(det.params().database.max_vote_candidates);
+    auto lc = matchPair(q, **it, votes ? det.params() : no_votes);
+    if (lc && (!best || lc->score > best->score)) best = std::move(lc);
+  }
+  return best;
+}
+
+TEST(QueryIndex, QueryKeepsTheBestScoringLoopOfItsCandidates) {
+  std::mt19937 rng(23);
+  // A natural stand and a jittered plantation (lattice searches), each seen from 12 places.
+  std::vector<std::vector<std::shared_ptr<const Descriptor>>> stands{
+      standViews(test::randomStand(rng, 100, 70, 600), 3),
+      standViews(test::plantation(rng, 100, 70, 3.0, 0.15), 4)};
+  LoopDetectorParams p;
+  p.database.max_vote_candidates = 3;  // candidates past it are matched without the votes
+  size_t loops = 0, several = 0, unverified = 0;
+  for (const auto& views : stands) {
+    LoopDetector det(p);
+    for (const auto& d : views) {
+      QueryStats st;
+      const std::optional<Loop> got = det.query(*d, &st);
+      const std::optional<Loop> want = bruteBestLoop(det, *d, st.candidates);
+      ASSERT_EQ(got.has_value(), want.has_value()) << d->robot << "/" << d->submap_id;
+      if (got) {
+        ++loops;
+        EXPECT_EQ(got->candidate_id, want->candidate_id) << d->submap_id;
+        EXPECT_EQ(got->score, want->score);
+        EXPECT_EQ(got->T_c_q.matrix(), want->T_c_q.matrix());
+        EXPECT_EQ(got->covariance, want->covariance);
+        EXPECT_EQ(got->inlier_pairs, want->inlier_pairs);
+        EXPECT_EQ(got->all_pairs, want->all_pairs);
+      }
+      several += st.verified > 1;
+      unverified += st.unverified;
+      det.insert(d);
+    }
+  }
+  // The case under test happened: loops, queries with several accepted candidates, and
+  // candidates left unverified.
+  EXPECT_GE(loops, 12u);
+  EXPECT_GT(several, 0u);
+  EXPECT_GT(unverified, 0u);
 }
 
 }  // namespace

@@ -33,40 +33,73 @@ constexpr double kSinglePairZVar = 0.3 * 0.3;
 constexpr double kGroundZVar = 0.05 * 0.05;
 constexpr double kMinYawVar = (0.1 * M_PI / 180.0) * (0.1 * M_PI / 180.0);
 
-/// Pose from correspondences, then verification (both timed into stats).
-void solveAndVerify(const Descriptor& q, const Descriptor& c,
-                    const std::vector<Correspondence>& corrs, const LoopDetectorParams& params,
-                    const PoseSolver* solver, QueryStats* stats, PoseEstimate* est,
-                    Verification* ver) {
+/// The solver on corrs (timed into stats).
+PoseEstimate solve(const std::vector<Correspondence>& corrs, const LoopDetectorParams& params,
+                   const PoseSolver* solver, QueryStats* stats) {
   if (stats) ++stats->matched;
-  auto t0 = std::chrono::steady_clock::now();
-  *est = solver && *solver ? (*solver)(corrs) : estimatePose(corrs, params.pose);
+  const auto t0 = std::chrono::steady_clock::now();
+  PoseEstimate est = solver && *solver ? (*solver)(corrs) : estimatePose(corrs, params.pose);
   if (stats) stats->solver_ms += msSince(t0);
-  t0 = std::chrono::steady_clock::now();
-  *ver = verifyLoop(q, c, corrs, *est, params.verification);
-  if (stats) stats->verify_ms += msSince(t0);
+  return est;
 }
 
-/// The vote fallback once the triangles gave no hypothesis: the voted pairs replace corrs and
-/// are solved and verified. When that fails too, ver keeps the triangles' rejection and adds
-/// the votes' (vote_rejection).
-void voteFallback(const Descriptor& q, const Descriptor& c, const LoopDetectorParams& params,
-                  const PoseSolver* solver, QueryStats* stats, std::vector<Correspondence>* corrs,
-                  PoseEstimate* est, Verification* ver) {
-  const Rejection triangle_rejection = ver->rejection;
-  const auto t0 = std::chrono::steady_clock::now();
-  Rejection vote_rejection = Rejection::kNone;
-  std::vector<Correspondence> voted = voteCorrespondences(q, c, params, &vote_rejection);
+/// A candidate's pose hypothesis, what matchPair solves before verification: from the
+/// triangles or, when they give none, from the vote fallback.
+struct Hypothesis {
+  std::vector<Correspondence> corrs;
+  PoseEstimate est;
+  Rejection triangles = Rejection::kNone;  ///< why the triangles gave no hypothesis
+  Rejection votes = Rejection::kNone;      ///< why the vote fallback gave none, when it ran
+  bool voted = false;                      ///< corrs and est are the vote fallback's
+  bool ok() const { return voted ? votes == Rejection::kNone : triangles == Rejection::kNone; }
+};
+
+/// Correspondences and pose (matching and solver timed into stats); the vote fallback once
+/// the triangles gave no hypothesis (its voted pairs replace corrs).
+Hypothesis hypothesize(const Descriptor& q, const Descriptor& c, const LoopDetectorParams& params,
+                       const PoseSolver* solver, QueryStats* stats,
+                       const std::vector<MatchTriangle>* tq, const std::vector<MatchTriangle>* tc,
+                       const std::vector<ConsistencyBounds>* bq = nullptr) {
+  Hypothesis h;
+  auto t0 = std::chrono::steady_clock::now();
+  h.corrs = buildCorrespondences(q, c, params.matcher, nullptr, tq, tc, bq);
   if (stats) stats->match_ms += msSince(t0);
-  if (!voted.empty()) {
-    corrs->swap(voted);
-    solveAndVerify(q, c, *corrs, params, solver, stats, est, ver);
-    vote_rejection = ver->rejection;
+  if (static_cast<int>(h.corrs.size()) >= params.verification.min_hypothesis_inliers) {
+    h.est = solve(h.corrs, params, solver, stats);
+    h.triangles = hypothesisRejection(h.est, params.verification);
+  } else {
+    h.triangles = Rejection::kFewCorrespondences;
   }
-  if (!ver->accepted) {
-    ver->rejection = triangle_rejection;
-    ver->vote_rejection = vote_rejection;
+  if (h.triangles == Rejection::kNone || !params.matcher.vote_fallback) return h;
+  t0 = std::chrono::steady_clock::now();
+  std::vector<Correspondence> voted = voteCorrespondences(q, c, params, &h.votes);
+  if (stats) stats->match_ms += msSince(t0);
+  if (voted.empty()) return h;
+  h.voted = true;
+  h.corrs.swap(voted);
+  h.est = solve(h.corrs, params, solver, stats);
+  h.votes = hypothesisRejection(h.est, params.verification);
+  return h;
+}
+
+/// Verification of a hypothesis (timed into stats). Without one, or when the voted one
+/// fails, the rejection is the triangles' and vote_rejection the votes'.
+Verification verifyHypothesis(const Descriptor& q, const Descriptor& c, const Hypothesis& h,
+                              const LoopDetectorParams& params, QueryStats* stats) {
+  Verification ver;
+  if (!h.ok()) {
+    ver.rejection = h.triangles;
+    ver.vote_rejection = h.votes;
+    return ver;
   }
+  const auto t0 = std::chrono::steady_clock::now();
+  ver = verifyLoop(q, c, h.corrs, h.est, params.verification);
+  if (stats) stats->verify_ms += msSince(t0);
+  if (h.voted && !ver.accepted) {
+    ver.vote_rejection = ver.rejection;
+    ver.rejection = h.triangles;
+  }
+  return ver;
 }
 
 /// A levelled pair's loop (estimated between the levelled frames) in the submaps' frames; the
@@ -127,6 +160,42 @@ Loop makeLoop(const Descriptor& q, const Descriptor& c, const std::vector<Corres
   return lc;
 }
 
+/// The loop of the best-scoring accepted hypothesis (ties: the first, i.e. best screened), as
+/// if every one were verified in screening order. Verification is the costly part (lattice
+/// searches in repetitive stands), so the hypotheses are verified in order of their score
+/// bound (inlierWeightShare: a loop scores its co-visible ratio, at most 1, times it), and
+/// those whose bound cannot beat the best loop found are not verified at all.
+std::optional<Loop> verifyBest(const Descriptor& q, const std::vector<const Descriptor*>& cands,
+                               const std::vector<Hypothesis>& hyps,
+                               const LoopDetectorParams& params, QueryStats* stats) {
+  std::vector<std::pair<double, size_t>> order;  // (bound, rank)
+  for (size_t rank = 0; rank < hyps.size(); ++rank) {
+    if (hyps[rank].ok())
+      order.emplace_back(inlierWeightShare(hyps[rank].corrs, hyps[rank].est), rank);
+  }
+  std::sort(order.begin(), order.end(), [](const auto& a, const auto& b) {
+    return a.first > b.first || (a.first == b.first && a.second < b.second);
+  });
+  std::optional<Loop> best;
+  size_t best_rank = 0;
+  for (size_t k = 0; k < order.size(); ++k) {
+    const auto [bound, rank] = order[k];
+    // Sorted: no later hypothesis can beat the best either.
+    if (best && (bound < best->score || (bound == best->score && rank > best_rank))) {
+      if (stats) stats->unverified += order.size() - k;
+      break;
+    }
+    const Verification ver = verifyHypothesis(q, *cands[rank], hyps[rank], params, stats);
+    if (!ver.accepted) continue;
+    if (stats) ++stats->verified;
+    if (!best || ver.score > best->score || (ver.score == best->score && rank < best_rank)) {
+      best = makeLoop(q, *cands[rank], hyps[rank].corrs, hyps[rank].est, ver);
+      best_rank = rank;
+    }
+  }
+  return best;
+}
+
 }  // namespace
 
 Pose submapFramePose(const Descriptor& q, const Descriptor& c, const Pose& T_Lc_Lq) {
@@ -141,24 +210,13 @@ std::optional<Loop> matchPair(const Descriptor& q, const Descriptor& c,
                               Verification* ver_out, QueryStats* stats, const PoseSolver* solver,
                               const std::vector<MatchTriangle>* tq,
                               const std::vector<MatchTriangle>* tc) {
-  const auto t0 = std::chrono::steady_clock::now();
-  std::vector<Correspondence> corrs = buildCorrespondences(q, c, params.matcher, nullptr, tq, tc);
-  if (stats) stats->match_ms += msSince(t0);
-  PoseEstimate est;
-  Verification ver;
-  if (static_cast<int>(corrs.size()) >= params.verification.min_hypothesis_inliers) {
-    solveAndVerify(q, c, corrs, params, solver, stats, &est, &ver);
-  } else {
-    ver.rejection = Rejection::kFewCorrespondences;
-  }
-  if (!ver.accepted && params.matcher.vote_fallback && isNoHypothesis(ver.rejection)) {
-    voteFallback(q, c, params, solver, stats, &corrs, &est, &ver);
-  }
-  if (est_out) *est_out = est;
+  const Hypothesis h = hypothesize(q, c, params, solver, stats, tq, tc);
+  const Verification ver = verifyHypothesis(q, c, h, params, stats);
+  if (est_out) *est_out = h.est;
   if (ver_out) *ver_out = ver;
   if (!ver.accepted) return std::nullopt;
   if (stats) ++stats->verified;
-  return makeLoop(q, c, corrs, est, ver);
+  return makeLoop(q, c, h.corrs, h.est, ver);
 }
 
 std::string DatabaseParams::validate() const {
@@ -280,12 +338,17 @@ std::optional<Loop> LoopDetector::query(const Descriptor& q, QueryStats* stats) 
   for (const Cand& cd : cands) st.candidates.push_back(entries_[cd.index]->submap_id);
   st.screen_ms = msSince(t0);
 
-  std::optional<Loop> best;
   std::vector<MatchTriangle> tq;
-  if (!cands.empty()) tq = matchTriangles(q, mp.neighbour_triangles);
+  std::vector<ConsistencyBounds> bq;  // the query's, tested against every candidate's
+  if (!cands.empty()) {
+    tq = matchTriangles(q, mp.neighbour_triangles);
+    bq = consistencyBounds(tq, mp);
+  }
   // Candidates past the best max_vote_candidates are matched without the vote fallback.
   LoopDetectorParams no_votes = params_;
   no_votes.matcher.vote_fallback = false;
+  std::vector<Hypothesis> hyps(cands.size());
+  std::vector<const Descriptor*> matched;
   for (size_t rank = 0; rank < cands.size(); ++rank) {
     const Cand& cd = cands[rank];
     auto& tc = triangles_[cd.index];
@@ -294,11 +357,11 @@ std::optional<Loop> LoopDetector::query(const Descriptor& q, QueryStats* stats) 
           matchTriangles(*entries_[cd.index], mp.neighbour_triangles));
     }
     const bool votes = rank < static_cast<size_t>(params_.database.max_vote_candidates);
-    auto lc = matchPair(q, *entries_[cd.index], votes ? params_ : no_votes, nullptr, nullptr, &st,
-                        &solver_, &tq, tc.get());
-    if (lc && (!best || lc->score > best->score)) best = std::move(lc);
+    matched.push_back(entries_[cd.index].get());
+    hyps[rank] = hypothesize(q, *matched.back(), votes ? params_ : no_votes, &solver_, &st, &tq,
+                             tc.get(), &bq);
   }
-  return best;
+  return verifyBest(q, matched, hyps, params_, &st);
 }
 
 }  // namespace dtif

@@ -5,6 +5,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <sstream>
 
@@ -32,7 +33,124 @@ inline bool fullyConsistent(const Triangle& q, const Triangle& c, const MatcherP
   return true;
 }
 
+/// consistentEdges, each radius compared once (every vertex ends two edges); inlined into the
+/// triangle-pair loop, where it runs for every pair of Delaunay faces.
+inline int edgeMask(const Triangle& q, const Triangle& c, const MatcherParams& params) {
+  const double el = params.edge_rel_tol, ea = params.edge_abs_tol_m;
+  const double rl = params.radius_rel_tol, ra = params.radius_abs_tol_m;
+  const int r0 = consistent(q.r[0], c.r[0], rl, ra), r1 = consistent(q.r[1], c.r[1], rl, ra),
+            r2 = consistent(q.r[2], c.r[2], rl, ra);
+  // kEdgeEnds: e1 joins vertices 0 and 2, e2 0 and 1, e3 1 and 2.
+  static_assert(kEdgeEnds[0][0] == 0 && kEdgeEnds[0][1] == 2 && kEdgeEnds[1][0] == 0 &&
+                kEdgeEnds[1][1] == 1 && kEdgeEnds[2][0] == 1 && kEdgeEnds[2][1] == 2);
+  return (consistent(q.len[0], c.len[0], el, ea) & r0 & r2) |
+         ((consistent(q.len[1], c.len[1], el, ea) & r0 & r1) << 1) |
+         ((consistent(q.len[2], c.len[2], el, ea) & r1 & r2) << 2);
+}
+
+/// Floats as integers of the same order (negative ones reversed), for searching float bounds.
+int64_t floatKey(float f) {
+  int32_t i = 0;
+  std::memcpy(&i, &f, sizeof i);
+  return i >= 0 ? int64_t{i} : -int64_t{i & 0x7fffffff};
+}
+float keyFloat(int64_t k) {
+  const uint32_t u = k >= 0 ? static_cast<uint32_t>(k) : (static_cast<uint32_t>(-k) | 0x80000000u);
+  float f = 0.0f;
+  std::memcpy(&f, &u, sizeof f);
+  return f;
+}
+
+/// The last key from `from` towards `to` (inclusive) where pass holds, given that it holds at
+/// `from` and, once it fails, fails all the way on: galloping from the guess, then bisection.
+template <class Pass>
+int64_t lastPassing(int64_t from, int64_t to, int64_t guess, const Pass& pass) {
+  const int64_t dir = to >= from ? 1 : -1;
+  auto clampKey = [&](int64_t k) {
+    return dir > 0 ? std::clamp(k, from, to) : std::clamp(k, to, from);
+  };
+  int64_t good = from, bad = to + dir;  // pass(good) holds; bad fails (to + dir: none yet)
+  guess = clampKey(guess);
+  if (pass(keyFloat(guess))) {
+    good = guess;
+  } else {
+    bad = guess;
+  }
+  if (bad == to + dir) {  // outwards from good
+    for (int64_t step = 1; good != to; step *= 2) {
+      const int64_t k = clampKey(good + dir * step);
+      if (!pass(keyFloat(k))) {
+        bad = k;
+        break;
+      }
+      good = k;
+    }
+    if (good == to) return to;
+  } else {  // inwards from bad
+    for (int64_t step = 1;; step *= 2) {
+      const int64_t k = clampKey(bad - dir * step);
+      if ((k - good) * dir <= 0) break;
+      if (pass(keyFloat(k))) {
+        good = k;
+        break;
+      }
+      bad = k;
+    }
+  }
+  while ((bad - good) * dir > 1) {
+    const int64_t mid = good + (bad - good) / 2;
+    if (pass(keyFloat(mid))) {
+      good = mid;
+    } else {
+      bad = mid;
+    }
+  }
+  return good;
+}
+
+/// The finite floats b with consistent(a, b, rel, abs_tol): an interval around a (on either
+/// side the gap grows faster than the tolerance), found by searching `consistent` itself, so
+/// that the interval decides every finite b exactly as it. False for a negative or non-finite a.
+bool consistentRange(float a, double rel, double abs_tol, float* lo, float* hi) {
+  if (!(a >= 0.0f && std::isfinite(a))) return false;
+  auto pass = [&](float b) { return consistent(a, b, rel, abs_tol); };
+  constexpr float kMax = std::numeric_limits<float>::max();
+  const int64_t ka = floatKey(a), kmax = floatKey(kMax);
+  const double up = rel < 1.0 ? std::max(a + abs_tol, a / (1.0 - rel)) : kMax;
+  const double down = std::min(a - abs_tol, a * (1.0 - rel));
+  *hi = keyFloat(
+      lastPassing(ka, kmax, floatKey(static_cast<float>(std::min<double>(up, kMax))), pass));
+  *lo = keyFloat(
+      lastPassing(ka, -kmax, floatKey(static_cast<float>(std::max<double>(down, -kMax))), pass));
+  return true;
+}
+
+/// edgeMask from the query triangle's bounds, without branches; a pair that is not a pair of
+/// faces only needs to know whether all is consistent (7) or not (0).
+inline int boundsMask(const ConsistencyBounds& b, const Triangle& c, bool faces) {
+  auto in = [&](int j, float v) { return static_cast<int>(v >= b.lo[j]) & (v <= b.hi[j]); };
+  const int l0 = in(0, c.len[0]), l1 = in(1, c.len[1]), l2 = in(2, c.len[2]);
+  const int r0 = in(3, c.r[0]), r1 = in(4, c.r[1]), r2 = in(5, c.r[2]);
+  if (!faces) return (l0 & l1 & l2 & r0 & r1 & r2) * 7;
+  return (l0 & r0 & r2) | ((l1 & r0 & r1) << 1) | ((l2 & r1 & r2) << 2);  // as edgeMask
+}
+
 }  // namespace
+
+std::vector<ConsistencyBounds> consistencyBounds(const std::vector<MatchTriangle>& t,
+                                                 const MatcherParams& params) {
+  std::vector<ConsistencyBounds> out(t.size());
+  for (size_t i = 0; i < t.size(); ++i) {
+    ConsistencyBounds& b = out[i];
+    for (int a = 0; a < 3; ++a) {
+      b.exact = b.exact && consistentRange(t[i].t.len[a], params.edge_rel_tol,
+                                           params.edge_abs_tol_m, &b.lo[a], &b.hi[a]);
+      b.exact = b.exact && consistentRange(t[i].t.r[a], params.radius_rel_tol,
+                                           params.radius_abs_tol_m, &b.lo[3 + a], &b.hi[3 + a]);
+    }
+  }
+  return out;
+}
 
 /// Computed from the trunks on both sides, so nothing extra crosses the radio link.
 std::vector<MatchTriangle> matchTriangles(const Descriptor& d, int k) {
@@ -165,22 +283,16 @@ bool passesScreening(const Descriptor& query, const Descriptor& candidate,
 }
 
 int consistentEdges(const Triangle& q, const Triangle& c, const MatcherParams& params) {
-  const double rel = params.edge_rel_tol, abs_tol = params.edge_abs_tol_m;
-  int mask = 0;
-  for (int a = 0; a < 3; ++a) {
-    const int u = kEdgeEnds[a][0], v = kEdgeEnds[a][1];
-    if (consistent(q.len[a], c.len[a], rel, abs_tol) &&
-        consistent(q.r[u], c.r[u], params.radius_rel_tol, params.radius_abs_tol_m) &&
-        consistent(q.r[v], c.r[v], params.radius_rel_tol, params.radius_abs_tol_m)) {
-      mask |= 1 << a;
-    }
-  }
-  return mask;
+  return edgeMask(q, c, params);
 }
 
 VertexSupport accumulateSupport(const std::vector<MatchTriangle>& tq,
                                 const std::vector<MatchTriangle>& tc, size_t nq, size_t nc,
-                                const MatcherParams& params, size_t* triangle_pairs) {
+                                const MatcherParams& params, size_t* triangle_pairs,
+                                const std::vector<ConsistencyBounds>* bq) {
+  std::vector<ConsistencyBounds> own;
+  if (!bq) own = consistencyBounds(tq, params);
+  const std::vector<ConsistencyBounds>& bounds = bq ? *bq : own;
   // Flat matrices: submaps hold tens to a few hundred trunks. The touched list lets the final
   // scan visit only non-zero entries.
   VertexSupport sup;
@@ -194,8 +306,10 @@ VertexSupport accumulateSupport(const std::vector<MatchTriangle>& tq,
     if (m[k] < 65535) ++m[k];
   };
   const double rel = params.edge_rel_tol, abs_tol = params.edge_abs_tol_m;
-  for (const MatchTriangle& mq : tq) {
+  for (size_t i = 0; i < tq.size(); ++i) {
+    const MatchTriangle& mq = tq[i];
     const Triangle& q = mq.t;
+    const ConsistencyBounds& b = bounds[i];
     // Triangles are sorted by len[0]; Cons_l on e1 bounds l_c to [lo, hi], so a binary search
     // finds the only candidate triangles whose longest edge can be consistent. A pair whose
     // longest edges disagree could still give weak support through e2/e3 in Alg. 1; dtif drops
@@ -210,7 +324,9 @@ VertexSupport accumulateSupport(const std::vector<MatchTriangle>& tq,
       ++*triangle_pairs;
       const bool faces = mq.delaunay && it->delaunay;
       // Eq. (3.4): chi_a per canonical edge; only a pair of faces needs the partial mask.
-      const int mask = faces ? consistentEdges(q, c, params) : fullyConsistent(q, c, params) * 7;
+      const int mask = b.exact ? boundsMask(b, c, faces)
+                       : faces ? edgeMask(q, c, params)
+                               : fullyConsistent(q, c, params) * 7;
       if (mask == 7) {
         for (int b = 0; b < 3; ++b) bump(sup.strong, q.v[b], c.v[b]);  // Eq. (3.6)
       } else if (mask != 0 && faces) {
@@ -231,12 +347,28 @@ std::vector<Correspondence> weightedCorrespondences(const VertexSupport& support
                                                     const Descriptor& query,
                                                     const Descriptor& candidate,
                                                     const MatcherParams& params) {
-  std::vector<Correspondence> out;
-  const size_t nc = support.nc;
+  // (omega, flat index) of the supported pairs; only the kept ones become Correspondences.
+  std::vector<std::pair<double, uint32_t>> weighted;
+  weighted.reserve(support.touched.size());
   for (uint32_t k : support.touched) {
     const int s = support.strong[k], w = support.weak[k];
     if (!(s > 0 || w > params.weak_support_min)) continue;  // Eq. (3.8)
-    Correspondence cr;
+    // Eq. (3.9)
+    weighted.emplace_back(1.0 + params.alpha_s * std::log1p(s) + params.alpha_w * std::log1p(w), k);
+  }
+  // Eq. (3.10), heaviest first; ties by index (the flat index orders by query, then candidate
+  // trunk) so the order is total and deterministic (the heaviest K sorted are then the first K
+  // of the whole list sorted).
+  const size_t keep = std::min(weighted.size(), static_cast<size_t>(params.max_correspondences));
+  std::partial_sort(weighted.begin(), weighted.begin() + keep, weighted.end(),
+                    [](const auto& a, const auto& b) {
+                      return a.first != b.first ? a.first > b.first : a.second < b.second;
+                    });
+  std::vector<Correspondence> out(keep);
+  const size_t nc = support.nc;
+  for (size_t i = 0; i < keep; ++i) {
+    const uint32_t k = weighted[i].second;
+    Correspondence& cr = out[i];
     cr.iq = static_cast<int>(k / nc);
     cr.ic = static_cast<int>(k % nc);
     const TrunkLandmark& a = query.trunks[cr.iq];
@@ -244,21 +376,10 @@ std::vector<Correspondence> weightedCorrespondences(const VertexSupport& support
     cr.pq = Eigen::Vector3d(a.x, a.y, a.z);
     cr.pc = Eigen::Vector3d(b.x, b.y, b.z);
     cr.z_ok = a.base_seen && b.base_seen;
-    cr.strong = s;
-    cr.weak = w;
-    cr.w = 1.0 + params.alpha_s * std::log1p(s) + params.alpha_w * std::log1p(w);  // Eq. (3.9)
-    out.push_back(cr);
+    cr.strong = support.strong[k];
+    cr.weak = support.weak[k];
+    cr.w = weighted[i].first;
   }
-  // Eq. (3.10), heaviest first; ties by index so the order is total and deterministic (the
-  // heaviest K sorted are then the first K of the whole list sorted).
-  const size_t keep = std::min(out.size(), static_cast<size_t>(params.max_correspondences));
-  std::partial_sort(out.begin(), out.begin() + keep, out.end(),
-                    [](const Correspondence& a, const Correspondence& b) {
-                      if (a.w != b.w) return a.w > b.w;
-                      if (a.iq != b.iq) return a.iq < b.iq;
-                      return a.ic < b.ic;
-                    });
-  out.resize(keep);
   return out;
 }
 
@@ -267,7 +388,8 @@ std::vector<Correspondence> weightedCorrespondences(const VertexSupport& support
 std::vector<Correspondence> buildCorrespondences(
     const Descriptor& query, const Descriptor& candidate, const MatcherParams& params,
     MatchStats* stats, const std::vector<MatchTriangle>* query_triangles,
-    const std::vector<MatchTriangle>* candidate_triangles) {
+    const std::vector<MatchTriangle>* candidate_triangles,
+    const std::vector<ConsistencyBounds>* query_bounds) {
   MatchStats local;
   MatchStats& st = stats ? *stats : local;
   st = MatchStats{};
@@ -280,7 +402,7 @@ std::vector<Correspondence> buildCorrespondences(
   const std::vector<MatchTriangle>& tq = query_triangles ? *query_triangles : own_q;
   const std::vector<MatchTriangle>& tc = candidate_triangles ? *candidate_triangles : own_c;
   const matcher_stages::VertexSupport support =
-      matcher_stages::accumulateSupport(tq, tc, nq, nc, params, &st.triangle_pairs);
+      matcher_stages::accumulateSupport(tq, tc, nq, nc, params, &st.triangle_pairs, query_bounds);
   return matcher_stages::weightedCorrespondences(support, query, candidate, params);
 }
 

@@ -224,6 +224,11 @@ std::vector<Tim> translationInvariantMeasurements(const std::vector<Corresponden
           corrs[a].pc.x() - corrs[b].pc.x(),
           corrs[a].pc.y() - corrs[b].pc.y(),
           std::sqrt(w[a] * w[b])};  // omega_ab of Eq. (3.13)
+    // Most TIMs fail the length test below by far: decided on sqrt, which is within a few
+    // ulps of hypot (the margin), before the costlier hypot that the kept ones are measured by.
+    const double sq = std::sqrt(m.qx * m.qx + m.qy * m.qy),
+                 sc = std::sqrt(m.cx * m.cx + m.cy * m.cy);
+    if (std::fabs(sq - sc) > beta_r + 1e-12 * (1.0 + sq + sc)) return;
     const double lq = std::hypot(m.qx, m.qy), lc = std::hypot(m.cx, m.cy);
     if (lq < 1e-9 || lc < 1e-9) return;
     // A rotation preserves length: a TIM with | |d^q| - |d^c| | > beta_R has residual

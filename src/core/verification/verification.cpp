@@ -115,11 +115,8 @@ std::vector<std::pair<int, int>> mutualPairs(const std::vector<P2>& pq, const st
 /// refine: the solver's, or the lattice fit's when the stand is repetitive.
 Rejection checkHypothesis(const Descriptor& q, const Descriptor& c, const PoseEstimate& est,
                           const VerifierParams& params, Verification* v, Pose* T_hyp) {
-  if (!est.ok) return Rejection::kNoPose;
-  if (static_cast<int>(est.inliers_T.size()) < params.min_hypothesis_inliers) {
-    return Rejection::kFewHypothesisInliers;
-  }
-  if (est.inlier_weight < params.min_inlier_weight) return Rejection::kLowInlierWeight;
+  const Rejection none = hypothesisRejection(est, params);
+  if (none != Rejection::kNone) return none;
 
   // Repetitive stands (plantation grids) support several poses almost equally; a loop is only
   // trusted when the chosen hypothesis clearly dominates the runner-up in yaw and translation.
@@ -277,6 +274,23 @@ std::string VerifierParams::validate() const {
   return err.str();
 }
 
+Rejection hypothesisRejection(const PoseEstimate& est, const VerifierParams& params) {
+  if (!est.ok) return Rejection::kNoPose;
+  if (static_cast<int>(est.inliers_T.size()) < params.min_hypothesis_inliers) {
+    return Rejection::kFewHypothesisInliers;
+  }
+  if (est.inlier_weight < params.min_inlier_weight) return Rejection::kLowInlierWeight;
+  return Rejection::kNone;
+}
+
+double inlierWeightShare(const std::vector<Correspondence>& corrs, const PoseEstimate& est) {
+  double total_w = 0.0;
+  for (const Correspondence& k : corrs) total_w += k.w;
+  double inlier_w = 0.0;  // in omega units even with unit_weights, so scores stay comparable
+  for (int i : est.inliers_T) inlier_w += corrs[i].w;
+  return total_w > 0 ? inlier_w / total_w : 0.0;
+}
+
 Refined guidedRefine(const Descriptor& q, const Descriptor& c, const Pose& T0, double radius) {
   Refined out;
   out.T = T0;
@@ -336,11 +350,7 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
   v.overlap = footprintOverlap(q.footprint, c.footprint, v.T_c_q);
   if (v.overlap >= 0.0 && v.overlap < params.min_overlap) return reject(Rejection::kSmallOverlap);
 
-  double total_w = 0.0;
-  for (const Correspondence& k : corrs) total_w += k.w;
-  double inlier_w = 0.0;  // in omega units even with unit_weights, so scores stay comparable
-  for (int i : est.inliers_T) inlier_w += corrs[i].w;
-  v.score = v.covisible_ratio * (total_w > 0 ? inlier_w / total_w : 0.0);
+  v.score = v.covisible_ratio * inlierWeightShare(corrs, est);
   v.accepted = true;
   return v;
 }

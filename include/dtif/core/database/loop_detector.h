@@ -81,14 +81,16 @@ using PoseSolver = std::function<PoseEstimate(const std::vector<Correspondence>&
 
 /// Per-query timings and counts.
 struct QueryStats {
-  double screen_ms = 0.0;           ///< histogram screening
-  double match_ms = 0.0;            ///< correspondence construction
-  double solver_ms = 0.0;           ///< pose estimation only
-  double verify_ms = 0.0;           ///< verification
-  size_t eligible = 0;              ///< database entries after recent-submap exclusion
-  size_t screened_in = 0;           ///< entries passing histogram screening
-  size_t matched = 0;               ///< candidates that reached pose estimation
-  size_t verified = 0;              ///< candidates that passed verification
+  double screen_ms = 0.0;  ///< histogram screening
+  double match_ms = 0.0;   ///< correspondence construction
+  double solver_ms = 0.0;  ///< pose estimation only
+  double verify_ms = 0.0;  ///< verification
+  size_t eligible = 0;     ///< database entries after recent-submap exclusion
+  size_t screened_in = 0;  ///< entries passing histogram screening
+  size_t matched = 0;      ///< candidates that reached pose estimation
+  size_t verified = 0;     ///< candidates that passed verification
+  /// Hypotheses query left unverified: their score bound could not beat the loop it found.
+  size_t unverified = 0;
   std::vector<int64_t> candidates;  ///< submap ids of the screened candidates, best first
 };
 

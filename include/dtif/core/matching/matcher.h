@@ -4,6 +4,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <array>
 #include <string>
 #include <vector>
 
@@ -82,6 +83,20 @@ struct MatchTriangle {
   bool delaunay = true;
 };
 
+/// For one (query) triangle, the candidate values that pass Cons_l with its edges ([0..2]) and
+/// Cons_r with its radii ([3..5]): closed intervals that decide every finite value exactly as
+/// Eq. (3.4)'s comparison does (validated descriptors hold finite trunks), so that a query's
+/// are computed once and then tested against every candidate's triangles with two float
+/// comparisons per value.
+struct ConsistencyBounds {
+  std::array<float, 6> lo{}, hi{};
+  bool exact = true;  ///< false: a value is negative or not finite; pairs are tested directly
+};
+
+/// consistencyBounds of each triangle of t, in order.
+std::vector<ConsistencyBounds> consistencyBounds(const std::vector<MatchTriangle>& t,
+                                                 const MatcherParams& params);
+
 /// The triangles matched for d: its Delaunay faces plus, with k > 0, every triangle of a trunk
 /// and two of its k nearest neighbours (deduplicated), sorted by longest edge. Depends only on d
 /// and k, so a database computes it once per descriptor, not once per pair. Pure; thread-safe.
@@ -96,11 +111,12 @@ std::vector<Correspondence> buildCorrespondences(const Descriptor& query,
                                                  const Descriptor& candidate,
                                                  const MatcherParams& params,
                                                  MatchStats* stats = nullptr);
-/// The same with the sides' matchTriangles(d, params.neighbour_triangles) given (a nullptr side
-/// is computed here).
+/// The same with the sides' matchTriangles(d, params.neighbour_triangles) and the query
+/// triangles' consistencyBounds given (each nullptr is computed here).
 std::vector<Correspondence> buildCorrespondences(
     const Descriptor& query, const Descriptor& candidate, const MatcherParams& params,
     MatchStats* stats, const std::vector<MatchTriangle>* query_triangles,
-    const std::vector<MatchTriangle>* candidate_triangles);
+    const std::vector<MatchTriangle>* candidate_triangles,
+    const std::vector<ConsistencyBounds>* query_bounds = nullptr);
 
 }  // namespace dtif

@@ -34,10 +34,12 @@ struct VertexSupport {
 /// Eqs. (3.4)-(3.7) over the triangle pairs whose longest edges are Cons_l-consistent (tc
 /// sorted by len[0]): a fully consistent pair gives strong support to its three vertex pairs,
 /// a partly consistent pair of Delaunay faces weak support to the ends of its consistent
-/// edges. Adds the pairs visited to *triangle_pairs.
+/// edges. Adds the pairs visited to *triangle_pairs. bq: consistencyBounds(tq, params),
+/// computed here when null.
 VertexSupport accumulateSupport(const std::vector<MatchTriangle>& tq,
                                 const std::vector<MatchTriangle>& tc, size_t nq, size_t nc,
-                                const MatcherParams& params, size_t* triangle_pairs);
+                                const MatcherParams& params, size_t* triangle_pairs,
+                                const std::vector<ConsistencyBounds>* bq = nullptr);
 
 /// Eqs. (3.8)-(3.10): the vertex pairs with strong support or enough weak support, weighted
 /// (Eq. 3.9), heaviest first (ties by index), at most params.max_correspondences.

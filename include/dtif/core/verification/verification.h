@@ -168,12 +168,14 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
                         const std::vector<Correspondence>& corrs, const PoseEstimate& est,
                         const VerifierParams& params);
 
-/// Verifies T_c_q (from estimatePose on corrs) between query q and candidate c. The pose is
-/// first refined on every mutually nearest trunk pair (guided matching): the descriptor
-/// correspondences give the hypothesis, all co-located trunks then fix it more precisely.
-Verification verifyLoop(const Descriptor& q, const Descriptor& c,
-                        const std::vector<Correspondence>& corrs, const PoseEstimate& est,
-                        const VerifierParams& params);
+/// verifyLoop's first checks, on the solver's result alone: kNoPose, kFewHypothesisInliers,
+/// kLowInlierWeight (no hypothesis, see isNoHypothesis), else kNone.
+Rejection hypothesisRejection(const PoseEstimate& est, const VerifierParams& params);
+
+/// The inlier weight share of a hypothesis, sum of omega_k over I_T / over all corrs (0 for
+/// none). An accepted loop scores covisible_ratio (at most 1) times it, so it bounds the score
+/// before verification: LoopDetector::query verifies no candidate that cannot beat its best.
+double inlierWeightShare(const std::vector<Correspondence>& corrs, const PoseEstimate& est);
 
 /// Result of guidedRefine.
 struct Refined {
