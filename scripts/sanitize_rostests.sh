@@ -46,7 +46,7 @@ export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1:log_path=${REPORTS}/ubs
 failed=()
 for t in "${TESTS[@]}"; do
   echo "sanitize_rostests: ${t}"
-  if ! rostest --text dtif "${t}" > "${WS}/${t%.test}.log" 2>&1 \
+  if ! rostest dtif "${t}" > "${WS}/${t%.test}.log" 2>&1 \
       || ! grep -q "RESULT: SUCCESS" "${WS}/${t%.test}.log"; then
     tail -30 "${WS}/${t%.test}.log"
     failed+=("${t}")

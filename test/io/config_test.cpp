@@ -4,6 +4,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <regex>
 #include <sstream>
 
 #include "dtif_test/test_config.h"
@@ -135,6 +136,25 @@ TEST(Config, ShippedTrunkExtractionYamlNamesEveryField) {
   };
   p.visit(named);
   EXPECT_EQ(fields, 56);
+}
+
+// rosparam loads the shipped files with YAML 1.1, where a float needs a sign in its exponent:
+// `1.0e6` is the string "1.0e6" there (the map-merge nodelet then refused to start), while
+// dtif's own loader reads it as a number. Every exponent in a shipped file carries its sign.
+TEST(Config, ShippedYamlsHaveNoUnsignedExponents) {
+  const std::regex unsigned_exponent(R"(:\s*[-+]?[0-9]*\.?[0-9]+[eE][0-9]+\s*(#.*)?$)");
+  int files = 0;
+  for (const auto& entry : fs::recursive_directory_iterator(DTIF_CONFIG_DIR)) {
+    if (entry.path().extension() != ".yaml") continue;
+    ++files;
+    std::ifstream in(entry.path());
+    std::string line;
+    for (int n = 1; std::getline(in, line); ++n) {
+      EXPECT_FALSE(std::regex_search(line, unsigned_exponent))
+          << entry.path() << ":" << n << ": " << line;
+    }
+  }
+  EXPECT_GT(files, 3);
 }
 
 // The shipped merge.yaml names every parameter of the map merger and the stem inventory.
