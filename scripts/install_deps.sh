@@ -14,7 +14,7 @@ PKGS=(
   ros-std-msgs ros-nav-msgs ros-tf2-msgs libgtest-dev googletest rosbash libstd-srvs-dev python3-std-srvs
   python3-sensor-msgs python3-geometry-msgs python3-visualization-msgs python3-nav-msgs
   libyaml-cpp-dev nlohmann-json3-dev libpng-dev zlib1g-dev libcli11-dev librosbag-storage-dev
-  libceres-dev
+  libceres-dev libsuitesparse-dev
 )
 
 PKGS+=("$@")
