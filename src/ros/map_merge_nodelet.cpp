@@ -225,10 +225,6 @@ class MapMergeNodelet : public nodelet::Nodelet {
         loops_in_.clear();
         clouds_in_.clear();
       }
-      if (ds.empty() && ls.empty() && cs.empty()) {
-        releaseFreedMemory(true);  // idle: whatever the last solve freed goes back now
-        continue;
-      }
       try {
         update(ds, ls, cs);
       } catch (const std::exception& e) {
@@ -252,7 +248,10 @@ class MapMergeNodelet : public nodelet::Nodelet {
     for (const auto& l : ls) pending_loops_.push_back(l);
     changed |= addPendingLoops();
     for (const auto& c : cs) addCloud(c.first, *c.second);
-    if (!changed && !dirty_) return;
+    if (!changed && !dirty_) {
+      releaseFreedMemory(true);  // idle: whatever the last solve freed goes back now
+      return;
+    }
     dirty_ = false;
     const auto t0 = std::chrono::steady_clock::now();
     const MergeSolveStats st = merger_.solve();
