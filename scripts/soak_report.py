@@ -13,8 +13,8 @@ more than --level-mb (16 MB). The base station's grows with its database by desi
 off when its RSS at the end is within max(--level-mb, --reload-frac (15 %)) of a fresh base
 station that loaded the run's saved database (soak_reload.sh, reload.csv): memory beyond the
 database's own is what an hour of queries left behind. File descriptors and threads of dtif's
-processes: at most 2 more at the end than in the middle (the base station's threads: than
-reloaded, its thread pools start lazily).
+processes: at most 2 more at the end than in the middle (the base station's solver libraries
+start a thread pool once, in the first minute, when the map merge still factors the graph).
 Lag (a result's time minus its submap's last cloud's), in wall time and in bag (ROS) time; the
 verdict: wall-time max < --max-lag-s (at rate 1, as on a unit, the two are the same).
 Also compares the loops with dtif eval's on the same dataset (reported, not a verdict: the order
@@ -221,7 +221,7 @@ class Report:
             if name != "dtif_manager":  # the base station's memory grows with its database
                 self.check(growth <= a.level_mb, "%s: RSS grew %.1f MB in the 2nd half (limit "
                            "%.0f MB)" % (name, growth, a.level_mb))
-            if dtif_proc and name != "dtif_manager":  # its threads: against the reload
+            if dtif_proc:
                 self.check(end[3] <= mid[3] + 2, "%s: threads %d -> %d" % (name, mid[3], end[3]))
             if dtif_proc:
                 self.check(end[2] <= mid[2] + 2, "%s: open file descriptors %d -> %d"
@@ -271,8 +271,12 @@ class Report:
         self.say("")
         self.check(end_mb <= limit, "dtif_manager: %.0f MB at the end, %.0f MB for its database "
                    "reloaded (limit %.0f MB)" % (end_mb, reload_mb, limit))
-        self.check(s[-1][3] <= reload_threads + 2, "dtif_manager: %d threads at the end, %d "
-                   "reloaded" % (s[-1][3], reload_threads))
+        # Threads are checked from the middle to the end like every process's: a reload solves
+        # its whole map with conjugate gradients at once, while the run factors with CHOLMOD
+        # while the graph is small, whose library thread pool (3 threads, created once) stays.
+        self.say("Threads: %d at the end, %d in the base station that reloaded the database."
+                 % (s[-1][3], reload_threads))
+        self.say("")
         self.data["database"] = {"end_mb": end_mb, "reload_mb": reload_mb,
                                  "kb_per_entry_first": k1, "kb_per_entry_second": k2,
                                  "file_kb_per_entry": per_entry / 1024, "entries": e3,
