@@ -11,9 +11,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <cstring>
 #include <ctime>
-#include <fstream>
 #include <map>
 #include <random>
 #include <string>
@@ -21,6 +19,7 @@
 
 #include "dtif/core/database/loop_detector.h"
 #include "dtif/core/merge/map_merger.h"
+#include "proc_status.h"
 
 namespace {
 
@@ -98,19 +97,10 @@ void bench(int n) {
               first.iterations, sum / 10.0, worst);
 }
 
-// VmRSS or VmHWM of this process [MB].
-double statusMb(const char* key) {
-  std::ifstream f("/proc/self/status");
-  std::string line;
-  while (std::getline(f, line)) {
-    if (line.rfind(key, 0) == 0) return std::atof(line.c_str() + std::strlen(key)) / 1024.0;
-  }
-  return 0.0;
-}
-
 struct Replay {
-  std::vector<size_t> order;             // entries in (stamp, robot) order
-  std::vector<std::vector<size_t>> due;  // per order position: loops whose submaps are both in
+  std::vector<size_t> order;  // entries in (stamp, robot) order; a submap's merger id: its position
+  // per position: the loops whose submaps are both in by then, ids as merger ids
+  std::vector<std::vector<dtif::Loop>> due;
 };
 
 Replay replayOrder(const dtif::LoopDetector& db) {
@@ -132,7 +122,11 @@ Replay replayOrder(const dtif::LoopDetector& db) {
     const dtif::Loop& lc = db.loops()[l];
     auto q = at.find({lc.query_robot, lc.query_id}),
          c = at.find({lc.candidate_robot, lc.candidate_id});
-    if (q != at.end() && c != at.end()) r.due[std::max(q->second, c->second)].push_back(l);
+    if (q == at.end() || c == at.end()) continue;
+    dtif::Loop renumbered = lc;
+    renumbered.query_id = static_cast<int64_t>(q->second);
+    renumbered.candidate_id = static_cast<int64_t>(c->second);
+    r.due[std::max(q->second, c->second)].push_back(renumbered);
   }
   return r;
 }
@@ -142,7 +136,6 @@ int benchDatabase(const std::string& path, int every) {
   db.load(path);
   const Replay rp = replayOrder(db);
   dtif::MapMerger merger;
-  std::map<std::pair<std::string, int64_t>, int64_t> global;
   std::printf(
       "| submaps | loops used / rejected | solve [ms CPU] | iterations | linear solver | RSS [MB] "
       "| peak [MB] |\n"
@@ -151,15 +144,9 @@ int benchDatabase(const std::string& path, int every) {
   int solves = 0;
   for (size_t k = 0; k < rp.order.size(); ++k) {
     const dtif::Descriptor& d = *db.entries()[rp.order[k]];
-    const int64_t gid = static_cast<int64_t>(k);
-    global[{d.robot, d.submap_id}] = gid;
-    merger.addSubmap({d.robot, gid, d.stamp, db.odometry(rp.order[k]).T_O_S, d.trunks});
-    for (size_t l : rp.due[k]) {
-      dtif::Loop lc = db.loops()[l];
-      lc.query_id = global.at({lc.query_robot, lc.query_id});
-      lc.candidate_id = global.at({lc.candidate_robot, lc.candidate_id});
-      merger.addLoop(lc);
-    }
+    merger.addSubmap(
+        {d.robot, static_cast<int64_t>(k), d.stamp, db.odometry(rp.order[k]).T_O_S, d.trunks});
+    for (const dtif::Loop& l : rp.due[k]) merger.addLoop(l);
     const bool last = k + 1 == rp.order.size();
     if ((k + 1) % every != 0 && !last) continue;
     const std::clock_t t0 = std::clock();
@@ -172,7 +159,7 @@ int benchDatabase(const std::string& path, int every) {
     if ((k + 1) % quarter < static_cast<size_t>(every) || last) {
       std::printf("| %zu | %zu / %zu | %.0f | %d | %s | %.0f | %.0f |\n", k + 1, st.loops_used,
                   st.loops_rejected, ms, st.iterations, st.iterative ? "CG" : "Cholesky",
-                  statusMb("VmRSS:"), statusMb("VmHWM:"));
+                  dtif::procMiB("VmRSS"), dtif::procMiB("VmHWM"));
     }
   }
   std::printf("%d solves: %.0f ms CPU in all, mean %.0f, max %.0f\n", solves, total,

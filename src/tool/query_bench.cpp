@@ -32,6 +32,7 @@
 #include "dtif/eval/evaluation.h"
 #include "dtif/io/config.h"
 #include "dtif/io/dataset.h"
+#include "proc_status.h"
 
 namespace {
 
@@ -47,21 +48,6 @@ double cpuMs() {
   timespec ts{};
   clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
   return 1e3 * static_cast<double>(ts.tv_sec) + 1e-6 * static_cast<double>(ts.tv_nsec);
-}
-
-/// VmRSS or VmHWM of this process [MiB].
-double procMiB(const char* key) {
-  std::ifstream is("/proc/self/status");
-  std::string k;
-  double kb = 0.0;
-  while (is >> k) {
-    if (k == std::string(key) + ":") {
-      is >> kb;
-      return kb / 1024.0;
-    }
-    is.ignore(1 << 12, '\n');
-  }
-  return 0.0;
 }
 
 /// "<scene>" of .../<scene>/dataset, with the seed folder's suffix (scenes-seed2 -> s2).
@@ -214,10 +200,10 @@ int scale(const std::string& db, const std::vector<size_t>& sizes) {
         "| %.0f |\n",
         det.size(), std::accumulate(t.begin(), t.end(), 0.0) * k, sorted[sorted.size() / 2],
         sorted.back(), screen * k, match * k, solver * k, verify * k, matched * k, loops,
-        memoryPerEntry(det).c_str(), bytes / det.size(), save_s, load_s, procMiB("VmRSS"));
+        memoryPerEntry(det).c_str(), bytes / det.size(), save_s, load_s, dtif::procMiB("VmRSS"));
     std::fflush(stdout);
   }
-  std::printf("peak RSS (VmHWM) %.0f MiB\n", procMiB("VmHWM"));
+  std::printf("peak RSS (VmHWM) %.0f MiB\n", dtif::procMiB("VmHWM"));
   return 0;
 }
 
