@@ -276,10 +276,11 @@ class MapMergeNodelet : public nodelet::Nodelet {
   void releaseFreedMemory(bool idle) {
 #ifdef __GLIBC__
     const auto now = std::chrono::steady_clock::now();
-    if (idle ? !trim_pending_ : now - last_trim_ < std::chrono::seconds(10)) {
-      trim_pending_ = trim_pending_ || !idle;
+    if (!idle && now - last_trim_ < std::chrono::seconds(10)) {
+      trim_pending_ = true;  // handed back when the worker falls idle
       return;
     }
+    if (idle && !trim_pending_) return;
     last_trim_ = now;
     trim_pending_ = false;
     malloc_trim(0);
