@@ -152,60 +152,129 @@ std::vector<ConsistencyBounds> consistencyBounds(const std::vector<MatchTriangle
   return out;
 }
 
+namespace {
+
+/// Trunk i's candidates for its kk nearest: every other finite trunk whose squared horizontal
+/// distance is within a hair of the kk-th smallest (the hair covers the rounding of hypot), as
+/// (squared distance, index) in `near`. A sweep outwards over the trunks sorted by x (`by_x`, i at
+/// position pos) stops on a side once the x gap alone exceeds the bound: the trunks beyond have kk
+/// others clearly nearer. The same set as a scan of all n trunks, in O(n log n) per descriptor
+/// for a stand rather than O(n^2).
+void nearestCandidates(const Trunks& tr, const std::vector<int>& by_x, int pos, int kk,
+                       std::vector<std::pair<double, int>>* near, std::vector<double>* heap) {
+  const TrunkLandmark& a = tr[static_cast<size_t>(by_x[static_cast<size_t>(pos)])];
+  near->clear();
+  heap->clear();  // max-heap of the kk smallest squared distances so far
+  const auto bound = [&] {
+    return static_cast<int>(heap->size()) < kk ? std::numeric_limits<double>::infinity()
+                                               : heap->front() * (1.0 + 1e-9);
+  };
+  const auto visit = [&](int j) {
+    const double dx = a.x - tr[static_cast<size_t>(j)].x, dy = a.y - tr[static_cast<size_t>(j)].y;
+    const double d2 = dx * dx + dy * dy;
+    near->emplace_back(d2, j);
+    if (static_cast<int>(heap->size()) < kk) {
+      heap->push_back(d2);
+      std::push_heap(heap->begin(), heap->end());
+    } else if (d2 < heap->front()) {
+      std::pop_heap(heap->begin(), heap->end());
+      heap->back() = d2;
+      std::push_heap(heap->begin(), heap->end());
+    }
+  };
+  const int n = static_cast<int>(by_x.size());
+  const auto gap2 = [&](int p) {
+    const double dx = a.x - tr[static_cast<size_t>(by_x[static_cast<size_t>(p)])].x;
+    return dx * dx;
+  };
+  // The nearer side in x first, so that the bound tightens early.
+  int l = pos - 1, r = pos + 1;
+  while (true) {
+    const bool left_ok = l >= 0 && gap2(l) <= bound();
+    const bool right_ok = r < n && gap2(r) <= bound();
+    if (!left_ok && !right_ok) break;
+    if (left_ok && (!right_ok || gap2(l) <= gap2(r))) {
+      visit(by_x[static_cast<size_t>(l--)]);
+    } else {
+      visit(by_x[static_cast<size_t>(r++)]);
+    }
+  }
+  const double b = bound();
+  near->erase(std::remove_if(near->begin(), near->end(),
+                             [b](const std::pair<double, int>& e) { return e.first > b; }),
+              near->end());
+}
+
+/// A triangle's trunk indices, sorted, packed into one integer (21 bits each) whose order is
+/// that of the sorted index triples: sorting and searching integers instead of arrays.
+constexpr int kKeyBits = 21;
+constexpr int kMaxKeyTrunks = 1 << kKeyBits;
+
+uint64_t sortedKey(int a, int b, int c) {
+  if (a > b) std::swap(a, b);
+  if (b > c) std::swap(b, c);
+  if (a > b) std::swap(a, b);
+  const uint64_t mask = kMaxKeyTrunks - 1;
+  return ((static_cast<uint64_t>(a) & mask) << (2 * kKeyBits)) |
+         ((static_cast<uint64_t>(b) & mask) << kKeyBits) | (static_cast<uint64_t>(c) & mask);
+}
+
+int keyTrunk(uint64_t key, int slot) {
+  return static_cast<int>((key >> ((2 - slot) * kKeyBits)) & (kMaxKeyTrunks - 1));
+}
+
+}  // namespace
+
 /// Computed from the trunks on both sides, so nothing extra crosses the radio link.
 std::vector<MatchTriangle> matchTriangles(const Descriptor& d, int k) {
   std::vector<MatchTriangle> out;
-  if (k <= 0 || d.trunks.size() < 3) {
+  // (More trunks than a key holds: far beyond kMaxDescriptorTrunks, never a valid descriptor.)
+  if (k <= 0 || d.trunks.size() < 3 || d.trunks.size() >= static_cast<size_t>(kMaxKeyTrunks)) {
     for (const Triangle& t : d.triangles) out.push_back({t, true});
     return out;
   }
   const int n = static_cast<int>(d.trunks.size());
   const int kk = std::min(k, n - 1);
-  std::vector<std::array<int, 3>> keys;
+  std::vector<uint64_t> keys;
   keys.reserve(d.triangles.size() + static_cast<size_t>(n) * kk * (kk - 1) / 2);
-  auto key = [](int a, int b, int c) {
-    std::array<int, 3> t{a, b, c};
-    std::sort(t.begin(), t.end());
-    return t;
-  };
-  for (const Triangle& t : d.triangles) keys.push_back(key(t.v[0], t.v[1], t.v[2]));
-  std::vector<std::pair<double, int>> nn;
-  std::vector<double> d2(static_cast<size_t>(n)), kth;
+  for (const Triangle& t : d.triangles) keys.push_back(sortedKey(t.v[0], t.v[1], t.v[2]));
+  // Trunks with a non-finite centre (never in a validated descriptor) take no part in the
+  // neighbour triangles.
+  std::vector<int> by_x;
+  by_x.reserve(static_cast<size_t>(n));
   for (int i = 0; i < n; ++i) {
-    // The kk nearest by (hypot, index). hypot only for the trunks whose squared distance is
-    // within a hair of the kk-th smallest: any other has kk trunks clearly nearer, so it
-    // cannot be among them (the hair covers the rounding of either distance).
-    bool finite = true;
-    for (int j = 0; j < n; ++j) {
-      const double dx = d.trunks[i].x - d.trunks[j].x, dy = d.trunks[i].y - d.trunks[j].y;
-      d2[j] = dx * dx + dy * dy;
-      finite = finite && std::isfinite(d2[j]);
+    if (std::isfinite(d.trunks[static_cast<size_t>(i)].x) &&
+        std::isfinite(d.trunks[static_cast<size_t>(i)].y))
+      by_x.push_back(i);
+  }
+  std::sort(by_x.begin(), by_x.end(), [&](int a, int b) {
+    return d.trunks[static_cast<size_t>(a)].x < d.trunks[static_cast<size_t>(b)].x;
+  });
+  const int m = std::min(kk, static_cast<int>(by_x.size()) - 1);
+  std::vector<std::pair<double, int>> near;
+  std::vector<double> heap;
+  for (int pos = 0; m >= 2 && pos < static_cast<int>(by_x.size()); ++pos) {
+    const int i = by_x[static_cast<size_t>(pos)];
+    nearestCandidates(d.trunks, by_x, pos, m, &near, &heap);
+    // The m nearest by (hypot, index), hypot only for the candidates.
+    for (auto& e : near) {
+      const TrunkLandmark &a = d.trunks[static_cast<size_t>(i)],
+                          &c = d.trunks[static_cast<size_t>(e.second)];
+      e.first = std::hypot(a.x - c.x, a.y - c.y);
     }
-    double bound = std::numeric_limits<double>::infinity();
-    if (finite) {
-      kth.clear();
-      for (int j = 0; j < n; ++j)
-        if (j != i) kth.push_back(d2[j]);
-      std::nth_element(kth.begin(), kth.begin() + (kk - 1), kth.end());
-      bound = kth[kk - 1] * (1.0 + 1e-9);
-    }
-    nn.clear();
-    for (int j = 0; j < n; ++j) {
-      if (j == i || (finite && d2[j] > bound)) continue;
-      nn.emplace_back(std::hypot(d.trunks[i].x - d.trunks[j].x, d.trunks[i].y - d.trunks[j].y), j);
-    }
-    std::partial_sort(nn.begin(), nn.begin() + kk, nn.end());
-    for (int a = 0; a < kk; ++a)
-      for (int b = a + 1; b < kk; ++b) keys.push_back(key(i, nn[a].second, nn[b].second));
+    std::partial_sort(near.begin(), near.begin() + m, near.end());
+    for (int a = 0; a < m; ++a)
+      for (int b = a + 1; b < m; ++b) keys.push_back(sortedKey(i, near[a].second, near[b].second));
   }
   const size_t n_delaunay = d.triangles.size();
-  std::vector<std::array<int, 3>> faces(keys.begin(), keys.begin() + n_delaunay);
+  std::vector<uint64_t> faces(keys.begin(), keys.begin() + n_delaunay);
   std::sort(faces.begin(), faces.end());
   std::sort(keys.begin(), keys.end());
   keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
   out.reserve(keys.size());
-  for (const auto& t : keys) {
-    const Triangle tri = makeCanonicalTriangle(d.trunks, t[0], t[1], t[2]);
+  for (const uint64_t t : keys) {
+    const Triangle tri =
+        makeCanonicalTriangle(d.trunks, keyTrunk(t, 0), keyTrunk(t, 1), keyTrunk(t, 2));
     if (tri.len[2] <= 1e-3) continue;  // collinear or duplicate trunks
     // Thin slivers: their shortest edge tells nothing reliable about the correspondence.
     const double s = 0.5 * (tri.len[0] + tri.len[1] + tri.len[2]);
