@@ -132,6 +132,45 @@ TEST(QueryIndex, ScreeningEqualsBruteForceAfterInsertReloadAndReplace) {
   EXPECT_LT(loaded.memoryBytes(), det.memoryBytes());
 }
 
+// A base station that built its database live and one that loaded the same database hold the
+// same memory (the soak test compares the two): every entry's match triangles are computed when
+// it enters, not on its first match, and memoryBytes counts them.
+TEST(QueryIndex, MemoryIsTheSameBuiltLiveOrLoaded) {
+  const auto entries = randomEntries(10, 31);
+  const LoopDetectorParams p = screeningParams();
+  LoopDetector live(p);
+  size_t triangle_bytes = 0;
+  for (const auto& e : entries) {
+    live.query(*e);  // matches some entries before others enter
+    ASSERT_TRUE(live.insert(e));
+    triangle_bytes +=
+        matchTriangles(*e, p.matcher.neighbour_triangles).size() * sizeof(MatchTriangle);
+  }
+  ASSERT_GT(triangle_bytes, 0u);
+  const std::string path = ::testing::TempDir() + "/dtif_query_index_memory.bin";
+  live.save(path);
+  LoopDetector loaded(p);
+  loaded.load(path);
+  EXPECT_EQ(loaded.memoryBytes(), live.memoryBytes());
+  // The descriptors alone: what memoryBytes counted before the triangles were.
+  size_t descriptor_bytes = 0;
+  for (const auto& d : entries)
+    descriptor_bytes +=
+        d->trunks.size() * sizeof(TrunkLandmark) + d->triangles.size() * sizeof(Triangle);
+  EXPECT_GE(live.memoryBytes(), descriptor_bytes + triangle_bytes);
+  int loops = 0;
+  for (const auto& q : entries) {
+    const auto a = live.query(*q);
+    const auto b = loaded.query(*q);
+    ASSERT_EQ(a.has_value(), b.has_value()) << q->robot << "/" << q->submap_id;
+    if (!a) continue;
+    ++loops;
+    EXPECT_EQ(a->candidate_robot, b->candidate_robot);
+    EXPECT_EQ(a->candidate_id, b->candidate_id);
+  }
+  EXPECT_GT(loops, 0);  // the comparison covered loops, not only empty answers
+}
+
 TEST(QueryIndex, ScreeningSkipsEntriesOfAnotherHistogramBinning) {
   auto entries = randomEntries(3, 5);
   auto odd = std::make_shared<Descriptor>(*entries[1]);

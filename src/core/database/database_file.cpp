@@ -173,7 +173,6 @@ void LoopDetector::replaceContents(DatabaseContents contents) {
   entries_ = std::move(contents.entries);
   odometry_ = std::move(contents.odometry);
   loops_ = std::move(contents.loops);
-  triangles_.assign(entries_.size(), nullptr);
   rebuildIndex();
 }
 

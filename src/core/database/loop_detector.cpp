@@ -249,7 +249,6 @@ bool LoopDetector::insert(std::shared_ptr<const Descriptor> d, const EntryOdomet
   indexEntry(*d);
   entries_.push_back(std::move(d));
   odometry_.push_back(odometry);
-  triangles_.push_back(nullptr);
   return true;
 }
 
@@ -266,6 +265,8 @@ void LoopDetector::indexEntry(const Descriptor& d) {
   row.stamp = d.stamp;
   row.submap_id = d.submap_id;
   screen_.push_back(row);
+  triangles_.push_back(matchTriangles(d, params_.matcher.neighbour_triangles));
+  triangles_.back().shrink_to_fit();  // held for the database's lifetime
 }
 
 void LoopDetector::rebuildIndex() {
@@ -273,6 +274,8 @@ void LoopDetector::rebuildIndex() {
   hists_.clear();
   robots_.clear();
   robot_ids_.clear();
+  triangles_.clear();
+  triangles_.reserve(entries_.size());
   for (const auto& d : entries_) indexEntry(*d);
 }
 
@@ -285,6 +288,7 @@ size_t LoopDetector::memoryBytes() const {
              d->footprint.bits.capacity() + d->ground_map.z.capacity() * sizeof(int16_t) +
              d->robot.capacity();
   }
+  for (const auto& t : triangles_) bytes += sizeof(t) + t.capacity() * sizeof(MatchTriangle);
   return bytes;
 }
 
@@ -351,15 +355,10 @@ std::optional<Loop> LoopDetector::query(const Descriptor& q, QueryStats* stats) 
   std::vector<const Descriptor*> matched;
   for (size_t rank = 0; rank < cands.size(); ++rank) {
     const Cand& cd = cands[rank];
-    auto& tc = triangles_[cd.index];
-    if (!tc) {
-      tc = std::make_shared<const std::vector<MatchTriangle>>(
-          matchTriangles(*entries_[cd.index], mp.neighbour_triangles));
-    }
     const bool votes = rank < static_cast<size_t>(params_.database.max_vote_candidates);
     matched.push_back(entries_[cd.index].get());
     hyps[rank] = hypothesize(q, *matched.back(), votes ? params_ : no_votes, &solver_, &st, &tq,
-                             tc.get(), &bq);
+                             &triangles_[cd.index], &bq);
   }
   return verifyBest(q, matched, hyps, params_, &st);
 }

@@ -144,8 +144,8 @@ class LoopDetector {
   bool insert(std::shared_ptr<const Descriptor> d, const EntryOdometry& odometry = {});
 
   size_t size() const { return entries_.size(); }
-  /// Bytes the database holds: the screening index and the entries' descriptors (trunks,
-  /// triangles, histograms; match triangles cached for matching not counted).
+  /// Bytes the database holds: the screening index, the entries' descriptors (trunks,
+  /// triangles, histograms) and their match triangles; the same built live or loaded.
   size_t memoryBytes() const;
   const std::vector<std::shared_ptr<const Descriptor>>& entries() const { return entries_; }
   /// The odometry pose of entries()[i], as inserted or loaded.
@@ -175,9 +175,11 @@ class LoopDetector {
   std::vector<EntryOdometry> odometry_;  // parallel to entries_
   std::vector<Loop> loops_;
   PoseSolver solver_;
-  /// matchTriangles of each entry, computed when the entry is first matched and then reused
-  /// (the neighbour triangles of a descriptor do not depend on the query).
-  mutable std::vector<std::shared_ptr<const std::vector<MatchTriangle>>> triangles_;
+  /// matchTriangles of each entry, computed when it enters (insert, load): the neighbour
+  /// triangles of a descriptor do not depend on the query. Computed up front rather than on
+  /// first match so that a database's memory is the same whether it was built live or loaded,
+  /// and query stays const without a mutable cache.
+  std::vector<std::vector<MatchTriangle>> triangles_;
 
   /// The screening index: what query's screening reads of every entry, in flat arrays (one
   /// pass over contiguous memory instead of a pointer chase and a robot-name comparison per
