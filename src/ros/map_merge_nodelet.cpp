@@ -528,15 +528,8 @@ class MapMergeNodelet : public nodelet::Nodelet {
     }
     std::lock_guard<std::mutex> lock(merge_mutex_);
     resetMap();
-    // (stamp, robot) order, as live submaps enter: the earliest robot anchors the map.
-    std::vector<size_t> order(db.size());
-    for (size_t i = 0; i < order.size(); ++i) order[i] = i;
-    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
-      const Descriptor &da = *db.entries()[a], &dbb = *db.entries()[b];
-      return da.stamp != dbb.stamp ? da.stamp < dbb.stamp : da.robot < dbb.robot;
-    });
     size_t added = 0, unknown = 0;
-    for (size_t i : order) {
+    for (size_t i : entriesInStampOrder(db)) {
       const Descriptor& d = *db.entries()[i];
       const EntryOdometry& o = db.odometry(i);
       if (!o.known()) {

@@ -105,13 +105,9 @@ struct Replay {
 
 Replay replayOrder(const dtif::LoopDetector& db) {
   Replay r;
-  for (size_t i = 0; i < db.size(); ++i) {
+  for (size_t i : dtif::entriesInStampOrder(db)) {
     if (db.odometry(i).known()) r.order.push_back(i);
   }
-  std::stable_sort(r.order.begin(), r.order.end(), [&](size_t a, size_t b) {
-    const dtif::Descriptor &da = *db.entries()[a], &dbb = *db.entries()[b];
-    return da.stamp != dbb.stamp ? da.stamp < dbb.stamp : da.robot < dbb.robot;
-  });
   std::map<std::pair<std::string, int64_t>, size_t> at;
   for (size_t k = 0; k < r.order.size(); ++k) {
     const dtif::Descriptor& d = *db.entries()[r.order[k]];

@@ -171,6 +171,24 @@ TEST(QueryIndex, MemoryIsTheSameBuiltLiveOrLoaded) {
   EXPECT_GT(loops, 0);  // the comparison covered loops, not only empty answers
 }
 
+// The map merge replays a database in the order live submaps entered: by stamp, then robot name,
+// entries of equal stamp and robot in database order.
+TEST(QueryIndex, EntriesInStampOrderSortsByStampThenRobot) {
+  const auto base = randomEntries(3, 11);  // six valid descriptors
+  const std::vector<std::pair<double, std::string>> keys = {{30.0, "bravo"}, {10.0, "charlie"},
+                                                            {10.0, "alpha"}, {30.0, "alpha"},
+                                                            {10.0, "alpha"}, {5.0, "zulu"}};
+  LoopDetector det(screeningParams());
+  for (size_t i = 0; i < keys.size(); ++i) {
+    auto e = std::make_shared<Descriptor>(*base[i]);
+    e->stamp = keys[i].first;
+    e->robot = keys[i].second;
+    e->submap_id = static_cast<int64_t>(i);
+    ASSERT_TRUE(det.insert(e));
+  }
+  EXPECT_EQ(entriesInStampOrder(det), (std::vector<size_t>{5, 2, 4, 1, 3, 0}));
+}
+
 TEST(QueryIndex, ScreeningSkipsEntriesOfAnotherHistogramBinning) {
   auto entries = randomEntries(3, 5);
   auto odd = std::make_shared<Descriptor>(*entries[1]);

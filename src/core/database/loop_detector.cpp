@@ -363,4 +363,14 @@ std::optional<Loop> LoopDetector::query(const Descriptor& q, QueryStats* stats) 
   return verifyBest(q, matched, hyps, params_, &st);
 }
 
+std::vector<size_t> entriesInStampOrder(const LoopDetector& db) {
+  std::vector<size_t> order(db.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+    const Descriptor &da = *db.entries()[a], &dbb = *db.entries()[b];
+    return da.stamp != dbb.stamp ? da.stamp < dbb.stamp : da.robot < dbb.robot;
+  });
+  return order;
+}
+
 }  // namespace dtif

@@ -199,4 +199,9 @@ class LoopDetector {
   void rebuildIndex();
 };
 
+/// Indices of db's entries in (stamp, robot) order, ties in database order: the order in which
+/// live submaps enter, so that a database replayed into the map merge is anchored on the robot
+/// that came first, as it was live.
+std::vector<size_t> entriesInStampOrder(const LoopDetector& db);
+
 }  // namespace dtif
