@@ -1,7 +1,9 @@
 #!/usr/bin/python3
 """Plots of `dtif bench` output (scripts/bench.sh): precision-recall over the acceptance
-threshold (inliers; scan context: its distance), error distributions, time per stage vs trunks per submap, query time vs database
-size. Usage: bench_plots.py <bench_dir>"""
+threshold (inliers; scan context: its distance), error distributions, time per stage vs trunks
+per submap, query time vs database size; with --speed (scripts/bench_speed.sh): query time vs
+database size and descriptor time vs points per submap, before and after.
+Usage: bench_plots.py <bench_dir>"""
 import csv
 import sys
 from collections import defaultdict
@@ -30,8 +32,44 @@ def finish(fig, ax, path, xlabel, ylabel, log=()):
     plt.close(fig)
 
 
+def speed_plots(out):
+    """speed_vs_database.png and speed_vs_points.png from speed_scale.csv, speed_describe.csv."""
+    fig, ax = plt.subplots(figsize=(6, 4.5))
+    scale = rows(out / "speed_scale.csv")
+    for build, style in [("before", "--"), ("after", "-")]:
+        rs = [r for r in scale if r["build"] == build]
+        if not rs:
+            continue
+        n = [int(float(r["db_size"])) for r in rs]
+        for key, mark in [("median_ms", "o"), ("mean_ms", "x")]:
+            ax.plot(n, [float(r[key]) for r in rs], ls=style, marker=mark,
+                    label="%s: query %s" % (build, key[:-3]))
+    for target, n in [(5, 1000), (10, 10000)]:
+        ax.plot([n], [target], marker="*", ms=12, ls="none", color="k")
+    ax.plot([], [], marker="*", ls="none", color="k", label="target (issue #18)")
+    ax.set_title("Loop query vs database size (thread CPU)")
+    finish(fig, ax, out / "speed_vs_database.png", "database size [entries]", "ms per query",
+           log="xy")
+
+    fig, ax = plt.subplots(figsize=(6, 4.5))
+    desc = rows(out / "speed_describe.csv")
+    for build, mark in [("before", "x"), ("after", "o")]:
+        rs = [r for r in desc if r["build"] == build]
+        if rs:
+            ax.scatter([float(r["points"]) / 1e6 for r in rs], [float(r["min_ms"]) for r in rs],
+                       s=10, marker=mark, label=build)
+    ax.axhline(25, color="k", ls=":", label="target at ~1 M points (issue #18)")
+    ax.set_title("Descriptor time vs points per submap (thread CPU)")
+    finish(fig, ax, out / "speed_vs_points.png", "points per submap [millions]",
+           "ms per submap (extraction + descriptor)")
+
+
 def main(out):
     out = Path(out)
+    if (out / "speed_scale.csv").exists():
+        speed_plots(out)
+    if not (out / "summary.csv").exists():  # dtif bench --speed-only
+        return
     # Precision-recall over the acceptance threshold (all scenes pooled). Scan context and
     # "dtif (place recognition)" count an answer as correct when it is a true loop.
     pr = defaultdict(lambda: defaultdict(lambda: [0, 0, 0]))  # method -> k -> [acc, tp, loops]

@@ -1,10 +1,12 @@
 // dtif bench <dataset_dir>... --out <dir> [--config params.yaml] [--back-ends a,b,...]
 //            [--no-front-ends] [--no-scaling] [--no-pr] [--no-scan-context]
-//            [--scaling-sizes 10,20,...]
+//            [--scaling-sizes 10,20,...] [--speed | --speed-only] [--before-probe <file>]
+//            [--speed-sizes 1000,5000,...] [--speed-every n]
 // Issue #5: dtif against the paper's baselines on the protocol of DATASET.md. Writes
 // summary.csv (one row per scene and method), tables.md (front ends, back ends and place
 // recognition, per scene and over all scenes), pr.csv, place_recognition.csv, submaps.csv,
-// scaling.csv, each method's results.csv and scan context's answers (<scene>/scan_context.csv).
+// scaling.csv, each method's results.csv and scan context's answers (<scene>/scan_context.csv);
+// with --speed, issue #18's speed tables (speed.md, bench_speed.h).
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
@@ -13,6 +15,7 @@
 #include <map>
 #include <sstream>
 
+#include "bench_speed.h"
 #include "commands.h"
 #include "dtif/baselines/bench.h"
 
@@ -279,11 +282,27 @@ baselines::BenchOptions benchOptions(const BenchArgs& a) {
 
 }  // namespace
 
+/// The speed section into <dir>/speed.md (and md).
+void benchSpeed(const BenchArgs& a, const std::filesystem::path& dir, std::ostream& md) {
+  SpeedOptions o;
+  o.after_probe = siblingProbe();
+  o.before_probe = a.before_probe;
+  o.sizes = a.speed_sizes;
+  o.every = a.speed_every;
+  std::ofstream(dir / "speed.md") << appendSpeed(md, dir, a.datasets, o);
+}
+
 int runBench(const BenchArgs& a) {
-  const DtifParams params = loadParams(a.configs);
-  const baselines::BenchOptions opt = benchOptions(a);
   const std::filesystem::path dir(a.out);
   std::filesystem::create_directories(dir);
+  if (a.speed_only) {
+    std::ostringstream md;
+    benchSpeed(a, dir, md);
+    std::cout << md.str();
+    return 0;
+  }
+  const DtifParams params = loadParams(a.configs);
+  const baselines::BenchOptions opt = benchOptions(a);
   BenchCsvs csvs(dir);
 
   std::vector<baselines::SceneBench> scenes;
@@ -301,6 +320,7 @@ int runBench(const BenchArgs& a) {
   }
   if (opt.place_recognition) appendPlaceRecognitionTable(md, csvs.place, scenes);
   if (!a.no_scaling && !pool.empty()) appendScaling(md, dir, pool, params, a.scaling_sizes);
+  if (a.speed) benchSpeed(a, dir, md);
   std::ofstream(dir / "tables.md") << md.str();
   std::cout << md.str();
   if (!csvs.good()) throw DatasetError(a.out + ": write failed");

@@ -219,6 +219,22 @@ void addBench(CLI::App* dtif, BenchArgs* a) {
       ->delimiter(',')
       ->transform(kCount)
       ->capture_default_str();
+  cmd->add_flag("--speed", a->speed,
+                "also descriptor and query time (speed.md, speed_*.csv), by the speed probe "
+                "dtif_query_bench; before / after with --before-probe");
+  cmd->add_flag("--speed-only", a->speed_only, "only the speed section (implies --speed)");
+  cmd->add_option("--before-probe", a->before_probe,
+                  "dtif_query_bench built against an earlier commit (scripts/build_before.sh)")
+      ->type_name("<file>")
+      ->check(CLI::ExistingFile);
+  cmd->add_option("--speed-sizes", a->speed_sizes, "database sizes of the speed section [entries]")
+      ->type_name("N,N,...")
+      ->delimiter(',')
+      ->transform(kCount)
+      ->capture_default_str();
+  cmd->add_option("--speed-every", a->speed_every, "describe every n-th submap")
+      ->transform(kCount)
+      ->capture_default_str();
 }
 
 }  // namespace

@@ -85,6 +85,11 @@ struct BenchArgs {
   bool no_scan_context = false;        ///< skip place recognition (scan context)
   bool no_scaling = false;             ///< skip query time vs database size
   std::vector<size_t> scaling_sizes{10, 20, 50, 100, 200, 500, 1000, 2000};  ///< database sizes
+  bool speed = false;        ///< the speed section (bench_speed.h)
+  bool speed_only = false;   ///< only the speed section
+  std::string before_probe;  ///< an earlier build's speed probe, for before / after
+  std::vector<size_t> speed_sizes{1000, 5000, 10000, 20000};  ///< database sizes [entries]
+  size_t speed_every = 1;                                     ///< describe every n-th submap
 };
 
 /// The options of every subcommand; the one the command line names is filled in.

@@ -10,6 +10,12 @@
 //   dtif_query_bench scale DB N...  query time against N entries: all of DB's entries, then
 //       perturbed copies of them (as other surveys of the same places); bytes per entry, save
 //       and load time, resident memory
+//   dtif_query_bench describe EVERY REPEAT DATASET...  descriptor time (extraction + topology +
+//       histograms, describeCloud) of every EVERY-th submap: min and median of REPEAT describes
+//       after one unmeasured describe (which sizes the thread's workspace)
+// The same source builds against an earlier commit (scripts/build_before.sh), so that `dtif
+// bench --speed` measures before and after with one instrument: it calls only what that commit
+// has too (memoryBytes is optional).
 // Query times are the thread's CPU time (a busy machine inflates them less than wall clock;
 // still compare two builds in the same conditions); the stage times inside QueryStats, save and
 // load are wall clock.
@@ -29,6 +35,7 @@
 
 #include "dtif/baselines/bench.h"
 #include "dtif/core/database/loop_detector.h"
+#include "dtif/core/descriptor/describe.h"
 #include "dtif/eval/evaluation.h"
 #include "dtif/io/config.h"
 #include "dtif/io/dataset.h"
@@ -122,6 +129,38 @@ int replay(const std::string& db, const std::string& only) {
     }
     std::fprintf(stderr, "%-16s %4zu queries %4zu loops  query mean %8.3f ms  max %8.3f ms\n",
                  s.c_str(), scenes[s].size(), loops, sum / scenes[s].size(), worst);
+    std::printf("scene %s %zu %zu %.4f %.4f\n", s.c_str(), scenes[s].size(), loops,
+                sum / scenes[s].size(), worst);
+  }
+  return 0;
+}
+
+/// Prints "describe <scene tag> <submap id> <points> <trunks> <min ms> <median ms>" for every
+/// every-th submap of each dataset.
+int describe(size_t every, int repeat, const std::vector<std::string>& dirs) {
+  dtif::DtifParams params;
+  for (const std::string& dir : dirs) {
+    const std::string tag = sceneTag(dir);
+    const dtif::Dataset ds = dtif::readDataset(dir);
+    for (size_t i = 0; i < ds.submaps.size(); i += every) {
+      const dtif::Cloud::Ptr cloud = dtif::loadSubmapCloud(ds, ds.submaps[i]);
+      const auto once = [&] {
+        return dtif::describeCloud(*cloud, dtif::SubmapKey{}, params.trunk_extraction,
+                                   params.descriptor);
+      };
+      const size_t trunks = once().trunks.size();
+      std::vector<double> t;
+      for (int k = 0; k < repeat; ++k) {
+        const double t0 = cpuMs();
+        once();
+        t.push_back(cpuMs() - t0);
+      }
+      std::sort(t.begin(), t.end());
+      std::printf("describe %s %lld %zu %zu %.4f %.4f\n", tag.c_str(),
+                  static_cast<long long>(ds.submaps[i].id), cloud->size(), trunks, t.front(),
+                  t[t.size() / 2]);
+      std::fflush(stdout);
+    }
   }
   return 0;
 }
@@ -211,7 +250,8 @@ int scale(const std::string& db, const std::vector<size_t>& sizes) {
 
 int main(int argc, char** argv) {
   const std::string usage =
-      "usage: dtif_query_bench collect OUT.db DATASET... | replay DB [SCENE] | scale DB N...\n";
+      "usage: dtif_query_bench collect OUT.db DATASET... | replay DB [SCENE] | scale DB N... |\n"
+      "       describe EVERY REPEAT DATASET...\n";
   if (argc < 3) {
     std::fputs(usage.c_str(), stderr);
     return 2;
@@ -220,6 +260,10 @@ int main(int argc, char** argv) {
   try {
     if (mode == "collect" && argc >= 4) {
       return collect(argv[2], std::vector<std::string>(argv + 3, argv + argc));
+    }
+    if (mode == "describe" && argc >= 5) {
+      return describe(std::max<size_t>(1, std::stoul(argv[2])), std::max(1, std::stoi(argv[3])),
+                      std::vector<std::string>(argv + 4, argv + argc));
     }
     if (mode == "replay") return replay(argv[2], argc > 3 ? argv[3] : "");
     if (mode == "scale") {
