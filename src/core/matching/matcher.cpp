@@ -235,13 +235,24 @@ std::vector<MatchTriangle> matchTriangles(const Descriptor& d, int k) {
   }
   const int n = static_cast<int>(d.trunks.size());
   const int kk = std::min(k, n - 1);
-  std::vector<uint64_t> keys;
-  keys.reserve(d.triangles.size() + static_cast<size_t>(n) * kk * (kk - 1) / 2);
-  for (const Triangle& t : d.triangles) keys.push_back(sortedKey(t.v[0], t.v[1], t.v[2]));
+  // Scratch reused between calls: a database load computes these for every entry.
+  struct Scratch {
+    std::vector<uint64_t> keys;
+    std::vector<int> by_x;
+    std::vector<std::pair<double, int>> near;
+    std::vector<double> heap;
+    std::vector<std::pair<float, uint32_t>> order;
+    std::vector<MatchTriangle> kept;
+  };
+  thread_local Scratch scratch;  // one TLS lookup per call, not one per use
+  auto& [keys, by_x, near, heap, order, kept] = scratch;
+  keys.clear();
+  // Each key shifted left by one, its low bit set for a Delaunay face: after sorting, a
+  // triangle's copies are adjacent and the face copy, if any, comes last.
+  for (const Triangle& t : d.triangles) keys.push_back(sortedKey(t.v[0], t.v[1], t.v[2]) << 1 | 1);
   // Trunks with a non-finite centre (never in a validated descriptor) take no part in the
   // neighbour triangles.
-  std::vector<int> by_x;
-  by_x.reserve(static_cast<size_t>(n));
+  by_x.clear();
   for (int i = 0; i < n; ++i) {
     if (std::isfinite(d.trunks[static_cast<size_t>(i)].x) &&
         std::isfinite(d.trunks[static_cast<size_t>(i)].y))
@@ -251,41 +262,44 @@ std::vector<MatchTriangle> matchTriangles(const Descriptor& d, int k) {
     return d.trunks[static_cast<size_t>(a)].x < d.trunks[static_cast<size_t>(b)].x;
   });
   const int m = std::min(kk, static_cast<int>(by_x.size()) - 1);
-  std::vector<std::pair<double, int>> near;
-  std::vector<double> heap;
   for (int pos = 0; m >= 2 && pos < static_cast<int>(by_x.size()); ++pos) {
     const int i = by_x[static_cast<size_t>(pos)];
     nearestCandidates(d.trunks, by_x, pos, m, &near, &heap);
-    // The m nearest by (hypot, index), hypot only for the candidates.
-    for (auto& e : near) {
-      const TrunkLandmark &a = d.trunks[static_cast<size_t>(i)],
-                          &c = d.trunks[static_cast<size_t>(e.second)];
-      e.first = std::hypot(a.x - c.x, a.y - c.y);
+    // The m nearest by (hypot, index), hypot only for the candidates, and only when there are
+    // more than m (near-ties at the bound): the pairs below do not depend on the order.
+    if (static_cast<int>(near.size()) > m) {
+      for (auto& e : near) {
+        const TrunkLandmark &a = d.trunks[static_cast<size_t>(i)],
+                            &c = d.trunks[static_cast<size_t>(e.second)];
+        e.first = std::hypot(a.x - c.x, a.y - c.y);
+      }
+      std::partial_sort(near.begin(), near.begin() + m, near.end());
     }
-    std::partial_sort(near.begin(), near.begin() + m, near.end());
     for (int a = 0; a < m; ++a)
-      for (int b = a + 1; b < m; ++b) keys.push_back(sortedKey(i, near[a].second, near[b].second));
+      for (int b = a + 1; b < m; ++b)
+        keys.push_back(sortedKey(i, near[a].second, near[b].second) << 1);
   }
-  const size_t n_delaunay = d.triangles.size();
-  std::vector<uint64_t> faces(keys.begin(), keys.begin() + n_delaunay);
-  std::sort(faces.begin(), faces.end());
   std::sort(keys.begin(), keys.end());
-  keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
-  out.reserve(keys.size());
-  for (const uint64_t t : keys) {
+  kept.clear();
+  order.clear();
+  for (size_t j = 0; j < keys.size(); ++j) {
+    const uint64_t t = keys[j] >> 1;
+    if (j + 1 < keys.size() && keys[j + 1] >> 1 == t) continue;  // the last copy: the face
+    const bool face = keys[j] & 1;
     const Triangle tri =
         makeCanonicalTriangle(d.trunks, keyTrunk(t, 0), keyTrunk(t, 1), keyTrunk(t, 2));
     if (tri.len[2] <= 1e-3) continue;  // collinear or duplicate trunks
     // Thin slivers: their shortest edge tells nothing reliable about the correspondence.
     const double s = 0.5 * (tri.len[0] + tri.len[1] + tri.len[2]);
     const double area2 = s * (s - tri.len[0]) * (s - tri.len[1]) * (s - tri.len[2]);
-    const bool face = std::binary_search(faces.begin(), faces.end(), t);
     if (!face && (area2 <= 0.0 || std::sqrt(area2) < 0.05 * tri.len[0] * tri.len[0])) continue;
-    out.push_back({tri, face});
+    order.emplace_back(tri.len[0], static_cast<uint32_t>(kept.size()));
+    kept.push_back({tri, face});
   }
-  std::stable_sort(out.begin(), out.end(), [](const MatchTriangle& a, const MatchTriangle& b) {
-    return a.t.len[0] < b.t.len[0];
-  });
+  // By longest edge, ties in key order (a stable sort of kept, without moving triangles).
+  std::sort(order.begin(), order.end());
+  out.reserve(kept.size());
+  for (const auto& o : order) out.push_back(kept[o.second]);
   return out;
 }
 
