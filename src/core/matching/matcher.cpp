@@ -245,7 +245,12 @@ std::vector<MatchTriangle> matchTriangles(const Descriptor& d, int k) {
     std::vector<MatchTriangle> kept;
   };
   thread_local Scratch scratch;  // one TLS lookup per call, not one per use
-  auto& [keys, by_x, near, heap, order, kept] = scratch;
+  std::vector<uint64_t>& keys = scratch.keys;
+  std::vector<int>& by_x = scratch.by_x;
+  std::vector<std::pair<double, int>>& near = scratch.near;
+  std::vector<double>& heap = scratch.heap;
+  std::vector<std::pair<float, uint32_t>>& order = scratch.order;
+  std::vector<MatchTriangle>& kept = scratch.kept;
   keys.clear();
   // Each key shifted left by one, its low bit set for a Delaunay face: after sorting, a
   // triangle's copies are adjacent and the face copy, if any, comes last.
@@ -369,6 +374,39 @@ int consistentEdges(const Triangle& q, const Triangle& c, const MatcherParams& p
   return edgeMask(q, c, params);
 }
 
+namespace {
+
+/// The candidate triangles' values as columns, so that a query triangle's test against a run
+/// of them is a loop over contiguous floats that the compiler vectorises.
+struct TriangleColumns {
+  std::array<std::vector<float>, 6> v;  // len[0..2], r[0..2]
+  void assign(const std::vector<MatchTriangle>& t) {
+    for (int a = 0; a < 6; ++a) v[a].resize(t.size());
+    for (size_t j = 0; j < t.size(); ++j) {
+      for (int a = 0; a < 3; ++a) {
+        v[a][j] = t[j].t.len[a];
+        v[3 + a][j] = t[j].t.r[a];
+      }
+    }
+  }
+};
+
+/// full[j - from] = 1 when every value of candidate triangle j lies in b's intervals (the
+/// non-face case of boundsMask), for j in [from, to).
+void fullyInBounds(const TriangleColumns& c, const ConsistencyBounds& b, size_t from, size_t to,
+                   std::vector<uint8_t>* full) {
+  const size_t n = to - from;
+  full->assign(n, 1);
+  uint8_t* f = full->data();
+  for (int a = 0; a < 6; ++a) {
+    const float* x = c.v[a].data() + from;
+    const float lo = b.lo[a], hi = b.hi[a];
+    for (size_t j = 0; j < n; ++j) f[j] &= static_cast<uint8_t>((x[j] >= lo) & (x[j] <= hi));
+  }
+}
+
+}  // namespace
+
 VertexSupport accumulateSupport(const std::vector<MatchTriangle>& tq,
                                 const std::vector<MatchTriangle>& tc, size_t nq, size_t nc,
                                 const MatcherParams& params, size_t* triangle_pairs,
@@ -388,6 +426,15 @@ VertexSupport accumulateSupport(const std::vector<MatchTriangle>& tq,
     if (sup.strong[k] == 0 && sup.weak[k] == 0) sup.touched.push_back(static_cast<uint32_t>(k));
     if (m[k] < 65535) ++m[k];
   };
+  struct Scratch {
+    TriangleColumns cols;
+    std::vector<uint8_t> full;
+  };
+  thread_local Scratch scratch;  // one TLS lookup per call, not one per use
+  TriangleColumns& cols = scratch.cols;
+  std::vector<uint8_t>& full = scratch.full;
+  cols.assign(tc);
+  const std::vector<float>& len0 = cols.v[0];
   const double rel = params.edge_rel_tol, abs_tol = params.edge_abs_tol_m;
   for (size_t i = 0; i < tq.size(); ++i) {
     const MatchTriangle& mq = tq[i];
@@ -400,18 +447,19 @@ VertexSupport accumulateSupport(const std::vector<MatchTriangle>& tq,
     const double l = q.len[0];
     const double lo = std::min(l - abs_tol, l * (1.0 - rel));
     const double hi = std::max(l + abs_tol, l / (1.0 - rel));
-    auto first = std::lower_bound(tc.begin(), tc.end(), lo,
-                                  [](const MatchTriangle& t, double v) { return t.t.len[0] < v; });
-    for (auto it = first; it != tc.end() && it->t.len[0] <= hi; ++it) {
-      const Triangle& c = it->t;
-      ++*triangle_pairs;
-      const bool faces = mq.delaunay && it->delaunay;
-      // Eq. (3.4): chi_a per canonical edge; only a pair of faces needs the partial mask.
-      const int mask = b.exact ? boundsMask(b, c, faces)
-                       : faces ? edgeMask(q, c, params)
-                               : fullyConsistent(q, c, params) * 7;
+    const size_t from = static_cast<size_t>(
+        std::lower_bound(len0.begin(), len0.end(), lo, [](float x, double v) { return x < v; }) -
+        len0.begin());
+    const size_t to = static_cast<size_t>(
+        std::upper_bound(len0.begin() + static_cast<std::ptrdiff_t>(from), len0.end(), hi,
+                         [](double v, float x) { return v < x; }) -
+        len0.begin());
+    *triangle_pairs += to - from;
+    // Eq. (3.4): chi_a per canonical edge; only a pair of faces needs the partial mask.
+    const auto support = [&](size_t j, int mask, bool faces) {
+      const Triangle& c = tc[j].t;
       if (mask == 7) {
-        for (int b = 0; b < 3; ++b) bump(sup.strong, q.v[b], c.v[b]);  // Eq. (3.6)
+        for (int a = 0; a < 3; ++a) bump(sup.strong, q.v[a], c.v[a]);  // Eq. (3.6)
       } else if (mask != 0 && faces) {
         // Neighbour triangles share their edges many times over: their partial matches would
         // pile up weak support on every edge; only Delaunay faces give weak support (Eq. 3.7).
@@ -421,6 +469,17 @@ VertexSupport accumulateSupport(const std::vector<MatchTriangle>& tq,
           bump(sup.weak, q.v[kEdgeEnds[a][1]], c.v[kEdgeEnds[a][1]]);
         }
       }
+    };
+    if (b.exact) fullyInBounds(cols, b, from, to, &full);
+    for (size_t j = from; j < to; ++j) {
+      const Triangle& c = tc[j].t;
+      const bool faces = mq.delaunay && tc[j].delaunay;
+      support(j,
+              !b.exact ? (faces ? edgeMask(q, c, params) : fullyConsistent(q, c, params) * 7)
+              : full[j - from] ? 7
+              : faces          ? boundsMask(b, c, true)
+                               : 0,
+              faces);
     }
   }
   return sup;
@@ -433,11 +492,21 @@ std::vector<Correspondence> weightedCorrespondences(const VertexSupport& support
   // (omega, flat index) of the supported pairs; only the kept ones become Correspondences.
   std::vector<std::pair<double, uint32_t>> weighted;
   weighted.reserve(support.touched.size());
+  // log1p of the small counts, computed once: the same values, without a libm call per pair.
+  static const std::array<double, 256> kLog1p = [] {
+    std::array<double, 256> t{};
+    for (size_t n = 0; n < t.size(); ++n) t[n] = std::log1p(static_cast<double>(n));
+    return t;
+  }();
+  const auto log1p = [](int n) {
+    return n < static_cast<int>(kLog1p.size()) ? kLog1p[static_cast<size_t>(n)]
+                                               : std::log1p(static_cast<double>(n));
+  };
   for (uint32_t k : support.touched) {
     const int s = support.strong[k], w = support.weak[k];
     if (!(s > 0 || w > params.weak_support_min)) continue;  // Eq. (3.8)
     // Eq. (3.9)
-    weighted.emplace_back(1.0 + params.alpha_s * std::log1p(s) + params.alpha_w * std::log1p(w), k);
+    weighted.emplace_back(1.0 + params.alpha_s * log1p(s) + params.alpha_w * log1p(w), k);
   }
   // Eq. (3.10), heaviest first; ties by index (the flat index orders by query, then candidate
   // trunk) so the order is total and deterministic (the heaviest K sorted are then the first K
