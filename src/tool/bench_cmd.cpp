@@ -289,7 +289,8 @@ void benchSpeed(const BenchArgs& a, const std::filesystem::path& dir, std::ostre
   o.before_probe = a.before_probe;
   o.sizes = a.speed_sizes;
   o.every = a.speed_every;
-  std::ofstream(dir / "speed.md") << appendSpeed(md, dir, a.datasets, o);
+  const std::string section = appendSpeed(md, dir, a.datasets, o);
+  std::ofstream(dir / "speed.md") << section;
 }
 
 int runBench(const BenchArgs& a) {

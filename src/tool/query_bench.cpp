@@ -30,6 +30,7 @@
 #include <memory>
 #include <numeric>
 #include <random>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -197,6 +198,7 @@ int scale(const std::string& db, const std::vector<size_t>& sizes) {
   dtif::LoopDetector file(params.loop);
   file.load(db);
   const std::vector<DescPtr>& real = file.entries();
+  if (real.empty()) throw std::runtime_error(db + ": no entries to scale from");
   std::vector<DescPtr> queries;  // 24 real entries spread over the file
   const size_t step = std::max<size_t>(1, real.size() / 24);
   for (size_t i = step / 2; i < real.size(); i += step) queries.push_back(real[i]);

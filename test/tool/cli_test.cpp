@@ -243,6 +243,45 @@ TEST(CliTest, BenchRunsTheBackEndsGiven) {
   fs::remove_all(dir);
 }
 
+/// Lines of a CSV file that start with prefix.
+size_t countLines(const std::filesystem::path& path, const std::string& prefix) {
+  std::stringstream ss(readText(path));
+  size_t n = 0;
+  for (std::string line; std::getline(ss, line);) n += line.rfind(prefix, 0) == 0;
+  return n;
+}
+
+/// bench --speed-only with this build's probe as the "before" build too: both builds measure
+/// every submap, the protocol's queries and each database size, and the loops they find are
+/// the same; a probe that fails stops the bench with its name.
+TEST(CliTest, BenchSpeedMeasuresBothBuilds) {
+  namespace fs = std::filesystem;
+  const fs::path dir = test::freshTempDir("dtif_cli_test_speed");
+  ToolRun r = runTool("simulate " + std::string(DTIF_SCENES_DIR) + "/tiny.yaml --out " +
+                      (dir / "ds").string() + " --quiet");
+  ASSERT_EQ(r.status, 0) << r.out;
+  const std::string probe = (fs::path(DTIF_TOOL).parent_path() / "dtif_query_bench").string();
+  r = runTool("bench " + (dir / "ds").string() + " --out " + (dir / "out").string() +
+              " --speed-only --speed-sizes 50,100 --before-probe " + probe);
+  ASSERT_EQ(r.status, 0) << r.out;
+  const size_t submaps = countLines(dir / "ds" / "submaps.csv", "") - 1;
+  EXPECT_EQ(countLines(dir / "out" / "speed_describe.csv", "after,"), submaps);
+  EXPECT_EQ(countLines(dir / "out" / "speed_describe.csv", "before,"), submaps);
+  EXPECT_EQ(countLines(dir / "out" / "speed_scale.csv", "after,50,"), 1u);
+  EXPECT_EQ(countLines(dir / "out" / "speed_scale.csv", "before,100,"), 1u);
+  const std::string md = readText(dir / "out" / "speed.md");
+  EXPECT_NE(md.find("Loops found: identical"), std::string::npos) << md;
+  EXPECT_GT(countLines(dir / "out" / "speed_loops_after.txt", "loop "), 0u);
+  EXPECT_EQ(readText(dir / "out" / "speed_loops_after.txt"),
+            readText(dir / "out" / "speed_loops_before.txt"));
+
+  r = runTool("bench " + (dir / "ds").string() + " --out " + (dir / "bad").string() +
+              " --speed-only --speed-sizes 50 --before-probe /bin/false");
+  EXPECT_EQ(r.status, 1) << r.out;
+  EXPECT_NE(r.out.find("/bin/false"), std::string::npos) << r.out;
+  fs::remove_all(dir);
+}
+
 /// A tiny survey whose robots' odometry frames are tilted 9 and 13 deg (upstream FAST-LIO2):
 /// eval levels each robot's submaps (on by default), reports the levelling error per robot,
 /// and scores the loops in the tilted frames: every accepted loop is a true positive.
