@@ -2,6 +2,8 @@
 // 2) and still reads version-1 files, whose entries come back with an unknown odometry pose.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <array>
 #include <cstring>
 #include <fstream>
 #include <memory>
@@ -10,6 +12,7 @@
 
 #include "core/loop_test_utils.h"
 #include "dtif/core/database/loop_detector.h"
+#include "dtif/core/matching/matcher.h"
 
 namespace dtif {
 namespace {
@@ -97,11 +100,13 @@ TEST(DatabaseOdometry, BadOdometryRecordIsRejectedAndLeavesDbUnchanged) {
   db.save(path);
   std::vector<char> c = readBytes(path);
   std::vector<uint8_t> b(c.begin(), c.end());
-  // The last odometry value (quaternion w = 1, before the loop count 0) becomes 3: not a
-  // rotation. Re-checksummed, so only the record's own check can refuse it.
+  // The last odometry value (quaternion w = 1, before the entry's match triangles and the
+  // loop count 0) becomes 3: not a rotation. Re-checksummed, so only the record's own check can
+  // refuse it.
   b.resize(b.size() - 4);
   const double three = 3.0;
-  std::memcpy(b.data() + b.size() - 8 - 8, &three, 8);
+  const size_t triangles = 4 + 7 * db.matchTrianglesOf(0).size();
+  std::memcpy(b.data() + b.size() - 8 - triangles - 8, &three, 8);
   put<uint32_t>(&b, fnv1a(b));
   writeBytes(path, b);
   LoopDetector target{LoopDetectorParams{}};
@@ -139,6 +144,106 @@ TEST(DatabaseOdometry, VersionOneFileLoadsWithUnknownOdometry) {
   }
   // The loaded entries still answer queries.
   EXPECT_TRUE(db.query(cases[1].q).has_value());
+}
+
+/// Exactly equal triangles, in order.
+void expectSameTriangles(const std::vector<MatchTriangle>& a, const std::vector<MatchTriangle>& b) {
+  ASSERT_EQ(a.size(), b.size());
+  for (size_t i = 0; i < a.size(); ++i) {
+    EXPECT_EQ(a[i].t.v, b[i].t.v) << i;
+    EXPECT_EQ(a[i].t.len, b[i].t.len) << i;
+    EXPECT_EQ(a[i].t.r, b[i].t.r) << i;
+    EXPECT_EQ(a[i].delaunay, b[i].delaunay) << i;
+  }
+}
+
+// A version-2 file (no match triangles) loads, and its entries' match triangles are computed.
+TEST(DatabaseOdometry, VersionTwoFileLoadsAndComputesMatchTriangles) {
+  const std::vector<PairCase> cases = overlappingPairs(2, 7);
+  std::vector<uint8_t> b = {'D', 'T', 'I', 'F', 'D', 'B', 0, 0};
+  put<uint32_t>(&b, 2);
+  put<uint64_t>(&b, cases.size());
+  for (const PairCase& pc : cases) {
+    const std::vector<uint8_t> e = encodeDescriptor(pc.c);
+    put<uint32_t>(&b, static_cast<uint32_t>(e.size()));
+    b.insert(b.end(), e.begin(), e.end());
+    put<uint16_t>(&b, 0);  // odometry frame: unknown
+    for (double v : {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0}) put<double>(&b, v);
+  }
+  put<uint64_t>(&b, 0);  // loops
+  put<uint32_t>(&b, fnv1a(b));
+  const std::string path = ::testing::TempDir() + "/dtif_db_v2.bin";
+  writeBytes(path, b);
+  const LoopDetectorParams p;
+  LoopDetector db(p);
+  db.load(path);
+  ASSERT_EQ(db.size(), cases.size());
+  for (size_t i = 0; i < db.size(); ++i) {
+    expectSameTriangles(db.matchTrianglesOf(i),
+                        matchTriangles(*db.entries()[i], p.matcher.neighbour_triangles));
+  }
+  EXPECT_TRUE(db.query(cases[1].q).has_value());
+}
+
+// A version-3 file holds each entry's match triangles: a load reads them (a bad one is
+// refused, naming the entry), with the saving detector's trunk triples; a detector whose
+// matcher takes another number of neighbours computes its own instead.
+TEST(DatabaseOdometry, SavedMatchTrianglesAreReadBack) {
+  const std::vector<PairCase> cases = overlappingPairs(3, 8);
+  const LoopDetectorParams p;
+  LoopDetector live(p);
+  for (const PairCase& pc : cases) ASSERT_TRUE(live.insert(std::make_shared<Descriptor>(pc.c)));
+  const std::string path = ::testing::TempDir() + "/dtif_db_v3.bin";
+  live.save(path);
+  LoopDetector loaded(p);
+  loaded.load(path);
+  ASSERT_EQ(loaded.size(), live.size());
+  size_t triangles = 0;
+  for (size_t i = 0; i < live.size(); ++i) {
+    const auto sorted = [](const std::vector<MatchTriangle>& t) {
+      std::vector<std::array<int, 4>> v;
+      for (const MatchTriangle& m : t) {
+        std::array<int, 4> k{m.t.v[0], m.t.v[1], m.t.v[2], m.delaunay};
+        std::sort(k.begin(), k.begin() + 3);
+        v.push_back(k);
+      }
+      std::sort(v.begin(), v.end());
+      return v;
+    };
+    EXPECT_EQ(sorted(loaded.matchTrianglesOf(i)), sorted(live.matchTrianglesOf(i))) << i;
+    const auto& t = loaded.matchTrianglesOf(i);
+    for (size_t j = 1; j < t.size(); ++j) EXPECT_LE(t[j - 1].t.len[0], t[j].t.len[0]);
+    triangles += t.size();
+  }
+  EXPECT_GT(triangles, 0u);
+
+  LoopDetectorParams two = p;
+  two.matcher.neighbour_triangles = 2;
+  LoopDetector other(two);
+  other.load(path);
+  for (size_t i = 0; i < other.size(); ++i) {
+    expectSameTriangles(other.matchTrianglesOf(i), matchTriangles(*other.entries()[i], 2));
+  }
+
+  // The last entry's first triangle names a trunk the entry does not have.
+  std::vector<char> c = readBytes(path);
+  std::vector<uint8_t> b(c.begin(), c.end());
+  b.resize(b.size() - 4);
+  const size_t first = b.size() - 8 - 7 * live.matchTrianglesOf(live.size() - 1).size();
+  const uint16_t beyond = static_cast<uint16_t>(live.entries().back()->trunks.size());
+  std::memcpy(b.data() + first, &beyond, 2);
+  put<uint32_t>(&b, fnv1a(b));
+  writeBytes(path, b);
+  LoopDetector target(p);
+  try {
+    target.load(path);
+    ADD_FAILURE() << "a triangle with a trunk out of range was accepted";
+  } catch (const std::runtime_error& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("entry " + std::to_string(live.size() - 1)), std::string::npos) << what;
+    EXPECT_NE(what.find("match triangle out of range"), std::string::npos) << what;
+  }
+  EXPECT_EQ(target.size(), 0u);
 }
 
 }  // namespace

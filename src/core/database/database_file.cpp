@@ -16,9 +16,11 @@ namespace dtif {
 namespace {
 
 constexpr char kDbMagic[8] = {'D', 'T', 'I', 'F', 'D', 'B', '\0', '\0'};
-// Version 2 adds each entry's odometry pose and frame and the accepted loops; version 1 files
-// still load.
-constexpr uint32_t kDbVersion = 2;
+// Version 2 adds each entry's odometry pose and frame and the accepted loops; version 3 each
+// entry's match triangles (a load then need not compute them again); versions 1 and 2 still
+// load.
+constexpr uint32_t kDbVersion = 3;
+constexpr uint32_t kDbVersionNoTriangles = 2;
 constexpr uint32_t kDbVersionNoOdometry = 1;
 
 constexpr size_t kEntryHeaderBytes = 4;
@@ -49,6 +51,44 @@ EntryOdometry getOdometry(detail::ByteReader& r) {
   o.T_O_S.linear() = q.normalized().toRotationMatrix();
   o.T_O_S.translation() = Eigen::Vector3d(v[0], v[1], v[2]);
   return o;
+}
+
+// A count, then per triangle its three trunk indices (u16) and whether it is a Delaunay face
+// (u8), in matchTriangles' order.
+void putTriangles(detail::ByteWriter& w, const std::vector<MatchTriangle>& t) {
+  w.put<uint32_t>(static_cast<uint32_t>(t.size()));
+  for (const MatchTriangle& m : t) {
+    for (int v : m.t.v) w.put<uint16_t>(static_cast<uint16_t>(v));
+    w.put<uint8_t>(m.delaunay ? 1 : 0);
+  }
+}
+
+// The triangles again from their trunks as the file holds them (trunk positions are stored as
+// floats, like the descriptor's Delaunay faces: values within float rounding of the saving
+// detector's), checked (trunk indices in range and distinct, a valid flag) and sorted by
+// longest edge again, as matching requires (a stable sort: float rounding can swap two
+// near-equal neighbours, nothing else).
+std::vector<MatchTriangle> getTriangles(detail::ByteReader& r, const Descriptor& d) {
+  constexpr size_t kTriangleBytes = 3 * 2 + 1;
+  const uint32_t n = r.get<uint32_t>();
+  if (n > r.remaining() / kTriangleBytes) throw std::runtime_error("triangle count exceeds file");
+  std::vector<MatchTriangle> out(n);
+  const int trunks = static_cast<int>(d.trunks.size());
+  for (MatchTriangle& m : out) {
+    int v[3];
+    for (int& x : v) x = r.get<uint16_t>();
+    const uint8_t face = r.get<uint8_t>();
+    if (v[0] >= trunks || v[1] >= trunks || v[2] >= trunks || v[0] == v[1] || v[1] == v[2] ||
+        v[0] == v[2] || face > 1) {
+      throw std::runtime_error("match triangle out of range");
+    }
+    m.t = makeCanonicalTriangle(d.trunks, v[0], v[1], v[2]);
+    m.delaunay = face == 1;
+  }
+  std::stable_sort(out.begin(), out.end(), [](const MatchTriangle& a, const MatchTriangle& b) {
+    return a.t.len[0] < b.t.len[0];
+  });
+  return out;
 }
 
 // Robots, ids, T_c_q (translation, quaternion x y z w), covariance, inliers, score.
@@ -92,6 +132,7 @@ DatabaseContents readContents(detail::ByteReader& r, uint32_t version) {
   std::set<std::pair<std::string, int64_t>> keys;
   // The loosest params: keep each descriptor's saved validity.
   const DescriptorParams loose = loosestDescriptorParams();
+  if (version >= kDbVersion) c.triangles_k = r.get<int32_t>();
   for (uint64_t i = 0; i < n; ++i) {
     const uint32_t sz = r.get<uint32_t>();
     if (r.remaining() < sz) throw std::runtime_error("entry truncated");
@@ -104,10 +145,17 @@ DatabaseContents readContents(detail::ByteReader& r, uint32_t version) {
       throw std::runtime_error(entry + " repeats robot '" + d->robot + "' submap " +
                                std::to_string(d->submap_id));
     }
+    c.odometry.push_back(version >= kDbVersionNoTriangles ? getOdometry(r) : EntryOdometry{});
+    if (version >= kDbVersion) {
+      try {
+        c.triangles.push_back(getTriangles(r, *d));
+      } catch (const std::runtime_error& e) {
+        throw std::runtime_error(entry + ": " + e.what());
+      }
+    }
     c.entries.push_back(std::move(d));
-    c.odometry.push_back(version >= kDbVersion ? getOdometry(r) : EntryOdometry{});
   }
-  if (version >= kDbVersion) {
+  if (version >= kDbVersionNoTriangles) {
     const uint64_t m = r.get<uint64_t>();
     // A loop takes far more than its two length fields: bounded by the bytes left.
     if (m > r.remaining() / 8) throw std::runtime_error("loop count exceeds file");
@@ -119,19 +167,22 @@ DatabaseContents readContents(detail::ByteReader& r, uint32_t version) {
 
 }  // namespace
 
-// File layout: 8-byte magic, u32 version, u64 entry count, entries (u32 size + encoded
-// descriptor + odometry record), u64 loop count, loops, u32 FNV-1a of everything before it.
-// Version 1 files have neither odometry records nor loops.
+// File layout: 8-byte magic, u32 version, u64 entry count, i32 neighbour_triangles of the
+// match triangles, entries (u32 size + encoded descriptor + odometry record + match
+// triangles), u64 loop count, loops, u32 FNV-1a of everything before it. Version 2 files have
+// no match triangles (nor their k), version 1 files neither odometry records nor loops.
 void LoopDetector::save(const std::string& path) const {
   detail::ByteWriter w;
   w.bytes.assign(kDbMagic, kDbMagic + 8);
   w.put<uint32_t>(kDbVersion);
   w.put<uint64_t>(entries_.size());
+  w.put<int32_t>(params_.matcher.neighbour_triangles);
   for (size_t i = 0; i < entries_.size(); ++i) {
     const std::vector<uint8_t> e = encodeDescriptor(*entries_[i]);
     w.put<uint32_t>(static_cast<uint32_t>(e.size()));
     w.putBytes(e);
     putOdometry(w, odometry_[i]);
+    putTriangles(w, triangles_[i]);
   }
   w.put<uint64_t>(loops_.size());
   for (const Loop& l : loops_) putLoop(w, l);
@@ -152,9 +203,9 @@ DatabaseContents readDatabaseFile(const std::string& path) {
   // The body: everything between the magic and the checksum.
   detail::ByteReader r(buf.data() + 8, buf.size() - 8 - 4, "truncated");
   const uint32_t version = r.get<uint32_t>();
-  if (version != kDbVersion && version != kDbVersionNoOdometry) {
+  if (version < kDbVersionNoOdometry || version > kDbVersion) {
     fail("version " + std::to_string(version) + ", expected " +
-         std::to_string(kDbVersionNoOdometry) + " or " + std::to_string(kDbVersion));
+         std::to_string(kDbVersionNoOdometry) + " to " + std::to_string(kDbVersion));
   }
   uint32_t stored_sum;
   std::memcpy(&stored_sum, buf.data() + buf.size() - 4, 4);
@@ -173,7 +224,10 @@ void LoopDetector::replaceContents(DatabaseContents contents) {
   entries_ = std::move(contents.entries);
   odometry_ = std::move(contents.odometry);
   loops_ = std::move(contents.loops);
-  rebuildIndex();
+  // Saved match triangles only when they are what this detector's matcher computes.
+  const bool saved = contents.triangles.size() == entries_.size() &&
+                     contents.triangles_k == params_.matcher.neighbour_triangles;
+  rebuildIndex(saved ? &contents.triangles : nullptr);
 }
 
 }  // namespace dtif

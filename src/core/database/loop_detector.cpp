@@ -252,7 +252,7 @@ bool LoopDetector::insert(std::shared_ptr<const Descriptor> d, const EntryOdomet
   return true;
 }
 
-void LoopDetector::indexEntry(const Descriptor& d) {
+void LoopDetector::indexEntry(const Descriptor& d, std::vector<MatchTriangle>* triangles) {
   ScreenRow row;
   const auto it = robot_ids_.emplace(d.robot, static_cast<uint32_t>(robots_.size())).first;
   if (it->second == robots_.size()) robots_.push_back(d.robot);
@@ -265,18 +265,20 @@ void LoopDetector::indexEntry(const Descriptor& d) {
   row.stamp = d.stamp;
   row.submap_id = d.submap_id;
   screen_.push_back(row);
-  triangles_.push_back(matchTriangles(d, params_.matcher.neighbour_triangles));
+  triangles_.push_back(triangles ? std::move(*triangles)
+                                 : matchTriangles(d, params_.matcher.neighbour_triangles));
   triangles_.back().shrink_to_fit();  // held for the database's lifetime
 }
 
-void LoopDetector::rebuildIndex() {
+void LoopDetector::rebuildIndex(std::vector<std::vector<MatchTriangle>>* saved) {
   screen_.clear();
   hists_.clear();
   robots_.clear();
   robot_ids_.clear();
   triangles_.clear();
   triangles_.reserve(entries_.size());
-  for (const auto& d : entries_) indexEntry(*d);
+  for (size_t i = 0; i < entries_.size(); ++i)
+    indexEntry(*entries_[i], saved ? &(*saved)[i] : nullptr);
 }
 
 size_t LoopDetector::memoryBytes() const {

@@ -231,6 +231,10 @@ std::vector<MatchTriangle> matchTriangles(const Descriptor& d, int k) {
   // (More trunks than a key holds: far beyond kMaxDescriptorTrunks, never a valid descriptor.)
   if (k <= 0 || d.trunks.size() < 3 || d.trunks.size() >= static_cast<size_t>(kMaxKeyTrunks)) {
     for (const Triangle& t : d.triangles) out.push_back({t, true});
+    // Sorted by longest edge like the general case: matching searches them by it.
+    std::stable_sort(out.begin(), out.end(), [](const MatchTriangle& a, const MatchTriangle& b) {
+      return a.t.len[0] < b.t.len[0];
+    });
     return out;
   }
   const int n = static_cast<int>(d.trunks.size());

@@ -117,6 +117,10 @@ struct DatabaseContents {
   std::vector<std::shared_ptr<const Descriptor>> entries;
   std::vector<EntryOdometry> odometry;
   std::vector<Loop> loops;
+  /// Each entry's matchTriangles as saved (version 3 files), computed with neighbour_triangles
+  /// = triangles_k; empty, or saved with another k: computed again when the contents enter.
+  std::vector<std::vector<MatchTriangle>> triangles;
+  int triangles_k = -1;
 };
 
 /// The contents of a database file (LoopDetector::save's format), read without any lock held:
@@ -148,6 +152,9 @@ class LoopDetector {
   /// triangles, histograms) and their match triangles; the same built live or loaded.
   size_t memoryBytes() const;
   const std::vector<std::shared_ptr<const Descriptor>>& entries() const { return entries_; }
+  /// The match triangles of entries()[i] (matchTriangles with the matcher's
+  /// neighbour_triangles), computed when it entered or read from the file it was loaded from.
+  const std::vector<MatchTriangle>& matchTrianglesOf(size_t i) const { return triangles_.at(i); }
   /// The odometry pose of entries()[i], as inserted or loaded.
   const EntryOdometry& odometry(size_t i) const { return odometry_.at(i); }
   /// Keeps an accepted loop between entries, saved with the database (trunk pairs are not), so
@@ -161,7 +168,8 @@ class LoopDetector {
 
   /// Writes the database to path atomically (temporary file, then rename). Throws on failure.
   void save(const std::string& path) const;
-  /// Replaces the database by the file's content (version 1 files: odometry unknown, no loops).
+  /// Replaces the database by the file's content (version 1 files: odometry unknown, no loops;
+  /// version 1 and 2 files: match triangles computed).
   /// Throws
   /// std::runtime_error (naming the file and the problem) on a missing, corrupt or
   /// version-mismatched file; then nothing changes.
@@ -195,8 +203,10 @@ class LoopDetector {
   std::vector<float> hists_;
   std::vector<std::string> robots_;
   std::unordered_map<std::string, uint32_t> robot_ids_;  ///< robots_ by name
-  void indexEntry(const Descriptor& d);
-  void rebuildIndex();
+  /// Indexes d; its match triangles are `triangles` when given, else computed.
+  void indexEntry(const Descriptor& d, std::vector<MatchTriangle>* triangles = nullptr);
+  /// The index of entries_, with saved match triangles (one per entry) when given.
+  void rebuildIndex(std::vector<std::vector<MatchTriangle>>* saved = nullptr);
 };
 
 /// Indices of db's entries in (stamp, robot) order, ties in database order: the order in which
