@@ -25,6 +25,13 @@ TEST(FactorCost, AChainCostsNextToNothingAndACliqueItsCube) {
   EXPECT_EQ(choleskyMultiplies(0, {}), 0.0);
 }
 
+// A map's first submap, or submaps joined by nothing yet: a diagonal factor, no work, and no
+// error (AMD refuses a pattern without entries).
+TEST(FactorCost, NodesWithoutEdgesCostNothing) {
+  EXPECT_EQ(choleskyMultiplies(1, {}), 0.0);
+  EXPECT_EQ(choleskyMultiplies(5, {{2, 2}}), 0.0);
+}
+
 TEST(FactorCost, SelfLoopsRepeatsAndOutOfRangeEdgesAreIgnored) {
   const Edges e{{0, 1}, {1, 0}, {1, 1}, {1, 2}, {2, 7}};
   EXPECT_EQ(choleskyMultiplies(3, e), choleskyMultiplies(3, {{0, 1}, {1, 2}}));

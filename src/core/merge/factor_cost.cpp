@@ -23,10 +23,13 @@ double choleskyMultiplies(size_t nodes, const std::vector<std::pair<size_t, size
     Ai.insert(Ai.end(), columns[j].begin(), columns[j].end());
     Ap[j + 1] = static_cast<int>(Ai.size());
   }
+  // No off-diagonal entry: the factor is the diagonal itself. (amd_order refuses a null Ai as
+  // an invalid matrix, and a map's first submaps have no edge yet.)
+  if (Ai.empty()) return 0.0;
   std::vector<int> order(nodes);
   double info[AMD_INFO];
-  const int status = amd_order(static_cast<int>(nodes), Ap.data(), Ai.empty() ? nullptr : Ai.data(),
-                               order.data(), nullptr, info);
+  const int status =
+      amd_order(static_cast<int>(nodes), Ap.data(), Ai.data(), order.data(), nullptr, info);
   if (status != AMD_OK) {
     throw std::runtime_error("choleskyMultiplies: AMD ordering failed (status " +
                              std::to_string(status) + ")");

@@ -11,7 +11,7 @@ namespace dtif {
 /// Multiply-subtract pairs of an LDL' factorisation of a graph's node-level pattern (one
 /// scalar per node, an edge per off-diagonal pair) under approximate minimum degree ordering:
 /// SuiteSparse AMD's own estimate, the ordering Ceres's sparse Cholesky uses. Self-loops and
-/// repeated edges are ignored; returns 0 for an empty graph.
+/// repeated edges are ignored; returns 0 for a graph without edges.
 double choleskyMultiplies(size_t nodes, const std::vector<std::pair<size_t, size_t>>& edges);
 
 }  // namespace dtif
