@@ -8,7 +8,9 @@
 //  - descriptors and loop closures carry robot-qualified frames (<robot>/camera_init);
 //  - TF links the odometry frames of every pair of robots that has an inter-robot loop, within
 //    tolerance of ground truth, and each unit's body frame is published;
-//  - every loop closure is a true positive of the evaluation protocol.
+//  - every loop closure is a true positive of the evaluation protocol;
+//  - each robot's submaps are levelled to within 1.5 deg of gravity (~scene_append may tilt the
+//    units' camera_init, as upstream FAST-LIO2 leaves it).
 #include <gtest/gtest.h>
 #include <ros/ros.h>
 #include <rosgraph_msgs/Log.h>
@@ -16,6 +18,7 @@
 #include <tf2_ros/transform_listener.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -71,6 +74,9 @@ TEST(FleetBagsRostest, StockUnitsGetQualifiedFramesAndTfBetweenRobots) {
   // The scene (config/scenes/<scene>.yaml) and its robots, as the .test file launches them.
   std::string scene = "tiny";
   pnh.getParam("scene", scene);
+  // Extra scene sections, e.g. FAST-LIO2's tilted camera_init (`fastlio:`).
+  std::string scene_append;
+  pnh.getParam("scene_append", scene_append);
   std::vector<std::string> robots;
   ASSERT_TRUE(pnh.getParam("robots", robots));
   ASSERT_GE(robots.size(), 2u);
@@ -92,7 +98,8 @@ TEST(FleetBagsRostest, StockUnitsGetQualifiedFramesAndTfBetweenRobots) {
   // The scene as a dataset and a bag per unit, generated here (a few seconds).
   const fs::path dir = test::scratchDir("fleet_bags_rostest");
   ASSERT_EQ(test::simulateScene(scene, dir,
-                                "--bag " + (dir / "unit.bag").string() + " --bag-layout fastlio"),
+                                "--bag " + (dir / "unit.bag").string() + " --bag-layout fastlio",
+                                scene_append),
             "");
   const Dataset ds = readDataset((dir / "dataset").string());
   ASSERT_FALSE(ds.T_W_S.empty());
@@ -162,6 +169,22 @@ TEST(FleetBagsRostest, StockUnitsGetQualifiedFramesAndTfBetweenRobots) {
     position[{d->robot, d->submap_id}] = i;
   }
   EXPECT_EQ(position.size(), ds.submaps.size());
+
+  // Levelling: each robot's last descriptor was extracted in a frame whose z is gravity's up,
+  // whatever its camera_init's tilt (the levelling error of `dtif eval` on these submaps).
+  std::map<std::string, boost::shared_ptr<const dtif::TrunkDescriptor>> last;
+  for (const auto& d : descriptors.all()) last[d->robot] = d;
+  for (const auto& [robot, d] : last) {
+    const auto& q = d->level_rotation;
+    const Eigen::Quaterniond R_L_S(q.w, q.x, q.y, q.z);
+    const Pose& T_W_S = ds.T_W_S.at(ds.submaps[position.at({robot, d->submap_id})].id);
+    const Eigen::Vector3d up_L =
+        R_L_S.normalized() * (T_W_S.linear().transpose() * Eigen::Vector3d::UnitZ());
+    const double err_deg = std::acos(std::clamp(up_L.z(), -1.0, 1.0)) * 180.0 / M_PI;
+    std::cout << robot << ": levelled " << Eigen::AngleAxisd(R_L_S).angle() * 180.0 / M_PI
+              << " deg, " << err_deg << " deg from gravity\n";
+    EXPECT_LE(err_deg, 1.5) << robot;
+  }
 
   // Loops: true positives; the latest inter-robot loop of each pair of robots.
   std::map<std::pair<std::string, std::string>, boost::shared_ptr<const dtif::LoopClosure>> latest;

@@ -7,6 +7,7 @@
 
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <functional>
 #include <mutex>
 #include <string>
@@ -28,11 +29,21 @@ inline std::filesystem::path scratchDir(const std::string& name) {
 
 /// `dtif simulate` of a built-in scene (seed 1) into dir/dataset, with `args` (the bag options),
 /// its output in dir/simulate.log. Returns the command when it fails, else "".
+/// `append` (YAML sections, e.g. a `fastlio:` section) is added to the scene file first.
 inline std::string simulateScene(const std::string& scene, const std::filesystem::path& dir,
-                                 const std::string& args) {
-  const std::string cmd = std::string(DTIF_TOOL) + " simulate " + DTIF_SCENES_DIR + "/" + scene +
-                          ".yaml --out " + (dir / "dataset").string() + " --seed 1 " + args +
-                          " > " + (dir / "simulate.log").string() + " 2>&1";
+                                 const std::string& args, const std::string& append = "") {
+  std::string file = std::string(DTIF_SCENES_DIR) + "/" + scene + ".yaml";
+  if (!append.empty()) {
+    const std::string copy = (dir / (scene + ".yaml")).string();
+    std::ifstream in(file);
+    std::ofstream out(copy);
+    out << in.rdbuf() << "\n" << append << "\n";
+    if (!in || !out) return "cannot write " + copy;
+    file = copy;
+  }
+  const std::string cmd = std::string(DTIF_TOOL) + " simulate " + file + " --out " +
+                          (dir / "dataset").string() + " --seed 1 " + args + " > " +
+                          (dir / "simulate.log").string() + " 2>&1";
   return std::system(cmd.c_str()) == 0 ? "" : cmd;
 }
 
