@@ -181,6 +181,27 @@ TEST(StemInventory, TaperNeedsEnoughObservationsAboveBreastHeight) {
   EXPECT_EQ(taperFromObservations({{2.0, 0.03}}, p), 0.0);
 }
 
+TEST(StemInventory, ASecondFitOverlappingAWellSeenStemIsDropped) {
+  // A stem of r = 0.15 m seen by six submaps; submap 1 also fitted a 0.2 m circle 0.36 m away
+  // (a branch with part of the bark: its circle misses the stem's by 1 cm, so extraction kept
+  // both, and the two cannot share a tree). Twin stems 0.32 m apart, each seen by six submaps,
+  // and a thin stem 0.6 m from the first, seen once, are trees.
+  std::vector<StemObservation> obs;
+  for (int s = 0; s < 6; ++s) {
+    obs.push_back({s, 0, 0.0, 0.0, 0.0, 0.15, true});
+    obs.push_back({s, 0, 10.0, 0.0, 0.0, 0.15, true});
+    obs.push_back({s, 0, 10.32, 0.0, 0.0, 0.15, true});
+  }
+  obs.push_back({1, 0, 0.36, 0.0, 0.0, 0.2, true});
+  obs.push_back({2, 0, 0.0, 0.6, 0.0, 0.05, true});
+  StemFusionParams p;
+  const std::vector<MergedStem> stems = fuseStems(obs, p);
+  ASSERT_EQ(stems.size(), 4u);
+  for (const MergedStem& s : stems) EXPECT_NE(s.x, 0.36);
+  p.overlap_margin_m = -1.0;
+  EXPECT_EQ(fuseStems(obs, p).size(), 5u);
+}
+
 TEST(StemInventory, NewParametersAreValidated) {
   StemFusionParams p;
   EXPECT_EQ(p.validate(), "");
@@ -192,6 +213,9 @@ TEST(StemInventory, NewParametersAreValidated) {
   p = StemFusionParams{};
   p.taper_min_pairs = -1;
   EXPECT_NE(p.validate().find("taper_min_pairs"), std::string::npos);
+  p = StemFusionParams{};
+  p.overlap_margin_m = 2.0;
+  EXPECT_NE(p.validate().find("overlap_margin_m"), std::string::npos);
 }
 
 }  // namespace

@@ -315,6 +315,49 @@ MergedStem fuse(const std::vector<StemObservation>& obs, const Tree& t, double t
   return s;
 }
 
+// Drops the entries whose circle comes within overlap_margin_m of the circle of an entry seen
+// by at least twice as many submaps: two trunks cannot overlap, so the weaker one is a second
+// fit of the same stem (a branch or the root flare with part of the bark, which extraction keeps
+// beside the stem's own fit when their circles just miss each other).
+std::vector<MergedStem> dropOverlapping(std::vector<MergedStem> stems, const StemFusionParams& p) {
+  if (!(p.overlap_margin_m >= 0.0) || stems.empty()) return stems;
+  std::vector<size_t> order(stems.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+    return stems[a].observations > stems[b].observations;
+  });
+  double reach = 0.0;  // largest centre distance of two overlapping entries
+  for (const MergedStem& s : stems) reach = std::max(reach, s.dbh);
+  reach += p.overlap_margin_m;
+  auto cell = [&](double v) { return cellIndex(v / std::max(reach, 1e-3)); };
+  std::unordered_map<int64_t, std::vector<size_t>> kept_grid;
+  std::vector<char> keep(stems.size(), 1);
+  for (size_t i : order) {
+    const MergedStem& b = stems[i];
+    const int64_t gx = cell(b.x), gy = cell(b.y);
+    for (int64_t dx = -1; dx <= 1 && keep[i]; ++dx) {
+      for (int64_t dy = -1; dy <= 1 && keep[i]; ++dy) {
+        auto it = kept_grid.find(packCell(gx + dx, gy + dy));
+        if (it == kept_grid.end()) continue;
+        for (size_t k : it->second) {
+          const MergedStem& a = stems[k];
+          if (a.component != b.component || a.observations < 2 * b.observations) continue;
+          if (std::hypot(a.x - b.x, a.y - b.y) < 0.5 * (a.dbh + b.dbh) + p.overlap_margin_m) {
+            keep[i] = 0;
+            break;
+          }
+        }
+      }
+    }
+    if (keep[i]) kept_grid[packCell(gx, gy)].push_back(i);
+  }
+  std::vector<MergedStem> out;
+  for (size_t i = 0; i < stems.size(); ++i) {
+    if (keep[i]) out.push_back(stems[i]);
+  }
+  return out;
+}
+
 }  // namespace
 
 std::string StemFusionParams::validate() const {
@@ -328,6 +371,7 @@ std::string StemFusionParams::validate() const {
   if (!(terrain_radius_m >= 0 && terrain_radius_m <= 1000))
     e << "stems.terrain_radius_m must be in [0, 1000]; ";
   if (taper_min_pairs < 0) e << "stems.taper_min_pairs must be >= 0; ";
+  if (!(overlap_margin_m <= 1.0)) e << "stems.overlap_margin_m must be <= 1 (< 0: off); ";
   return e.str();
 }
 
@@ -354,6 +398,7 @@ std::vector<MergedStem> fuseStems(const std::vector<StemObservation>& observatio
   const double taper = taperFromObservations(taperPairs(observations, trees, params), params);
   std::vector<MergedStem> out;
   for (const Tree& t : trees) out.push_back(fuse(observations, t, taper, params));
+  out = dropOverlapping(std::move(out), params);
   std::stable_sort(out.begin(), out.end(), [](const MergedStem& a, const MergedStem& b) {
     if (a.component != b.component) return a.component < b.component;
     return a.x != b.x ? a.x < b.x : a.y < b.y;

@@ -29,6 +29,10 @@ struct StemFusionParams {
   /// estimated from the inventory itself: the radius change per metre of base offset within
   /// trees whose base was seen. Fewer such observations than this: no correction; 0: never.
   int taper_min_pairs = 30;
+  /// An entry whose circle comes within this of the circle of an entry seen by at least twice
+  /// as many submaps is dropped (two trunks cannot overlap: a second fit of the same stem);
+  /// < 0: never [m].
+  double overlap_margin_m = 0.1;
   std::string validate() const;
 
   template <class V>
@@ -41,6 +45,7 @@ struct StemFusionParams {
     v("max_base_offset_m", max_base_offset_m);
     v("terrain_radius_m", terrain_radius_m);
     v("taper_min_pairs", taper_min_pairs);
+    v("overlap_margin_m", overlap_margin_m);
   }
 };
 
