@@ -16,8 +16,9 @@ struct StemFusionParams {
   double radius_abs_tol_m =
       0.2;  ///< ... to join a cluster (loose: one submap's radius can be far off) [m]
   int min_observations = 1;  ///< fewer contributing submaps: dropped (false trunks)
-  /// Breast height is 1.3 m above the base an observation estimated: an observation whose base
-  /// lies within this of the tree's base fitted its circle at breast height [m].
+  /// Each observation fitted its circle 1.3 m above its own base estimate: one whose base lies
+  /// within this of the tree's fitted near breast height, so its centre counts for the tree's
+  /// position and its radius is the reference of the taper estimate [m].
   double base_tol_m = 1.0;
   /// Observations whose base is off the tree's by more are left out of the DBH and position
   /// (when others remain): their ground was a guess far from the stem [m].
