@@ -111,5 +111,112 @@ TEST(StemInventory, OneSubmapNeverContributesTwiceToATree) {
   EXPECT_EQ(fuseStems(obs, StemFusionParams{}).size(), 2u);
 }
 
+/// Trees on a 3 m grid on a 20 % slope with 1.2 cm of taper per metre and a 5 % lean along x,
+/// each seen by six submaps: two saw the base and fitted at breast height, four guessed a base
+/// 1.2-2.9 m too high (the ground by the stem hidden) and fitted there, where the stem is thinner
+/// and its centre has moved along the lean. Every fifth tree's base nobody saw.
+std::vector<StemObservation> observeOnSlope(std::vector<Tree>* trees) {
+  constexpr double kTaper = 0.012, kLean = 0.05;
+  const double offsets[] = {0.0, 0.0, 1.2, 1.8, 2.4, 2.9};
+  std::vector<StemObservation> obs;
+  for (int i = 0; i < 8; ++i) {
+    for (int k = 0; k < 6; ++k) {
+      const double x = 3.0 * i + 0.3 * (k % 2);
+      const Tree t{x, 3.0 * k, 0.2 * x, 0.08 + 0.02 * ((i + k) % 9)};
+      const bool base_hidden = trees->size() % 5 == 4;
+      for (int s = 0; s < 6; ++s) {
+        const double dz = base_hidden ? offsets[2 + s % 4] : offsets[s];
+        StemObservation o;
+        o.submap = s;
+        o.x = t.x + kLean * dz;
+        o.y = t.y;
+        o.z = t.z + dz;
+        o.r = t.r - kTaper * dz + 0.002 * ((s * 7 + i) % 3 - 1);  // +-2 mm of fit noise
+        o.base_seen = dz == 0.0;
+        obs.push_back(o);
+      }
+      trees->push_back(t);
+    }
+  }
+  return obs;
+}
+
+TEST(StemInventory, RadiiFittedAboveBreastHeightAreCorrectedByTheStandsTaper) {
+  std::vector<Tree> trees;
+  const std::vector<StemObservation> obs = observeOnSlope(&trees);
+  const std::vector<MergedStem> stems = fuseStems(obs, StemFusionParams{});
+  ASSERT_EQ(stems.size(), trees.size());
+  for (const Tree& t : trees) {
+    const MergedStem* s = nullptr;
+    for (const MergedStem& m : stems) {
+      if (std::hypot(m.x - t.x, m.y - t.y) < 0.5) s = &m;
+    }
+    ASSERT_NE(s, nullptr) << t.x << " " << t.y;
+    // The median of the raw radii would be 1.2 cm x 1.5-2.4 m too thin: 3.6-5.8 cm of DBH.
+    EXPECT_NEAR(s->dbh, 2.0 * t.r, 0.005) << t.x << " " << t.y;
+    // The base from the seen ones, or from the plane through the neighbours' (a 20 % slope,
+    // evaluated where the tree was fitted: 9 cm up the lean, 1.8 cm higher).
+    EXPECT_NEAR(s->z_base, t.z, 0.025) << t.x << " " << t.y;
+    // The centre at breast height, not moved up the lean by the guessed bases (where some
+    // observation fitted there).
+    const bool base_seen = (&t - trees.data()) % 5 != 4;
+    if (base_seen) EXPECT_NEAR(s->x, t.x, 0.02) << t.x << " " << t.y;
+    EXPECT_EQ(s->observations, 6);
+  }
+}
+
+TEST(StemInventory, TaperNeedsEnoughObservationsAboveBreastHeight) {
+  StemFusionParams p;
+  std::vector<TaperPair> pairs;
+  for (int i = 0; i < 29; ++i) pairs.push_back({1.5 + 0.05 * i, -0.01 * (1.5 + 0.05 * i)});
+  pairs.push_back({0.3, 0.05});                     // at breast height: not a taper pair
+  pairs.push_back({4.0, -0.2});                     // beyond max_base_offset_m
+  EXPECT_EQ(taperFromObservations(pairs, p), 0.0);  // 29 < taper_min_pairs
+  pairs.push_back({2.0, -0.02});
+  EXPECT_NEAR(taperFromObservations(pairs, p), 0.01, 1e-9);
+  p.taper_min_pairs = 0;
+  EXPECT_EQ(taperFromObservations(pairs, p), 0.0);
+  // A stem cannot widen upwards: clamped to 0.
+  p.taper_min_pairs = 1;
+  EXPECT_EQ(taperFromObservations({{2.0, 0.03}}, p), 0.0);
+}
+
+TEST(StemInventory, ASecondFitOverlappingAWellSeenStemIsDropped) {
+  // A stem of r = 0.15 m seen by six submaps; submap 1 also fitted a 0.2 m circle 0.36 m away
+  // (a branch with part of the bark: its circle misses the stem's by 1 cm, so extraction kept
+  // both, and the two cannot share a tree). Twin stems 0.32 m apart, each seen by six submaps,
+  // and a thin stem 0.6 m from the first, seen once, are trees.
+  std::vector<StemObservation> obs;
+  for (int s = 0; s < 6; ++s) {
+    obs.push_back({s, 0, 0.0, 0.0, 0.0, 0.15, true});
+    obs.push_back({s, 0, 10.0, 0.0, 0.0, 0.15, true});
+    obs.push_back({s, 0, 10.32, 0.0, 0.0, 0.15, true});
+  }
+  obs.push_back({1, 0, 0.36, 0.0, 0.0, 0.2, true});
+  obs.push_back({2, 0, 0.0, 0.6, 0.0, 0.05, true});
+  StemFusionParams p;
+  const std::vector<MergedStem> stems = fuseStems(obs, p);
+  ASSERT_EQ(stems.size(), 4u);
+  for (const MergedStem& s : stems) EXPECT_NE(s.x, 0.36);
+  p.overlap_margin_m = -1.0;
+  EXPECT_EQ(fuseStems(obs, p).size(), 5u);
+}
+
+TEST(StemInventory, NewParametersAreValidated) {
+  StemFusionParams p;
+  EXPECT_EQ(p.validate(), "");
+  p.max_base_offset_m = 0.5 * p.base_tol_m;
+  EXPECT_NE(p.validate().find("max_base_offset_m"), std::string::npos);
+  p = StemFusionParams{};
+  p.terrain_radius_m = -1.0;
+  EXPECT_NE(p.validate().find("terrain_radius_m"), std::string::npos);
+  p = StemFusionParams{};
+  p.taper_min_pairs = -1;
+  EXPECT_NE(p.validate().find("taper_min_pairs"), std::string::npos);
+  p = StemFusionParams{};
+  p.overlap_margin_m = 2.0;
+  EXPECT_NE(p.validate().find("overlap_margin_m"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace dtif

@@ -1,5 +1,6 @@
 #include "dtif/core/merge/stem_inventory.h"
 
+#include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
 #include <map>
@@ -8,6 +9,7 @@
 #include <unordered_map>
 
 #include "dtif/core/cells.h"
+#include "dtif/core/robust.h"
 
 namespace dtif {
 namespace {
@@ -148,24 +150,212 @@ class Clusterer {
   std::unordered_map<int64_t, std::vector<int>> grid_;
 };
 
-MergedStem fuse(const std::vector<StemObservation>& obs, const Cluster& cl, int component) {
-  std::vector<double> xs, ys, zs_seen, zs_all, rs;
+/// One tree: a cluster of observations and the base they are referred to.
+struct Tree {
+  int component = 0;
+  std::vector<size_t> members;
+  int observations = 0;
+  double x = 0.0, y = 0.0;  // median of all observations [m]
+  bool base_seen = false;   // some observation saw the base
+  bool has_base = false;    // z_base is known (seen, or from the neighbours' terrain)
+  double z_base = 0.0;      // [m]
+};
+
+Tree treeOf(const std::vector<StemObservation>& obs, const Cluster& cl, int component,
+            const StemFusionParams& p) {
+  Tree t;
+  t.component = component;
+  t.members = cl.members;
+  t.observations = static_cast<int>(cl.submaps.size());
+  std::vector<double> zs_seen;
   for (size_t i : cl.members) {
+    if (obs[i].base_seen) zs_seen.push_back(obs[i].z);
+  }
+  t.base_seen = t.has_base = !zs_seen.empty();
+  t.z_base = median(zs_seen);
+  // Where the neighbours look for this tree's ground: its position at breast height when known.
+  std::vector<double> xs, ys, xs_bh, ys_bh;
+  for (size_t i : cl.members) {
+    xs.push_back(obs[i].x), ys.push_back(obs[i].y);
+    if (t.base_seen && std::fabs(obs[i].z - t.z_base) <= p.base_tol_m)
+      xs_bh.push_back(obs[i].x), ys_bh.push_back(obs[i].y);
+  }
+  t.x = median(xs_bh.empty() ? xs : xs_bh);
+  t.y = median(ys_bh.empty() ? ys : ys_bh);
+  return t;
+}
+
+std::vector<Tree> clusterTrees(const std::vector<StemObservation>& observations,
+                               const StemFusionParams& params) {
+  std::map<int, std::vector<size_t>> by_component;
+  for (size_t i = 0; i < observations.size(); ++i) {
+    const StemObservation& o = observations[i];
+    if (std::isfinite(o.x) && std::isfinite(o.y) && std::isfinite(o.z) && std::isfinite(o.r)) {
+      by_component[o.component].push_back(i);
+    }
+  }
+  std::vector<Tree> trees;
+  for (const auto& [component, idx] : by_component) {
+    Clusterer clusterer(observations, params);
+    for (size_t i : idx) clusterer.add(i);
+    clusterer.joinClose();
+    for (const Cluster& cl : clusterer.clusters()) {
+      if (static_cast<int>(cl.submaps.size()) < params.min_observations) continue;
+      trees.push_back(treeOf(observations, cl, component, params));
+    }
+  }
+  return trees;
+}
+
+// Ground at (x, y) from a plane through the given seen bases (Tukey-weighted: a seen base can be
+// a shrub's top); false when fewer than 4 or all within about a metre of a line.
+bool terrainAt(double x, double y, const std::vector<Eigen::Vector3d>& bases, double* z) {
+  constexpr double kTukeyM = 0.5, kMinSpreadM2 = 1.0;
+  if (bases.size() < 4) return false;
+  Eigen::Matrix2d cov = Eigen::Matrix2d::Zero();
+  Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+  for (const Eigen::Vector3d& b : bases) mean += b.head<2>();
+  mean /= static_cast<double>(bases.size());
+  for (const Eigen::Vector3d& b : bases)
+    cov += (b.head<2>() - mean) * (b.head<2>() - mean).transpose();
+  cov /= static_cast<double>(bases.size());
+  if (Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(cov).eigenvalues()(0) < kMinSpreadM2)
+    return false;
+  Eigen::Vector3d plane(median([&] {
+                          std::vector<double> zs;
+                          for (const Eigen::Vector3d& b : bases) zs.push_back(b.z());
+                          return zs;
+                        }()),
+                        0.0, 0.0);
+  for (int it = 0; it < 4; ++it) {
+    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+    Eigen::Vector3d g = Eigen::Vector3d::Zero();
+    for (const Eigen::Vector3d& b : bases) {
+      const Eigen::Vector3d row(1.0, b.x() - x, b.y() - y);
+      const double w = tukeyWeight(b.z() - row.dot(plane), it == 0 ? 1e9 : kTukeyM);
+      A += w * row * row.transpose();
+      g += w * row * b.z();
+    }
+    const Eigen::Vector3d next = A.ldlt().solve(g);
+    if (!next.allFinite() || A.determinant() < 1e-9) return false;
+    plane = next;
+  }
+  *z = plane(0);
+  return true;
+}
+
+/// Trees whose base nobody saw take the ground of the seen bases around them.
+void terrainBases(const StemFusionParams& p, std::vector<Tree>* trees) {
+  if (!(p.terrain_radius_m > 0.0)) return;
+  std::unordered_map<int64_t, std::vector<size_t>> grid;
+  auto cell = [&](double v) { return cellIndex(v / p.terrain_radius_m); };
+  for (size_t k = 0; k < trees->size(); ++k) {
+    const Tree& t = (*trees)[k];
+    if (t.base_seen) grid[packCell(cell(t.x), cell(t.y))].push_back(k);
+  }
+  for (Tree& t : *trees) {
+    if (t.has_base) continue;
+    std::vector<Eigen::Vector3d> bases;
+    for (int64_t dx = -1; dx <= 1; ++dx) {
+      for (int64_t dy = -1; dy <= 1; ++dy) {
+        auto it = grid.find(packCell(cell(t.x) + dx, cell(t.y) + dy));
+        if (it == grid.end()) continue;
+        for (size_t k : it->second) {
+          const Tree& n = (*trees)[k];
+          if (n.component == t.component && std::hypot(n.x - t.x, n.y - t.y) <= p.terrain_radius_m)
+            bases.emplace_back(n.x, n.y, n.z_base);
+        }
+      }
+    }
+    t.has_base = terrainAt(t.x, t.y, bases, &t.z_base);
+  }
+}
+
+// Radii of a tree's observations at breast height (base within base_tol_m of the tree's).
+std::vector<double> breastHeightRadii(const std::vector<StemObservation>& obs, const Tree& t,
+                                      const StemFusionParams& p) {
+  std::vector<double> rs;
+  for (size_t i : t.members) {
+    if (std::fabs(obs[i].z - t.z_base) <= p.base_tol_m) rs.push_back(obs[i].r);
+  }
+  return rs;
+}
+
+std::vector<TaperPair> taperPairs(const std::vector<StemObservation>& obs,
+                                  const std::vector<Tree>& trees, const StemFusionParams& p) {
+  std::vector<TaperPair> pairs;
+  for (const Tree& t : trees) {
+    if (!t.base_seen) continue;
+    const std::vector<double> at_bh = breastHeightRadii(obs, t, p);
+    if (at_bh.empty()) continue;
+    const double r_bh = median(at_bh);
+    for (size_t i : t.members) pairs.push_back({obs[i].z - t.z_base, obs[i].r - r_bh});
+  }
+  return pairs;
+}
+
+MergedStem fuse(const std::vector<StemObservation>& obs, const Tree& t, double taper,
+                const StemFusionParams& p) {
+  std::vector<double> xs_all, ys_all, zs_all, rs_all, xs, ys, rs;
+  for (size_t i : t.members) {
     const StemObservation& o = obs[i];
-    xs.push_back(o.x);
-    ys.push_back(o.y);
-    rs.push_back(o.r);
-    zs_all.push_back(o.z);
-    if (o.base_seen) zs_seen.push_back(o.z);
+    xs_all.push_back(o.x), ys_all.push_back(o.y), zs_all.push_back(o.z), rs_all.push_back(o.r);
+    if (!t.has_base) continue;
+    const double dz = o.z - t.z_base;
+    if (std::fabs(dz) <= p.base_tol_m) xs.push_back(o.x), ys.push_back(o.y);
+    if (std::fabs(dz) <= p.max_base_offset_m) rs.push_back(o.r + taper * dz);
   }
   MergedStem s;
-  s.component = component;
-  s.x = median(xs);
-  s.y = median(ys);
-  s.z_base = median(zs_seen.empty() ? zs_all : zs_seen);
-  s.dbh = 2.0 * median(rs);
-  s.observations = static_cast<int>(cl.submaps.size());
+  s.component = t.component;
+  s.x = median(xs.empty() ? xs_all : xs);
+  s.y = median(ys.empty() ? ys_all : ys);
+  s.z_base = t.has_base ? t.z_base : median(zs_all);
+  s.dbh = 2.0 * median(rs.empty() ? rs_all : rs);
+  s.observations = t.observations;
   return s;
+}
+
+// Drops the entries whose circle comes within overlap_margin_m of the circle of an entry seen
+// by at least twice as many submaps: two trunks cannot overlap, so the weaker one is a second
+// fit of the same stem (a branch or the root flare with part of the bark, which extraction keeps
+// beside the stem's own fit when their circles just miss each other).
+std::vector<MergedStem> dropOverlapping(std::vector<MergedStem> stems, const StemFusionParams& p) {
+  if (!(p.overlap_margin_m >= 0.0) || stems.empty()) return stems;
+  std::vector<size_t> order(stems.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+    return stems[a].observations > stems[b].observations;
+  });
+  double reach = 0.0;  // largest centre distance of two overlapping entries
+  for (const MergedStem& s : stems) reach = std::max(reach, s.dbh);
+  reach += p.overlap_margin_m;
+  auto cell = [&](double v) { return cellIndex(v / std::max(reach, 1e-3)); };
+  std::unordered_map<int64_t, std::vector<size_t>> kept_grid;
+  std::vector<char> keep(stems.size(), 1);
+  for (size_t i : order) {
+    const MergedStem& b = stems[i];
+    const int64_t gx = cell(b.x), gy = cell(b.y);
+    for (int64_t dx = -1; dx <= 1 && keep[i]; ++dx) {
+      for (int64_t dy = -1; dy <= 1 && keep[i]; ++dy) {
+        auto it = kept_grid.find(packCell(gx + dx, gy + dy));
+        if (it == kept_grid.end()) continue;
+        for (size_t k : it->second) {
+          const MergedStem& a = stems[k];
+          if (a.component != b.component || a.observations < 2 * b.observations) continue;
+          if (std::hypot(a.x - b.x, a.y - b.y) < 0.5 * (a.dbh + b.dbh) + p.overlap_margin_m) {
+            keep[i] = 0;
+            break;
+          }
+        }
+      }
+    }
+    if (keep[i]) kept_grid[packCell(gx, gy)].push_back(i);
+  }
+  std::vector<MergedStem> out;
+  for (size_t i = 0; i < stems.size(); ++i) {
+    if (keep[i]) out.push_back(stems[i]);
+  }
+  return out;
 }
 
 }  // namespace
@@ -176,33 +366,43 @@ std::string StemFusionParams::validate() const {
   if (!(radius_rel_tol >= 0)) e << "stems.radius_rel_tol must be >= 0; ";
   if (!(radius_abs_tol_m >= 0)) e << "stems.radius_abs_tol_m must be >= 0; ";
   if (min_observations < 1) e << "stems.min_observations must be >= 1; ";
+  if (!(base_tol_m >= 0)) e << "stems.base_tol_m must be >= 0; ";
+  if (!(max_base_offset_m >= base_tol_m)) e << "stems.max_base_offset_m must be >= base_tol_m; ";
+  if (!(terrain_radius_m >= 0 && terrain_radius_m <= 1000))
+    e << "stems.terrain_radius_m must be in [0, 1000]; ";
+  if (taper_min_pairs < 0) e << "stems.taper_min_pairs must be >= 0; ";
+  if (!(overlap_margin_m <= 1.0)) e << "stems.overlap_margin_m must be <= 1 (< 0: off); ";
   return e.str();
+}
+
+double taperFromObservations(const std::vector<TaperPair>& pairs, const StemFusionParams& params) {
+  constexpr double kMaxTaper = 0.05;  // steeper than any stem between 1 and 4 m [m/m]
+  if (params.taper_min_pairs < 1) return 0.0;
+  double sxy = 0.0, sxx = 0.0;
+  int n = 0;
+  for (const TaperPair& q : pairs) {
+    if (!(q.dz > params.base_tol_m && q.dz <= params.max_base_offset_m) || !std::isfinite(q.dr))
+      continue;
+    sxy -= q.dz * q.dr;
+    sxx += q.dz * q.dz;
+    ++n;
+  }
+  if (n < params.taper_min_pairs) return 0.0;
+  return std::clamp(sxy / sxx, 0.0, kMaxTaper);
 }
 
 std::vector<MergedStem> fuseStems(const std::vector<StemObservation>& observations,
                                   const StemFusionParams& params) {
-  std::map<int, std::vector<size_t>> by_component;
-  for (size_t i = 0; i < observations.size(); ++i) {
-    const StemObservation& o = observations[i];
-    if (std::isfinite(o.x) && std::isfinite(o.y) && std::isfinite(o.z) && std::isfinite(o.r)) {
-      by_component[o.component].push_back(i);
-    }
-  }
+  std::vector<Tree> trees = clusterTrees(observations, params);
+  terrainBases(params, &trees);
+  const double taper = taperFromObservations(taperPairs(observations, trees, params), params);
   std::vector<MergedStem> out;
-  for (const auto& [component, idx] : by_component) {
-    Clusterer clusterer(observations, params);
-    for (size_t i : idx) clusterer.add(i);
-    clusterer.joinClose();
-    std::vector<MergedStem> stems;
-    for (const Cluster& cl : clusterer.clusters()) {
-      if (static_cast<int>(cl.submaps.size()) < params.min_observations) continue;
-      stems.push_back(fuse(observations, cl, component));
-    }
-    std::sort(stems.begin(), stems.end(), [](const MergedStem& a, const MergedStem& b) {
-      return a.x != b.x ? a.x < b.x : a.y < b.y;
-    });
-    out.insert(out.end(), stems.begin(), stems.end());
-  }
+  for (const Tree& t : trees) out.push_back(fuse(observations, t, taper, params));
+  out = dropOverlapping(std::move(out), params);
+  std::stable_sort(out.begin(), out.end(), [](const MergedStem& a, const MergedStem& b) {
+    if (a.component != b.component) return a.component < b.component;
+    return a.x != b.x ? a.x < b.x : a.y < b.y;
+  });
   for (size_t i = 0; i < out.size(); ++i) out[i].stem_id = static_cast<int64_t>(i);
   return out;
 }

@@ -16,6 +16,24 @@ struct StemFusionParams {
   double radius_abs_tol_m =
       0.2;  ///< ... to join a cluster (loose: one submap's radius can be far off) [m]
   int min_observations = 1;  ///< fewer contributing submaps: dropped (false trunks)
+  /// Each observation fitted its circle 1.3 m above its own base estimate: one whose base lies
+  /// within this of the tree's fitted near breast height, so its centre counts for the tree's
+  /// position and its radius is the reference of the taper estimate [m].
+  double base_tol_m = 1.0;
+  /// Observations whose base is off the tree's by more are left out of the DBH and position
+  /// (when others remain): their ground was a guess far from the stem [m].
+  double max_base_offset_m = 3.0;
+  /// A tree with no seen base takes its base from a plane through the seen bases of the trees
+  /// within this radius (at least 4, spread over >= 1 m); 0: never [m].
+  double terrain_radius_m = 12.0;
+  /// Radii fitted above (below) breast height are too small (large) by the stand's taper,
+  /// estimated from the inventory itself: the radius change per metre of base offset within
+  /// trees whose base was seen. Fewer such observations than this: no correction; 0: never.
+  int taper_min_pairs = 30;
+  /// An entry whose circle comes within this of the circle of an entry seen by at least twice
+  /// as many submaps is dropped (two trunks cannot overlap: a second fit of the same stem);
+  /// < 0: never [m].
+  double overlap_margin_m = 0.1;
   std::string validate() const;
 
   template <class V>
@@ -24,6 +42,11 @@ struct StemFusionParams {
     v("radius_rel_tol", radius_rel_tol);
     v("radius_abs_tol_m", radius_abs_tol_m);
     v("min_observations", min_observations);
+    v("base_tol_m", base_tol_m);
+    v("max_base_offset_m", max_base_offset_m);
+    v("terrain_radius_m", terrain_radius_m);
+    v("taper_min_pairs", taper_min_pairs);
+    v("overlap_margin_m", overlap_margin_m);
   }
 };
 
@@ -48,11 +71,27 @@ struct MergedStem {
 
 /// Clusters observations per component (greedy, nearest cluster centre within the radius and
 /// a similar radius, at most one observation per submap in a cluster; then clusters closer than
-/// the radius with no submap in common are joined) and fuses each cluster robustly: median
-/// position and radius, base from the observations whose base was seen when there are any.
-/// Deterministic: the output is ordered by component, then x, then y; stem ids follow that
-/// order.
+/// the radius with no submap in common are joined) and fuses each cluster robustly. The tree's
+/// base: the median of the observations whose base was seen, else the seen bases of the trees
+/// around it (a plane), else the median of all. Each observation fitted its circle 1.3 m above
+/// its own base estimate, which for a hidden base can be metres too high: DBH is the median
+/// radius of the observations within max_base_offset_m of the tree's base, each corrected to
+/// breast height by the stand's taper (taperFromObservations), and x, y the median of those
+/// within base_tol_m (a leaning stem's centre moves with height); all observations when none
+/// qualify. Deterministic: the output is ordered by component, then x, then y; stem ids follow
+/// that order.
 std::vector<MergedStem> fuseStems(const std::vector<StemObservation>& observations,
                                   const StemFusionParams& params);
+
+/// One observation of a tree whose base was seen: its base offset from the tree's base (dz,
+/// metres up) and its radius minus the radius of the tree's observations at breast height.
+struct TaperPair {
+  double dz = 0.0, dr = 0.0;  ///< [m]
+};
+
+/// The stand's taper [m of radius per m of height] from observations fitted above breast
+/// height (base_tol_m < dz <= max_base_offset_m): least squares of -dr = taper * dz, clamped to
+/// [0, 0.05]; 0 with fewer than taper_min_pairs such pairs (or taper_min_pairs 0).
+double taperFromObservations(const std::vector<TaperPair>& pairs, const StemFusionParams& params);
 
 }  // namespace dtif
