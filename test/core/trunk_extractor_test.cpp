@@ -622,12 +622,15 @@ TEST(TrunkExtractor, DensityParamsAreValidated) {
   p = TrunkExtractorParams();
   p.density_min_trunks = 0;
   EXPECT_NE(p.validate().find("density_min_trunks"), std::string::npos);
-  // Scaled thresholds never fall below what validate() allows.
+  // Scaled thresholds never fall below their floors; the stem-base counts stay.
   p = TrunkExtractorParams();
-  p.min_base_points = 3;
   const TrunkExtractorParams q = scaledForDensity(p, 0.01);
   EXPECT_EQ(q.validate(), "");
-  EXPECT_EQ(q.min_base_points, 3);
+  EXPECT_EQ(q.min_column_points, 2);
+  EXPECT_EQ(q.min_fit_points, 5);
+  EXPECT_EQ(q.min_base_points, p.min_base_points);
+  EXPECT_EQ(q.ground_map_min_points, p.ground_map_min_points);
+  EXPECT_EQ(scaledForDensity(p, 0.5).min_fit_points, 6);
   EXPECT_EQ(scaledForDensity(p, 1.0).min_fit_points, p.min_fit_points);
 }
 

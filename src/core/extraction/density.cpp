@@ -48,13 +48,12 @@ double densityScale(double density, const TrunkExtractorParams& p) {
 TrunkExtractorParams scaledForDensity(const TrunkExtractorParams& p, double scale) {
   TrunkExtractorParams q = p;
   if (!(scale < 1.0)) return q;
-  // Floors: what validate() allows, and 3 points for a circle's RANSAC sample (plus two to
-  // tell it from noise).
+  // Floors: two points per column, and 3 points for a circle's RANSAC sample plus two to tell
+  // it from noise. The stem-base counts stay: with fewer ring points a base on a shrub or log
+  // passes the max_base_below_points check (dense_slope at a third of the returns: a loop
+  // 0.75 m off in z).
   q.min_column_points = scaledCount(p.min_column_points, scale, std::min(p.min_column_points, 2));
   q.min_fit_points = scaledCount(p.min_fit_points, scale, std::min(p.min_fit_points, 5));
-  q.min_base_points = scaledCount(p.min_base_points, scale, std::min(p.min_base_points, 3));
-  q.ground_map_min_points =
-      scaledCount(p.ground_map_min_points, scale, std::min(p.ground_map_min_points, 2));
   return q;
 }
 

@@ -298,9 +298,9 @@ double barkDensity(const std::vector<FoundTrunk>& found, const TrunkExtractorPar
 /// clamped to [density_min_scale, 1]; 1 when adaptation is off or nothing was measured.
 double densityScale(double density, const TrunkExtractorParams& p);
 
-/// The parameters with the point-count thresholds (min_column_points, min_fit_points,
-/// min_base_points, ground_map_min_points) scaled by `scale` (rounded), none below what
-/// validate() allows; the same parameters for scale 1.
+/// The parameters with the trunk-detection point counts (min_column_points, min_fit_points)
+/// scaled by `scale` (rounded; at least 2 and 5, or the count itself if lower); the same
+/// parameters for scale 1.
 TrunkExtractorParams scaledForDensity(const TrunkExtractorParams& p, double scale);
 
 // --- Result ---------------------------------------------------------------------------------

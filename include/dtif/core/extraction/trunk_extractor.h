@@ -103,10 +103,11 @@ struct TrunkExtractorParams {
   double ground_map_below_seen = 0.4;  ///< seen-base share under which a map is built [0..1.01]
   double ground_map_margin_m = 2.0;    ///< the map covers the trunks' box plus this [m]
   int ground_map_min_points = 10;      ///< a cell with fewer points stays empty
-  /// Density adaptation: the point-count thresholds (min_column_points, min_fit_points,
-  /// min_base_points, ground_map_min_points) hold for clouds at least as dense as
-  /// density_reference; sparser clouds (a unit that keeps every n-th return, a slower sensor)
-  /// get them scaled by density / density_reference, at least by density_min_scale. The
+  /// Density adaptation: the trunk-detection point counts (min_column_points, min_fit_points)
+  /// hold for clouds at least as dense as density_reference; sparser clouds (a unit that keeps
+  /// every n-th return, a slower sensor) get them scaled by density / density_reference, at
+  /// least by density_min_scale. The ground and stem-base counts stay: scaled, they let bases on
+  /// shrubs through (a false loop, 0.75 m off in z, on dense_slope at a third of the returns). The
   /// density: the median over the trunks a first pass fits (at least density_min_trunks, at least
   /// density_min_range_m from the submap origin, the sensor) of their breast-height inliers per
   /// m^2 of bark seen, times (range / 10 m)^2: points per m^2 of bark 10 m from the sensor.
