@@ -9,6 +9,8 @@
 #include <limits>
 #include <random>
 
+#include "dtif/core/extraction/extraction_stages.h"
+
 namespace dtif {
 namespace {
 
@@ -163,7 +165,7 @@ TEST(TrunkExtractor, VisitListsEveryKeyOnce) {
   std::vector<std::string> keys;
   auto v = [&](const char* k, auto&) { keys.push_back(k); };
   p.visit(v);
-  EXPECT_EQ(keys.size(), 56u);
+  EXPECT_EQ(keys.size(), 60u);
   std::sort(keys.begin(), keys.end());
   EXPECT_EQ(std::unique(keys.begin(), keys.end()), keys.end());
 }
@@ -530,6 +532,106 @@ TEST(TrunkExtractor, BoundsAreValidated) {
   p = TrunkExtractorParams();
   p.max_points = 0;
   EXPECT_NE(p.validate().find("max_points"), std::string::npos);
+}
+
+// Issue #15 part 3: a unit that keeps every third return. A plot seen from the origin (the
+// sensor): five stems 10 m out that any density shows, and thin stems whose breast-height band
+// holds ~80 points at full density, ~27 at a third. With min_fit_points 36 (the mechanism
+// scales whatever the thresholds are) the thin stems need the adaptation at a third.
+Plot densityPlot(double step, std::vector<Stem>* thick, std::vector<Stem>* thin) {
+  Plot plot(0.05, 0.0, 31);
+  plot.addGround(-13, 13, -13, 13, 0.1, 0.02);
+  for (int k = 0; k < 5; ++k) {
+    const double a = k * 72.0 * kPi / 180.0;
+    thick->push_back({10.0 * std::cos(a), 10.0 * std::sin(a), 0.2, 180.0, k * 72.0 + 180.0});
+  }
+  for (int k = 0; k < 2; ++k) {
+    const double a = (36.0 + k * 144.0) * kPi / 180.0;
+    thin->push_back({9.0 * std::cos(a), 9.0 * std::sin(a), 0.08, 180.0, 36.0 + k * 144.0 + 180.0});
+  }
+  for (const Stem& s : *thick) plot.addStem(s, 4.0, 0.005, step);
+  for (const Stem& s : *thin) plot.addStem(s, 4.0, 0.005, step);
+  return plot;
+}
+
+// A random third of the points, fixed seed (FAST-LIO2 keeps every third return of a scan
+// pattern that does not repeat: no pattern on the bark).
+Cloud thirdOf(const Cloud& cloud) {
+  std::mt19937 rng(5);
+  std::uniform_int_distribution<int> pick(0, 2);
+  Cloud out;
+  for (const pcl::PointXYZ& q : cloud)
+    if (pick(rng) == 0) out.push_back(q);
+  return out;
+}
+
+void expectSame(const Trunks& a, const Trunks& b) {
+  ASSERT_EQ(a.size(), b.size());
+  for (size_t i = 0; i < a.size(); ++i) {
+    EXPECT_EQ(a[i].x, b[i].x);
+    EXPECT_EQ(a[i].y, b[i].y);
+    EXPECT_EQ(a[i].z, b[i].z);
+    EXPECT_EQ(a[i].r, b[i].r);
+    EXPECT_EQ(a[i].base_seen, b[i].base_seen);
+  }
+}
+
+TEST(TrunkExtractor, DensityAdaptationFindsThinStemsAtAThirdOfTheReturns) {
+  std::vector<Stem> thick, thin;
+  const Plot plot = densityPlot(0.05, &thick, &thin);  // bark: 400 points per m^2
+  TrunkExtractorParams fixed;
+  fixed.min_fit_points = 36;
+  fixed.density_reference = 0.0;
+  TrunkExtractorParams adaptive = fixed;
+  adaptive.density_reference = 300.0;
+
+  // Full density (above the reference): the adaptation changes nothing.
+  const auto full = extractTrunks(plot.cloud, adaptive);
+  EXPECT_GT(full.stats.density, 300.0);
+  EXPECT_EQ(full.stats.density_scale, 1.0);
+  expectSame(full.trunks, extractTrunks(plot.cloud, fixed).trunks);
+  EXPECT_EQ(full.trunks.size(), thick.size() + thin.size());
+
+  const Cloud third = thirdOf(plot.cloud);
+  const auto without = extractTrunks(third, fixed);
+  const auto with = extractTrunks(third, adaptive);
+  // Measured near a third of the full density; the thresholds halved (density_min_scale).
+  EXPECT_NEAR(with.stats.density, full.stats.density / 3.0, 0.1 * full.stats.density);
+  EXPECT_EQ(with.stats.density_scale, adaptive.density_min_scale);
+  for (const Stem& s : thick) {
+    EXPECT_GE(nearest(without.trunks, s.x, s.y, 0.05), 0) << s.x << "," << s.y;
+    EXPECT_GE(nearest(with.trunks, s.x, s.y, 0.05), 0) << s.x << "," << s.y;
+  }
+  for (const Stem& s : thin) {
+    EXPECT_LT(nearest(without.trunks, s.x, s.y, 0.5), 0) << s.x << "," << s.y;
+    const int k = nearest(with.trunks, s.x, s.y, 0.05);
+    ASSERT_GE(k, 0) << "thin stem at " << s.x << "," << s.y << " not found";
+    EXPECT_NEAR(with.trunks[k].r, s.r, 0.02);
+  }
+  // Nothing else became a trunk.
+  EXPECT_EQ(with.trunks.size(), thick.size() + thin.size());
+}
+
+TEST(TrunkExtractor, DensityParamsAreValidated) {
+  TrunkExtractorParams p;
+  p.density_min_scale = 0.0;
+  EXPECT_NE(p.validate().find("density_min_scale"), std::string::npos);
+  p = TrunkExtractorParams();
+  p.density_reference = -1.0;
+  EXPECT_NE(p.validate().find("density_reference"), std::string::npos);
+  p = TrunkExtractorParams();
+  p.density_min_trunks = 0;
+  EXPECT_NE(p.validate().find("density_min_trunks"), std::string::npos);
+  // Scaled thresholds never fall below their floors; the stem-base counts stay.
+  p = TrunkExtractorParams();
+  const TrunkExtractorParams q = scaledForDensity(p, 0.01);
+  EXPECT_EQ(q.validate(), "");
+  EXPECT_EQ(q.min_column_points, 2);
+  EXPECT_EQ(q.min_fit_points, 5);
+  EXPECT_EQ(q.min_base_points, p.min_base_points);
+  EXPECT_EQ(q.ground_map_min_points, p.ground_map_min_points);
+  EXPECT_EQ(scaledForDensity(p, 0.5).min_fit_points, 6);
+  EXPECT_EQ(scaledForDensity(p, 1.0).min_fit_points, p.min_fit_points);
 }
 
 }  // namespace

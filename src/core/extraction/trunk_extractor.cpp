@@ -142,6 +142,16 @@ void checkBaseAndOutputs(const TrunkExtractorParams& p, Checks* c) {
              "ground_map_below_seen must be in [0, 1.01]");
 }
 
+void checkDensity(const TrunkExtractorParams& p, Checks* c) {
+  c->require(p.density_reference >= 0.0 && std::isfinite(p.density_reference),
+             "density_reference must be >= 0 (0: no adaptation)");
+  c->require(p.density_min_scale > 0.0 && p.density_min_scale <= 1.0,
+             "density_min_scale must be in (0, 1]");
+  c->require(p.density_min_range_m >= 0.0 && std::isfinite(p.density_min_range_m),
+             "density_min_range_m must be >= 0");
+  c->require(p.density_min_trunks >= 1, "density_min_trunks must be >= 1");
+}
+
 // What lies around a stem of local centre (cx, cy) and radius r.
 struct BaseRing {
   std::vector<double> bx, by, bz;  // ground points of the ring (|h| <= base_max_dh_m) [m]
@@ -324,6 +334,7 @@ std::string TrunkExtractorParams::validate() const {
   checkGroundAndColumns(*this, &c);
   checkCircleFit(*this, &c);
   checkBaseAndOutputs(*this, &c);
+  checkDensity(*this, &c);
   return c.str();
 }
 
@@ -449,6 +460,7 @@ void fitCandidate(const LocalPoints& pts, const std::vector<float>& h, const Gro
       f.trunk.r = fit.r;
       f.trunk.base_seen = base.seen;
       f.inliers = fit.inliers;
+      f.arc_deg = fit.arc_deg;
       found->push_back(f);
     }
     removeInliers(fit, &band, &h_band);
@@ -501,6 +513,25 @@ GroundMap groundMapIfFewBasesSeen(const Trunks& trunks, const LocalPoints& pts,
                        static_cast<uint32_t>(p.ground_map_min_points));
 }
 
+namespace {
+
+// Slab columns, candidates and their circle fits: the trunks found (before duplicates are
+// dropped) into *found. false when there is no candidate.
+bool findTrunks(const LocalPoints& pts, const std::vector<float>& h, const GroundGrid& ground,
+                const TrunkExtractorParams& p, VoxelColumns* cols, std::vector<FoundTrunk>* found,
+                TrunkExtractionStats* st) {
+  slabColumns(pts, h, p, cols);
+  if (cols->slab.empty()) return false;
+  st->candidate_columns = cols->passing;
+  const TrunkCandidates cand = clusterColumns(*cols, p);
+  st->candidates = static_cast<size_t>(cand.count);
+  if (cand.count == 0) return false;
+  for (int l = 0; l < cand.count; ++l) fitCandidate(pts, h, ground, cand, l, p, found, st);
+  return true;
+}
+
+}  // namespace
+
 TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorParams& p) {
   TrunkExtractionResult result;
   TrunkExtractionStats& st = result.stats;
@@ -535,20 +566,27 @@ TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorPara
                          ? makeFootprint(marks->cells(), p.footprint_cell_m)
                          : trunkFootprint(in, p);
 
-  const VoxelColumns& cols = ws.cols;
-  slabColumns(pts, h, p, &ws.cols);
-  if (cols.slab.empty()) return result;
-  st.candidate_columns = cols.passing;
-  const TrunkCandidates cand = clusterColumns(cols, p);
-  st.candidates = static_cast<size_t>(cand.count);
-  if (cand.count == 0) return result;
-
   std::vector<FoundTrunk> found;
-  for (int l = 0; l < cand.count; ++l) fitCandidate(pts, h, ground, cand, l, p, &found, &st);
-  result.trunks = keepDistinctTrunks(std::move(found), p, &st);
+  if (!findTrunks(pts, h, ground, p, &ws.cols, &found, &st)) return result;
+  // A sparse cloud (every n-th return, a slower sensor): the count thresholds scaled to its
+  // density, all stages after the ground again. Clouds at the reference density or denser
+  // take the first pass as it is.
+  st.density = barkDensity(found, p);
+  st.density_scale = densityScale(st.density, p);
+  const TrunkExtractorParams q = scaledForDensity(p, st.density_scale);
+  if (st.density_scale < 1.0) {
+    const TrunkExtractionStats first = st;
+    st = TrunkExtractionStats();
+    st.input_points = first.input_points, st.finite_points = first.finite_points;
+    st.far_points = first.far_points;
+    st.density = first.density, st.density_scale = first.density_scale;
+    found.clear();
+    if (!findTrunks(pts, h, ground, q, &ws.cols, &found, &st)) return result;
+  }
+  result.trunks = keepDistinctTrunks(std::move(found), q, &st);
   // When too few stem bases were seen to fix a loop's elevation (steep slopes seen from a
   // helmet), the lowest surface of the whole submap has to.
-  result.ground_map = groundMapIfFewBasesSeen(result.trunks, pts, p);
+  result.ground_map = groundMapIfFewBasesSeen(result.trunks, pts, q);
   return result;
 }
 

@@ -273,8 +273,9 @@ StemBase stemBase(const LocalPoints& pts, const std::vector<float>& h, const Gro
 
 /// A trunk found in a candidate and the support of its fit.
 struct FoundTrunk {
-  TrunkLandmark trunk;  ///< in S
-  size_t inliers = 0;   ///< circle inliers
+  TrunkLandmark trunk;   ///< in S
+  size_t inliers = 0;    ///< circle inliers
+  double arc_deg = 0.0;  ///< angular coverage of the inliers [deg]
 };
 
 /// Fits up to max_fits_per_candidate circles in the breast-height band [fit_min_h_m,
@@ -284,6 +285,23 @@ struct FoundTrunk {
 void fitCandidate(const LocalPoints& pts, const std::vector<float>& h, const GroundGrid& grid,
                   const TrunkCandidates& cand, int l, const TrunkExtractorParams& p,
                   std::vector<FoundTrunk>* found, TrunkExtractionStats* stats);
+
+// --- Density ---------------------------------------------------------------------------------
+
+/// Bark density of the fitted trunks: the median over those at least density_min_range_m from
+/// the origin of S (the sensor at the anchor time) of inliers / (bark seen in the fit band:
+/// arc x radius x band height) x (range / 10 m)^2, the sensor's angular density as points per
+/// m^2 of bark 10 m away. 0 when fewer than density_min_trunks trunks qualify.
+double barkDensity(const std::vector<FoundTrunk>& found, const TrunkExtractorParams& p);
+
+/// Factor on the point-count thresholds for a measured density: density / density_reference,
+/// clamped to [density_min_scale, 1]; 1 when adaptation is off or nothing was measured.
+double densityScale(double density, const TrunkExtractorParams& p);
+
+/// The parameters with the trunk-detection point counts (min_column_points, min_fit_points)
+/// scaled by `scale` (rounded; at least 2 and 5, or the count itself if lower); the same
+/// parameters for scale 1.
+TrunkExtractorParams scaledForDensity(const TrunkExtractorParams& p, double scale);
 
 // --- Result ---------------------------------------------------------------------------------
 

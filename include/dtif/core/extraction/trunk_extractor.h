@@ -103,6 +103,18 @@ struct TrunkExtractorParams {
   double ground_map_below_seen = 0.4;  ///< seen-base share under which a map is built [0..1.01]
   double ground_map_margin_m = 2.0;    ///< the map covers the trunks' box plus this [m]
   int ground_map_min_points = 10;      ///< a cell with fewer points stays empty
+  /// Density adaptation: the trunk-detection point counts (min_column_points, min_fit_points)
+  /// hold for clouds at least as dense as density_reference; sparser clouds (a unit that keeps
+  /// every n-th return, a slower sensor) get them scaled by density / density_reference, at
+  /// least by density_min_scale. The ground and stem-base counts stay: scaled, they let bases on
+  /// shrubs through (a false loop, 0.75 m off in z, on dense_slope at a third of the returns). The
+  /// density: the median over the trunks a first pass fits (at least density_min_trunks, at least
+  /// density_min_range_m from the submap origin, the sensor) of their breast-height inliers per
+  /// m^2 of bark seen, times (range / 10 m)^2: points per m^2 of bark 10 m from the sensor.
+  double density_reference = 130.0;  ///< 0: no adaptation [points/m^2 at 10 m]
+  double density_min_scale = 0.5;    ///< smallest factor on the count thresholds (0..1]
+  double density_min_range_m = 8.0;  ///< nearer trunks: bark saturated by the voxel filter [m]
+  int density_min_trunks = 5;        ///< fewer such trunks: no adaptation
 
   /// Returns an empty string when the values are usable, else what is wrong.
   std::string validate() const;
@@ -165,6 +177,10 @@ struct TrunkExtractorParams {
     v("ground_map_below_seen", ground_map_below_seen);
     v("ground_map_margin_m", ground_map_margin_m);
     v("ground_map_min_points", ground_map_min_points);
+    v("density_reference", density_reference);
+    v("density_min_scale", density_min_scale);
+    v("density_min_range_m", density_min_range_m);
+    v("density_min_trunks", density_min_trunks);
   }
 };
 
@@ -182,6 +198,10 @@ struct TrunkExtractionStats {
   size_t duplicates = 0;        ///< trunks dropped as duplicates
   size_t ground_fallbacks = 0;  ///< trunks whose base came from the grid, not the ring
   size_t unseen_bases = 0;      ///< trunks whose base was not observed (base_seen false)
+  /// Bark density the first pass measured (TrunkExtractorParams::density_reference); 0: not
+  /// measured (too few trunks) [points/m^2 at 10 m].
+  double density = 0.0;
+  double density_scale = 1.0;  ///< factor on the count thresholds; below 1: a second pass ran
 };
 
 struct TrunkExtractionResult {
