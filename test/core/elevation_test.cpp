@@ -372,7 +372,8 @@ TEST(Elevation, FitsResidualTiltFromGroundMaps) {
       EXPECT_EQ(fitted, accepted);
       EXPECT_LT(sum_rot / accepted, 0.1);
       EXPECT_LT(sum_z / accepted, 0.05);
-      EXPECT_LT(sum_sd / accepted, 0.2);
+      // The fit's own std dev (~0.06 deg here) plus ground_tilt_floor_deg in quadrature.
+      EXPECT_LT(sum_sd / accepted, 0.25);
     } else {
       EXPECT_EQ(fitted, 0);
       EXPECT_GT(sum_rot / accepted, 0.25);  // the relative tilt (up to 1 deg) mostly left

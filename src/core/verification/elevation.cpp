@@ -215,6 +215,11 @@ void fitTilt(TiltSamples smp, double z_applied, const VerifierParams& params, Po
   const Eigen::Matrix4d post = info.inverse() * params.base_sigma_m * params.base_sigma_m;
   v->roll_var = std::max(post(3, 3), kMinFittedTiltVar);
   v->pitch_var = std::max(post(2, 2), kMinFittedTiltVar);
+  if (v->tilt_ground_cells > 0) {
+    const double floor = params.ground_tilt_floor_deg * M_PI / 180.0;
+    v->roll_var += floor * floor;
+    v->pitch_var += floor * floor;
+  }
 }
 
 /// The ground maps' cell differences under `T` for the tilt fit, when both submaps carry a map
@@ -244,6 +249,7 @@ double refineElevation(const Descriptor& q, const Descriptor& c,
   const bool seen = !use.empty();
   v->z_pairs = static_cast<int>(use.size());
   v->tilt_fitted = false;
+  v->tilt_ground_cells = 0;
   if (!seen) use = pairs;
   if (use.empty()) return 0.0;
   const ElevationSamples smp = elevationSamples(q, c, use, *T);
