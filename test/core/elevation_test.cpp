@@ -327,5 +327,60 @@ TEST(Elevation, FitsResidualTiltFromSeenBases) {
   }
 }
 
+/// Few stem bases seen, all close together (a third of the returns, shrubs): they cannot tell
+/// the residual tilt. The two submaps' ground maps overlap over 20-30 m and differ by t_z plus
+/// that tilt's plane, so the fit recovers it from them (tilt_min_ground_cells 0: the bases
+/// alone, as before the ground maps took part) and reports a tighter roll/pitch variance.
+TEST(Elevation, FitsResidualTiltFromGroundMaps) {
+  for (const int min_cells : {50, 0}) {
+    LoopDetectorParams params;
+    params.verification.tilt_min_ground_cells = min_cells;
+    std::mt19937 rng(23);
+    test::ObservationNoise nz;
+    nz.z_sigma_m = 0.02;
+    int accepted = 0, fitted = 0;
+    double sum_rot = 0.0, sum_z = 0.0, sum_sd = 0.0;
+    for (int i = 0; i < 20; ++i) {
+      const Trunks world = test::randomStand(rng, 100, 100, 600);
+      const Eigen::Vector2d cc(30, 30), qc(36, 27), seen(33, 28.5);
+      const Pose T_w_c = randomTiltedPose(rng, cc, test::terrainZ(cc.x(), cc.y()) + 1.7);
+      const Pose T_w_q = randomTiltedPose(rng, qc, test::terrainZ(qc.x(), qc.y()) + 1.7);
+      Descriptor c = describe(observe(rng, world, cc, T_w_c, nz), "a", 0, 0.0);
+      Descriptor q = describe(observe(rng, world, qc, T_w_q, nz), "b", 1, 0.0);
+      for (auto [d, T] : {std::pair<Descriptor*, Pose>(&c, T_w_c), {&q, T_w_q}}) {
+        for (TrunkLandmark& t : d->trunks)
+          t.base_seen = ((T * Eigen::Vector3d(t.x, t.y, t.z)).head<2>() - seen).norm() < 3.0;
+      }
+      c.ground_map = test::mapOf(test::hillyGround(rng, cc, 14.0, true), T_w_c, 0.5, 0.05);
+      q.ground_map = test::mapOf(test::hillyGround(rng, qc, 14.0, true), T_w_q, 0.5, 0.05);
+      const Pose T_c_q = T_w_c.inverse() * T_w_q;
+      Verification ver;
+      const auto lc = matchPair(q, c, params, nullptr, &ver);
+      if (!lc) continue;
+      ++accepted;
+      fitted += ver.tilt_ground_cells > 0;
+      sum_rot += rotationErrorDeg(lc->T_c_q, T_c_q);
+      sum_z += std::fabs(lc->T_c_q.translation().z() - T_c_q.translation().z());
+      sum_sd += std::sqrt(lc->covariance(3, 3)) * 180.0 / M_PI;
+    }
+    std::printf(
+        "[ info ] tilt_min_ground_cells %d: accepted %d/20 (%d tilts from the ground), rotation "
+        "error %.3f deg, z %.3f m, roll std dev %.3f deg\n",
+        min_cells, accepted, fitted, sum_rot / accepted, sum_z / accepted, sum_sd / accepted);
+    ASSERT_GE(accepted, 16);
+    if (min_cells > 0) {
+      EXPECT_EQ(fitted, accepted);
+      EXPECT_LT(sum_rot / accepted, 0.1);
+      EXPECT_LT(sum_z / accepted, 0.05);
+      // The fit's own std dev (~0.06 deg here) plus ground_tilt_floor_deg in quadrature.
+      EXPECT_LT(sum_sd / accepted, 0.25);
+    } else {
+      EXPECT_EQ(fitted, 0);
+      EXPECT_GT(sum_rot / accepted, 0.25);  // the relative tilt (up to 1 deg) mostly left
+      EXPECT_GE(sum_sd / accepted, 0.3);
+    }
+  }
+}
+
 }  // namespace
 }  // namespace dtif

@@ -256,13 +256,9 @@ GroundMap decodeGroundMap(const uint8_t* data, size_t size) {
   return m;
 }
 
-GroundElevation groundElevation(const GroundMap& q, const GroundMap& c, const Pose& T_c_q,
-                                double window_m) {
-  GroundElevation out;
+GroundDifferences groundDifferences(const GroundMap& q, const GroundMap& c, const Pose& T_c_q) {
+  GroundDifferences out;
   if (q.empty() || c.empty()) return out;
-  const int nb = static_cast<int>(std::lround(kMaxDz / kBin));
-  std::vector<double> hist(2 * nb + 1, 0.0);
-  std::vector<double> dz;
   for (int32_t iy = 0; iy < q.height; ++iy) {
     for (int32_t ix = 0; ix < q.width; ++ix) {
       const int16_t v = q.z[static_cast<size_t>(iy) * q.width + ix];
@@ -272,13 +268,27 @@ GroundElevation groundElevation(const GroundMap& q, const GroundMap& c, const Po
                                   q.z0_m + v * q.z_step_m);
       double zc;
       if (!c.at(p.x(), p.y(), &zc)) continue;
-      const double d = zc - p.z();
-      ++out.compared;
-      const long b = std::lround(d / kBin);
-      if (std::abs(b) > nb) continue;
-      hist[static_cast<size_t>(b + nb)] += 1.0;
-      dz.push_back(d);
+      out.xy.push_back(p.head<2>());
+      out.dz.push_back(zc - p.z());
     }
+  }
+  return out;
+}
+
+GroundElevation groundElevation(const GroundMap& q, const GroundMap& c, const Pose& T_c_q,
+                                double window_m) {
+  GroundElevation out;
+  if (q.empty() || c.empty()) return out;
+  const int nb = static_cast<int>(std::lround(kMaxDz / kBin));
+  std::vector<double> hist(2 * nb + 1, 0.0);
+  std::vector<double> dz;
+  const GroundDifferences diff = groundDifferences(q, c, T_c_q);
+  out.compared = static_cast<int>(diff.dz.size());
+  for (double d : diff.dz) {
+    const long b = std::lround(d / kBin);
+    if (std::abs(b) > nb) continue;
+    hist[static_cast<size_t>(b + nb)] += 1.0;
+    dz.push_back(d);
   }
   if (dz.empty()) return out;
   // Smoothed [1 2 1]: the true difference straddles bins.

@@ -88,13 +88,28 @@ int elevationRunnerUp(const std::vector<double>& dz, double mode) {
   return second;
 }
 
-/// MAP fit of dz = s0 + s1 (x - mean.x) + s2 (y - mean.y) by IRLS with Tukey weights, starting
-/// from the mode; false when the system is degenerate. `info` receives the last normal matrix.
-bool fitTiltPlane(const ElevationSamples& smp, const Eigen::Vector2d& mean, double z_mode,
-                  const VerifierParams& params, Eigen::Vector3d* plane, Eigen::Matrix3d* info) {
-  // c = 0.15 m: base estimates are cm-level, a wrong base is decimetres off.
-  constexpr double kTukeyC = 0.15;
-  Eigen::Vector3d s(z_mode, 0.0, 0.0);
+/// Elevation differences the residual tilt is fitted to, under one pose: seen-base pairs and
+/// ground-map cells, each group with its own offset (a cell's lowest point is not a stem base:
+/// on a slope it lies at the cell's downhill edge, in both maps alike) and its start (the
+/// group's mode).
+struct TiltSamples {
+  ElevationSamples bases, ground;
+  double bases_start = 0.0, ground_start = 0.0;
+};
+
+/// MAP fit of dz = o_g + a (x - centre.x) + b (y - centre.y), o_g the offset of the sample's
+/// group (bases, ground), by IRLS with Tukey weights, starting from the groups' modes; false
+/// when the system is degenerate. In units of a full-weight base pair (std dev base_sigma_m):
+/// a ground cell weighs (base_sigma_m / ground_cell_sigma_m)^2. `info` receives the last normal
+/// matrix, `kept` the ground cells of nonzero weight.
+bool fitTiltPlane(const TiltSamples& smp, const Eigen::Vector2d& centre,
+                  const VerifierParams& params, Eigen::Vector4d* plane, Eigen::Matrix4d* info,
+                  int* kept) {
+  // c = 0.15 m: base estimates are cm-level, a wrong base is decimetres off. Ground cells
+  // start wider: a residual tilt of 0.5 deg lifts cells 20 m from the centre by 0.17 m.
+  constexpr double kTukeyC = 0.15, kGroundStartC = 0.4;
+  constexpr int kGroundStartIts = 4;
+  Eigen::Vector4d s(smp.bases_start, smp.ground_start, 0.0, 0.0);
   // Zero-mean prior on the slopes: (sigma_base / sigma_tilt)^2 per slope, in units of a
   // full-weight pair.
   double prior = 0.0;
@@ -102,24 +117,36 @@ bool fitTiltPlane(const ElevationSamples& smp, const Eigen::Vector2d& mean, doub
     const double sigma_tilt = std::tan(params.tilt_prior_deg * M_PI / 180.0);
     prior = (params.base_sigma_m / sigma_tilt) * (params.base_sigma_m / sigma_tilt);
   }
-  *info = Eigen::Matrix3d::Identity();
-  for (int it = 0; it < 10; ++it) {
-    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
-    A(1, 1) = A(2, 2) = prior;
-    Eigen::Vector3d b = Eigen::Vector3d::Zero();
-    for (size_t k = 0; k < smp.xy.size(); ++k) {
-      const Eigen::Vector3d J(1.0, smp.xy[k].x() - mean.x(), smp.xy[k].y() - mean.y());
-      const double r = smp.dz[k] - J.dot(s);
-      const double w = tukeyWeight(r, kTukeyC);
-      if (w == 0.0) continue;
-      A += w * J * J.transpose();
-      b += w * J * smp.dz[k];
-    }
+  const double ground_w = (params.base_sigma_m / params.ground_cell_sigma_m) *
+                          (params.base_sigma_m / params.ground_cell_sigma_m);
+  *info = Eigen::Matrix4d::Identity();
+  for (int it = 0; it < 20; ++it) {
+    Eigen::Matrix4d A = Eigen::Matrix4d::Zero();
+    A(2, 2) = A(3, 3) = prior;
+    // A group without samples keeps its offset at 0.
+    if (smp.bases.dz.empty()) A(0, 0) = 1.0;
+    if (smp.ground.dz.empty()) A(1, 1) = 1.0;
+    Eigen::Vector4d b = Eigen::Vector4d::Zero();
+    int n_kept = 0;
+    const auto add = [&](const ElevationSamples& g, int group, double c, double scale) {
+      for (size_t k = 0; k < g.xy.size(); ++k) {
+        Eigen::Vector4d J(0.0, 0.0, g.xy[k].x() - centre.x(), g.xy[k].y() - centre.y());
+        J(group) = 1.0;
+        const double w = scale * tukeyWeight(g.dz[k] - J.dot(s), c);
+        if (w == 0.0) continue;
+        n_kept += group == 1;
+        A += w * J * J.transpose();
+        b += w * J * g.dz[k];
+      }
+    };
+    add(smp.bases, 0, kTukeyC, 1.0);
+    add(smp.ground, 1, it < kGroundStartIts ? kGroundStartC : kTukeyC, ground_w);
     if (A.determinant() <= 1e-9) return false;
     *info = A;
-    const Eigen::Vector3d next = A.ldlt().solve(b);
+    *kept = n_kept;
+    const Eigen::Vector4d next = A.ldlt().solve(b);
     if (!next.allFinite()) return false;
-    const bool done = (next - s).norm() < 1e-7;
+    const bool done = it >= kGroundStartIts && (next - s).norm() < 1e-7;
     s = next;
     if (done) break;
   }
@@ -127,42 +154,88 @@ bool fitTiltPlane(const ElevationSamples& smp, const Eigen::Vector2d& mean, doub
   return true;
 }
 
-/// Residual roll/pitch from the seen-base pairs when they spread enough and the fitted tilt
-/// is plausible (max_tilt_deg): rotates `T` about their centroid and fills v's tilt fields.
-void fitTilt(const ElevationSamples& smp, double z_mode, const VerifierParams& params, Pose* T,
-             Verification* v) {
+/// Smaller std dev of the samples' horizontal spread (bases and ground cells) and their centre:
+/// the bases' centroid, where t_z was measured, else the ground cells'.
+double tiltSpread(const TiltSamples& smp, Eigen::Vector2d* centre) {
+  const ElevationSamples& anchor = smp.bases.xy.empty() ? smp.ground : smp.bases;
+  *centre = Eigen::Vector2d::Zero();
+  for (const auto& p : anchor.xy) *centre += p;
+  *centre /= static_cast<double>(anchor.xy.size());
   Eigen::Vector2d mean = Eigen::Vector2d::Zero();
-  for (const auto& p : smp.xy) mean += p;
-  mean /= static_cast<double>(smp.xy.size());
   Eigen::Matrix2d cov = Eigen::Matrix2d::Zero();
-  for (const auto& p : smp.xy) cov += (p - mean) * (p - mean).transpose();
-  cov /= static_cast<double>(smp.xy.size());
-  const double spread = std::sqrt(
+  const size_t n = smp.bases.xy.size() + smp.ground.xy.size();
+  for (const auto* g : {&smp.bases, &smp.ground})
+    for (const auto& p : g->xy) mean += p / static_cast<double>(n);
+  for (const auto* g : {&smp.bases, &smp.ground})
+    for (const auto& p : g->xy) cov += (p - mean) * (p - mean).transpose();
+  cov /= static_cast<double>(n);
+  return std::sqrt(
       std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(cov).eigenvalues().minCoeff()));
-  if (spread < params.tilt_min_spread_m) return;
-  Eigen::Vector3d s;
-  Eigen::Matrix3d info;
-  if (!fitTiltPlane(smp, mean, z_mode, params, &s, &info)) return;
+}
+
+/// Residual roll/pitch from the samples when they spread enough, the ground cells kept are
+/// enough (tilt_min_ground_cells; else the bases alone, when tilt_min_pairs of them) and the
+/// fitted tilt is plausible (max_tilt_deg): rotates `T` about their centre and fills v's tilt
+/// fields. `z_applied`: the t_z already added to `T` since the samples were taken, from the
+/// bases (or, without any, the ground).
+void fitTilt(TiltSamples smp, double z_applied, const VerifierParams& params, Pose* T,
+             Verification* v) {
+  Eigen::Vector4d s;
+  Eigen::Matrix4d info;
+  Eigen::Vector2d mean;
+  int kept = 0;
+  for (;;) {
+    if (smp.bases.xy.empty() && smp.ground.xy.empty()) return;
+    if (tiltSpread(smp, &mean) < params.tilt_min_spread_m) return;
+    if (!fitTiltPlane(smp, mean, params, &s, &info, &kept)) return;
+    if (smp.ground.xy.empty() || kept >= params.tilt_min_ground_cells) break;
+    // Too few cells agree: the bases alone, as without ground maps.
+    if (static_cast<int>(smp.bases.xy.size()) < params.tilt_min_pairs) return;
+    smp.ground = ElevationSamples();
+  }
   const double max_slope = std::tan(params.max_tilt_deg * M_PI / 180.0);
-  if (std::hypot(s(1), s(2)) > max_slope) return;
+  if (std::hypot(s(2), s(3)) > max_slope) return;
   // z' = z - beta x + alpha y for a small rotation R_x(alpha) R_y(beta) about `mean`.
-  const double alpha = std::asin(std::clamp(s(2), -1.0, 1.0));
-  const double beta = -std::asin(std::clamp(s(1), -1.0, 1.0));
+  const double alpha = std::asin(std::clamp(s(3), -1.0, 1.0));
+  const double beta = -std::asin(std::clamp(s(2), -1.0, 1.0));
   const Eigen::Matrix3d R_tilt = (Eigen::AngleAxisd(alpha, Eigen::Vector3d::UnitX()) *
                                   Eigen::AngleAxisd(beta, Eigen::Vector3d::UnitY()))
                                      .toRotationMatrix();
-  // Rotate about the pairs' centroid at its refined elevation, so t_z stays well conditioned.
+  // Rotate about the centre at its refined elevation, so t_z stays well conditioned.
+  const double offset = smp.bases.xy.empty() ? s(1) : s(0);
   Pose T_tilt = Pose::Identity();
   const Eigen::Vector3d centre(mean.x(), mean.y(), 0.0);
   T_tilt.linear() = R_tilt;
-  T_tilt.translation() = centre - R_tilt * centre + Eigen::Vector3d(0, 0, s(0) - z_mode);
+  T_tilt.translation() = centre - R_tilt * centre + Eigen::Vector3d(0, 0, offset - z_applied);
   *T = T_tilt * *T;
   v->tilt_fitted = true;
-  // Information in units of a full-weight pair of std dev base_sigma_m; s2 is the roll
-  // (about x), s1 the pitch.
-  const Eigen::Matrix3d post = info.inverse() * params.base_sigma_m * params.base_sigma_m;
-  v->roll_var = std::max(post(2, 2), kMinFittedTiltVar);
-  v->pitch_var = std::max(post(1, 1), kMinFittedTiltVar);
+  v->tilt_ground_cells = smp.ground.xy.empty() ? 0 : kept;
+  // Information in units of a full-weight pair of std dev base_sigma_m; s3 is the roll
+  // (about x), s2 the pitch.
+  const Eigen::Matrix4d post = info.inverse() * params.base_sigma_m * params.base_sigma_m;
+  v->roll_var = std::max(post(3, 3), kMinFittedTiltVar);
+  v->pitch_var = std::max(post(2, 2), kMinFittedTiltVar);
+  if (v->tilt_ground_cells > 0) {
+    const double floor = params.ground_tilt_floor_deg * M_PI / 180.0;
+    v->roll_var += floor * floor;
+    v->pitch_var += floor * floor;
+  }
+}
+
+/// The ground maps' cell differences under `T` for the tilt fit, when both submaps carry a map
+/// and their differences have a clear mode with tilt_min_ground_cells agreeing; else none.
+void addGroundSamples(const Descriptor& q, const Descriptor& c, const Pose& T,
+                      const VerifierParams& params, TiltSamples* smp) {
+  if (params.tilt_min_ground_cells <= 0 || q.ground_map.empty() || c.ground_map.empty()) return;
+  const GroundElevation g = groundElevation(q.ground_map, c.ground_map, T, params.ground_window_m);
+  if (!g.ok || g.support < params.tilt_min_ground_cells ||
+      g.ambiguity > params.max_ground_ambiguity) {
+    return;
+  }
+  const GroundDifferences d = groundDifferences(q.ground_map, c.ground_map, T);
+  smp->ground.xy = d.xy;
+  smp->ground.dz = d.dz;
+  smp->ground_start = g.dz_m;
 }
 
 }  // namespace
@@ -176,6 +249,7 @@ double refineElevation(const Descriptor& q, const Descriptor& c,
   const bool seen = !use.empty();
   v->z_pairs = static_cast<int>(use.size());
   v->tilt_fitted = false;
+  v->tilt_ground_cells = 0;
   if (!seen) use = pairs;
   if (use.empty()) return 0.0;
   const ElevationSamples smp = elevationSamples(q, c, use, *T);
@@ -184,9 +258,17 @@ double refineElevation(const Descriptor& q, const Descriptor& c,
     v->z_pairs = m.agree;
     v->z_ambiguity = static_cast<double>(elevationRunnerUp(smp.dz, m.mode)) / std::max(m.agree, 1);
   }
+  const Pose T_samples = *T;
   T->translation().z() += m.z_mode;
-  if (seen && params.tilt_min_pairs > 0 && static_cast<int>(use.size()) >= params.tilt_min_pairs)
-    fitTilt(smp, m.z_mode, params, T, v);
+  if (!seen || params.tilt_min_pairs <= 0) return rmsElevation(q, c, use, *T);
+  TiltSamples tilt;
+  tilt.bases = smp;
+  tilt.bases_start = m.z_mode;
+  // Ground cells only with bases that fix t_z (else checkElevation may take it from the ground).
+  const bool trusted = m.agree >= params.min_z_pairs && !(v->z_ambiguity > params.max_z_ambiguity);
+  if (trusted) addGroundSamples(q, c, T_samples, params, &tilt);
+  if (!tilt.ground.xy.empty() || static_cast<int>(use.size()) >= params.tilt_min_pairs)
+    fitTilt(tilt, m.z_mode, params, T, v);
   return rmsElevation(q, c, use, *T);
 }
 
@@ -207,7 +289,10 @@ Rejection checkElevation(const Descriptor& q, const Descriptor& c, const Verifie
   v->ground_ambiguity = g.ok ? g.ambiguity : -1.0;
   if (!g.ok || g.support < params.min_ground_cells) return why;
   if (g.ambiguity > params.max_ground_ambiguity) return Rejection::kElevationAmbiguous;
+  TiltSamples tilt;
+  if (params.tilt_min_pairs > 0) addGroundSamples(q, c, *T, params, &tilt);
   T->translation().z() += g.dz_m;
+  if (!tilt.ground.xy.empty()) fitTilt(tilt, g.dz_m, params, T, v);
   v->T_c_q = *T;
   v->ground_cells = g.support;
   v->ground_sigma_m = g.spread_m;

@@ -256,6 +256,11 @@ std::string VerifierParams::validate() const {
   if (!(tilt_prior_deg >= 0.0 && tilt_prior_deg <= 10.0))
     err << "tilt_prior_deg must be in [0, 10] (0: no prior); ";
   if (!(base_sigma_m > 0.0)) err << "base_sigma_m must be > 0; ";
+  if (tilt_min_ground_cells < 0) err << "tilt_min_ground_cells must be >= 0 (0: bases only); ";
+  if (!(ground_cell_sigma_m > 0.0 && std::isfinite(ground_cell_sigma_m)))
+    err << "ground_cell_sigma_m must be > 0; ";
+  if (!(ground_tilt_floor_deg >= 0.0 && ground_tilt_floor_deg <= 10.0))
+    err << "ground_tilt_floor_deg must be in [0, 10]; ";
   if (!(min_overlap >= 0.0 && min_overlap <= 1.0)) err << "min_overlap must be in [0, 1]; ";
   if (!(max_fit_median_m > 0.0)) err << "max_fit_median_m must be > 0; ";
   if (!(fit_score_radius_m > 0.0 && std::isfinite(fit_score_radius_m))) {

@@ -55,6 +55,18 @@ std::vector<uint8_t> encodeGroundMap(const GroundMap& m);
 /// malformed input.
 GroundMap decodeGroundMap(const uint8_t* data, size_t size);
 
+/// The query cells that fall on a candidate cell with a value under T_c_q: each one's centre
+/// (at its value) in the candidate frame, horizontal, and the difference zc - z there.
+struct GroundDifferences {
+  std::vector<Eigen::Vector2d> xy;
+  std::vector<double> dz;
+};
+
+/// Maps every query cell centre (at its value) through T_c_q and differences it with the
+/// candidate cell it falls on. Where both maps saw the same lowest surface the differences are
+/// t_z plus the residual tilt's plane; canopy or shrub tops seen in only one are outliers.
+GroundDifferences groundDifferences(const GroundMap& q, const GroundMap& c, const Pose& T_c_q);
+
 /// The elevation two maps agree on under a horizontal alignment.
 struct GroundElevation {
   bool ok = false;         ///< a mode was found (see groundElevation)
@@ -65,10 +77,9 @@ struct GroundElevation {
   double ambiguity = 1.0;  ///< runner-up / mode of the smoothed difference histogram
 };
 
-/// Maps every query cell centre (at its value) through T_c_q, differences it with the candidate
-/// cell it falls on, and takes the mode of the differences (5 cm bins, smoothed), refined to
-/// the mean within `window_m`. The runner-up is the highest bin more than 2 x window_m from
-/// the mode. ok when at least one cell was compared and either map is non-empty.
+/// The mode of groundDifferences (5 cm bins, smoothed), refined to the mean within
+/// `window_m`. The runner-up is the highest bin more than 2 x window_m from the mode. ok when at
+/// least one cell was compared and either map is non-empty.
 GroundElevation groundElevation(const GroundMap& q, const GroundMap& c, const Pose& T_c_q,
                                 double window_m);
 
