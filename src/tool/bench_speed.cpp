@@ -277,7 +277,9 @@ std::string appendSpeed(std::ostream& md, const fs::path& dir,
   BuildSpeed before_build{o.before_probe, {}, {}, {}, {}};
   BuildSpeed* before = o.before_probe.empty() ? nullptr : &before_build;
   const fs::path db = dir / "speed_entries.db";
-  runProbe(after.probe, [&] {
+  // Collected by the earlier build when there is one: a build reads the database files of its
+  // own and earlier versions only.
+  runProbe(before ? before->probe : after.probe, [&] {
     std::vector<std::string> a{"collect", db.string()};
     a.insert(a.end(), datasets.begin(), datasets.end());
     return a;

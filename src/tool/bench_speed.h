@@ -17,7 +17,8 @@ struct SpeedOptions {
   int repeat = 3;  ///< describes per submap; the fastest counts
 };
 
-/// Collects every dataset's descriptors into <dir>/speed_entries.db, measures describe, the
+/// Collects every dataset's descriptors into <dir>/speed_entries.db (by the earlier build when
+/// given, which reads no newer file version than its own), measures describe, the
 /// protocol's queries and query vs database size with each probe, writes speed_describe.csv,
 /// speed_scale.csv and speed_loops_*.txt into dir, and appends the speed tables to md (also
 /// returned). Throws std::runtime_error when a probe fails.
