@@ -296,14 +296,10 @@ std::string appendSpeed(std::ostream& md, const fs::path& dir,
   }
   writeDescribeCsv(dir / "speed_describe.csv", after, before);
   writeScaleCsv(dir / "speed_scale.csv", after, before);
-  std::ofstream(dir / "speed_loops_after.txt") << [&] {
-    std::string s;
-    for (const auto& l : after.loops) s += l + "\n";
-    return s;
-  }();
-  if (before) {
-    std::ofstream lb(dir / "speed_loops_before.txt");
-    for (const auto& l : before->loops) lb << l << "\n";
+  for (const BuildSpeed* b : {before, &after}) {
+    if (!b) continue;
+    std::ofstream os(dir / (b == &after ? "speed_loops_after.txt" : "speed_loops_before.txt"));
+    for (const std::string& l : b->loops) os << l << "\n";
   }
   std::ostringstream sec;
   sec << "## Speed (issue #18): before = " << (before ? o.before_probe : "not run")
