@@ -457,6 +457,7 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
   cells.reserve(ds.submaps.size());
   std::vector<std::shared_ptr<const Descriptor>> descs;  // every submap's, for explainMiss
   double bytes_sum = 0.0;
+  size_t bytes_max = 0;
   const size_t n = ds.submaps.size();
 
   for (size_t i = 0; i < n; ++i) {
@@ -482,7 +483,9 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
       result.detection.back().submap = rec.id;
     }
     row.invalid_reason = desc.invalid_reason;
-    bytes_sum += static_cast<double>(encodeDescriptor(desc).size());
+    const size_t bytes = encodeDescriptor(desc).size();
+    bytes_sum += static_cast<double>(bytes);
+    bytes_max = std::max(bytes_max, bytes);
     row.t_loop_ms = step.loop_ms;
     row.t_solver_ms = step.query.solver_ms;
 
@@ -515,6 +518,7 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
   result.summary = summarize(result.rows);
   result.summary.dataset = ds.root;
   if (n > 0) result.summary.descriptor_bytes_mean = bytes_sum / static_cast<double>(n);
+  result.summary.descriptor_bytes_max = bytes_max;
   return result;
 }
 

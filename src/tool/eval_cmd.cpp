@@ -2,6 +2,7 @@
 // The evaluation protocol of DATASET.md; writes results.csv, summary.json, table.md and the
 // effective parameters (params.yaml) into the output folder; misses.csv says why each query
 // with a true loop missed it (its best ground-truth candidate matched alone).
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
@@ -76,6 +77,9 @@ int runEval(const EvalArgs& a) {
   const std::filesystem::path dir(a.out);
   writeMissesCsv((dir / "misses.csv").string(), res.misses);
   std::cout << "dataset " << ds.root << ": " << res.summary.submaps << " submaps\n" << table;
+  std::cout << "descriptor bytes: mean " << std::lround(res.summary.descriptor_bytes_mean)
+            << ", max " << res.summary.descriptor_bytes_max << " (encoded; budget "
+            << params.descriptor.max_bytes << ", descriptor/max_bytes)\n";
   printLevelling(dir, res);
   printMultiSubmap(res.rows);
   if (!res.detection.empty()) {

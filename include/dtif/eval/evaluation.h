@@ -70,6 +70,7 @@ struct EvalSummary {
   std::optional<double> rmse_rot_deg, rmse_trans_m;
   double t_desc_ms = 0, t_loop_ms = 0, t_solver_ms = 0, t_total_ms = 0;
   double descriptor_bytes_mean = 0;
+  size_t descriptor_bytes_max = 0;  ///< largest encoded descriptor (DESIGN: <= 8 KB on the wire)
   bool online = false;  ///< scored from an online run's loop log: only t_loop_ms is measured
 };
 
