@@ -217,6 +217,40 @@ TEST(Descriptor, WireRoundTripSmallAndExact) {
   EXPECT_EQ(g.ground_map.width, grounded.ground_map.width);
 }
 
+TEST(Descriptor, GroundMapCroppedToTheByteBudget) {
+  std::mt19937 rng(4);
+  const Trunks t = test::randomStand(rng, 40, 40, 500);
+  Descriptor d = buildDescriptor(t, DescriptorParams{});
+  ASSERT_TRUE(d.valid);
+  std::mt19937 grng(9);
+  d.ground_map = test::mapOf(test::hillyGround(grng, Eigen::Vector2d(0, 0), 25.0, false),
+                             Pose::Identity(), 0.5, 0.05);
+  const size_t total = encodeDescriptor(d).size();
+  const size_t map = encodeGroundMap(d.ground_map).size();
+  ASSERT_GT(map, 2000u);
+  // Within budget, or no limit: untouched.
+  Descriptor same = d;
+  fitDescriptorBytes(&same, static_cast<int>(total));
+  EXPECT_EQ(same.ground_map.z, d.ground_map.z);
+  fitDescriptorBytes(&same, 0);
+  EXPECT_EQ(same.ground_map.z, d.ground_map.z);
+  // Over budget: the map gives way until the whole descriptor fits; trunks and faces stay.
+  const int budget = static_cast<int>(total - map / 2);
+  Descriptor fit = d;
+  fitDescriptorBytes(&fit, budget);
+  EXPECT_LE(encodeDescriptor(fit).size(), static_cast<size_t>(budget));
+  EXPECT_FALSE(fit.ground_map.empty());
+  // Coarser heights (twice the step) and, if that was not enough, fewer cells.
+  EXPECT_NEAR(fit.ground_map.z_step_m, 2.0 * d.ground_map.z_step_m, 1e-9);
+  EXPECT_LE(fit.ground_map.count(), d.ground_map.count());
+  EXPECT_EQ(fit.trunks.size(), d.trunks.size());
+  EXPECT_EQ(fit.triangles.size(), d.triangles.size());
+  // The rest alone over budget: no map at all.
+  Descriptor none = d;
+  fitDescriptorBytes(&none, static_cast<int>(total - map - 10));
+  EXPECT_TRUE(none.ground_map.empty());
+}
+
 TEST(Descriptor, DecodeRejectsMalformedBytes) {
   std::mt19937 rng(5);
   const Descriptor d = buildDescriptor(test::randomStand(rng, 30, 30, 600), DescriptorParams{});
@@ -440,6 +474,9 @@ TEST(Descriptor, ParamsValidate) {
   p = DescriptorParams{};
   p.radius_hist_max_m = 0;
   EXPECT_NE(p.validate(), "");
+  p = DescriptorParams{};
+  p.max_bytes = -1;
+  EXPECT_NE(p.validate().find("max_bytes"), std::string::npos);
 }
 
 }  // namespace

@@ -296,8 +296,11 @@ TEST(ExtractionStages, GroundMapOnlyWhenFewBasesSeen) {
   addGround(&pts, slopeZ, 10.0, 0.1, &rng);
   Trunks trunks(3);
   for (size_t i = 0; i < trunks.size(); ++i) trunks[i].x = 2.0 + 3.0 * i, trunks[i].y = 5.0;
-  const TrunkExtractorParams p;
+  TrunkExtractorParams p;
   for (auto& t : trunks) t.base_seen = true;
+  // The default (1.01): every submap carries one, all bases seen or not.
+  EXPECT_FALSE(groundMapIfFewBasesSeen(trunks, pts, p).empty());
+  p.ground_map_below_seen = 0.4;
   EXPECT_TRUE(groundMapIfFewBasesSeen(trunks, pts, p).empty());
   trunks[0].base_seen = trunks[1].base_seen = false;  // 1/3 seen < 0.4
   const GroundMap m = groundMapIfFewBasesSeen(trunks, pts, p);

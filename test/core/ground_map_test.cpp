@@ -67,6 +67,55 @@ TEST(GroundMap, EncodeDecodeRoundTripIncludingLargeSteps) {
   EXPECT_TRUE(decodeGroundMap(nullptr, 0).empty());
 }
 
+TEST(GroundMap, CroppedAboutItsCentreToFitAByteBudget) {
+  std::mt19937 rng(7);
+  const GroundMap m =
+      mapOf(hillyGround(rng, Eigen::Vector2d(20, 20), 15.0, true), Pose::Identity(), 0.5, 0.05);
+  const size_t full = encodeGroundMap(m).size();
+  ASSERT_GT(full, 1000u);
+  // No limit, or a budget it already fits: the same map.
+  EXPECT_EQ(fitGroundMapBytes(m, 0).z, m.z);
+  EXPECT_EQ(fitGroundMapBytes(m, full).z, m.z);
+  // Slightly less: the heights are kept at twice the step, the cells all stay, and the
+  // rounding is unbiased (errors of +- a quarter of the new step that cancel on average).
+  const GroundMap coarse = fitGroundMapBytes(m, full - 1);
+  ASSERT_FALSE(coarse.empty());
+  EXPECT_LE(encodeGroundMap(coarse).size(), full - 1);
+  EXPECT_EQ(coarse.width, m.width);
+  EXPECT_EQ(coarse.count(), m.count());
+  EXPECT_NEAR(coarse.z_step_m, 2.0 * m.z_step_m, 1e-12);
+  double sum = 0.0;
+  size_t n = 0;
+  for (int32_t r = 0; r < m.height; ++r) {
+    for (int32_t k = 0; k < m.width; ++k) {
+      const double x = (m.x0 + k + 0.5) * m.cell_m, y = (m.y0 + r + 0.5) * m.cell_m;
+      double zm = 0.0, zc = 0.0;
+      if (!m.at(x, y, &zm)) continue;
+      ASSERT_TRUE(coarse.at(x, y, &zc));
+      EXPECT_NEAR(zc, zm, 0.25 * coarse.z_step_m + 1e-9);
+      sum += zc - zm, ++n;
+    }
+  }
+  EXPECT_LT(std::abs(sum / n), 0.1 * m.z_step_m);
+  // A quarter of the bytes: a smaller map within the budget whose cells are the coarse map's,
+  // and whose centre stays where m's was (within a cell).
+  const GroundMap c = fitGroundMapBytes(m, full / 4);
+  ASSERT_FALSE(c.empty());
+  EXPECT_LE(encodeGroundMap(c).size(), full / 4);
+  EXPECT_LT(c.width, m.width);
+  EXPECT_LT(c.height, m.height);
+  EXPECT_LE(std::abs((2 * c.x0 + c.width) - (2 * m.x0 + m.width)), 2);
+  EXPECT_LE(std::abs((2 * c.y0 + c.height) - (2 * m.y0 + m.height)), 2);
+  for (int32_t r = 0; r < c.height; r += 7) {
+    for (int32_t k = 0; k < c.width; k += 5) {
+      const size_t in_m = static_cast<size_t>(c.y0 - m.y0 + r) * m.width + (c.x0 - m.x0 + k);
+      ASSERT_EQ(c.z[static_cast<size_t>(r) * c.width + k], coarse.z[in_m]) << r << " " << k;
+    }
+  }
+  // A budget below the header: nothing fits.
+  EXPECT_TRUE(fitGroundMapBytes(m, 10).empty());
+}
+
 TEST(GroundMap, MalformedBytesThrow) {
   std::mt19937 rng(6);
   const GroundMap m =

@@ -7,11 +7,13 @@
 #include "dtif/core/timing.h"
 
 namespace dtif {
+namespace {
 
-Descriptor describeCloud(const Cloud& cloud_S, const SubmapKey& key,
-                         const TrunkExtractorParams& extractor_params,
-                         const DescriptorParams& descriptor_params, DescribeTimings* timings,
-                         TrunkExtractionResult* extraction) {
+// describeCloud before the byte budget.
+Descriptor describeUnfitted(const Cloud& cloud_S, const SubmapKey& key,
+                            const TrunkExtractorParams& extractor_params,
+                            const DescriptorParams& descriptor_params, DescribeTimings* timings,
+                            TrunkExtractionResult* extraction) {
   const auto t0 = std::chrono::steady_clock::now();
   TrunkExtractionResult ext = extractTrunks(cloud_S, extractor_params);
   if (timings) timings->extract_ms = msSince(t0);
@@ -21,6 +23,18 @@ Descriptor describeCloud(const Cloud& cloud_S, const SubmapKey& key,
   d.submap_id = key.submap_id;
   d.stamp = key.stamp;
   if (extraction) *extraction = std::move(ext);
+  return d;
+}
+
+}  // namespace
+
+Descriptor describeCloud(const Cloud& cloud_S, const SubmapKey& key,
+                         const TrunkExtractorParams& extractor_params,
+                         const DescriptorParams& descriptor_params, DescribeTimings* timings,
+                         TrunkExtractionResult* extraction) {
+  Descriptor d =
+      describeUnfitted(cloud_S, key, extractor_params, descriptor_params, timings, extraction);
+  fitDescriptorBytes(&d, descriptor_params.max_bytes);
   return d;
 }
 
@@ -49,9 +63,10 @@ Descriptor describeLevelledCloud(const Cloud& cloud_S, const Eigen::Quaterniond&
   const Cloud cloud_L = rotateCloud(cloud_S, R_L_S);
   const double rotate_ms = msSince(t0);
   Descriptor d =
-      describeCloud(cloud_L, key, extractor_params, descriptor_params, timings, extraction);
+      describeUnfitted(cloud_L, key, extractor_params, descriptor_params, timings, extraction);
   if (timings) timings->total_ms += rotate_ms;
   d.level_rotation = R_L_S.normalized();
+  fitDescriptorBytes(&d, descriptor_params.max_bytes);
   return d;
 }
 

@@ -170,6 +170,7 @@ std::string DescriptorParams::validate() const {
     err << "radius_hist_bins must be in [1, " << kMaxHistogramBins << "]; ";
   }
   if (!(radius_hist_max_m > 0.0)) err << "radius_hist_max_m must be > 0; ";
+  if (max_bytes < 0) err << "max_bytes must be >= 0 (0: no limit); ";
   return err.str();
 }
 
@@ -214,6 +215,15 @@ Descriptor describeSubmap(const TrunkExtractionResult& extraction, const Descrip
   d.footprint = extraction.footprint;
   d.ground_map = extraction.ground_map;
   return d;
+}
+
+void fitDescriptorBytes(Descriptor* d, int max_bytes) {
+  if (max_bytes <= 0 || d->ground_map.empty()) return;
+  const size_t budget = static_cast<size_t>(max_bytes);
+  const size_t total = encodeDescriptor(*d).size();
+  if (total <= budget) return;
+  const size_t rest = total - encodeGroundMap(d->ground_map).size();
+  d->ground_map = rest < budget ? fitGroundMapBytes(d->ground_map, budget - rest) : GroundMap();
 }
 
 Descriptor buildDescriptor(const Trunks& input, const DescriptorParams& params) {

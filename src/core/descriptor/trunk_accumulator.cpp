@@ -8,6 +8,7 @@
 #include <utility>
 #include <vector>
 
+#include "dtif/core/extraction/extraction_stages.h"
 #include "dtif/core/timing.h"
 
 namespace dtif {
@@ -147,25 +148,17 @@ GroundMap groundMapOfCloud(const Cloud& cloud_S, const Trunks& own, const TrunkE
   for (const auto& q : cloud_S) {
     x.push_back(q.x), y.push_back(q.y), z.push_back(q.z);
   }
-  Eigen::Vector2d lo(own[0].x, own[0].y), hi = lo;
-  for (const TrunkLandmark& t : own) {
-    lo = lo.cwiseMin(Eigen::Vector2d(t.x, t.y));
-    hi = hi.cwiseMax(Eigen::Vector2d(t.x, t.y));
-  }
-  const Eigen::Vector2d margin = Eigen::Vector2d::Constant(p.ground_map_margin_m);
-  return makeGroundMap(x.data(), y.data(), z.data(), x.size(), Eigen::Vector3d::Zero(), lo - margin,
-                       hi + margin, p.ground_map_cell_m, p.ground_map_z_step_m,
-                       static_cast<uint32_t>(p.ground_map_min_points));
+  return groundMapAroundTrunks(own, x.data(), y.data(), z.data(), x.size(), Eigen::Vector3d::Zero(),
+                               p);
 }
 
-}  // namespace
-
-Descriptor describeCloudAccumulated(const Cloud& cloud_S, const SubmapKey& key, const Pose& T_O_S,
-                                    TrunkAccumulator* accumulator,
-                                    const TrunkExtractorParams& extractor_params,
-                                    const DescriptorParams& descriptor_params,
-                                    DescribeTimings* timings, TrunkExtractionResult* extraction,
-                                    AccumulatedTrunks* accumulated) {
+// describeCloudAccumulated before the byte budget.
+Descriptor describeAccumulatedUnfitted(const Cloud& cloud_S, const SubmapKey& key,
+                                       const Pose& T_O_S, TrunkAccumulator* accumulator,
+                                       const TrunkExtractorParams& extractor_params,
+                                       const DescriptorParams& descriptor_params,
+                                       DescribeTimings* timings, TrunkExtractionResult* extraction,
+                                       AccumulatedTrunks* accumulated) {
   const auto t0 = std::chrono::steady_clock::now();
   TrunkExtractionResult ext = extractTrunks(cloud_S, extractor_params);
   if (timings) timings->extract_ms = msSince(t0);
@@ -185,6 +178,20 @@ Descriptor describeCloudAccumulated(const Cloud& cloud_S, const SubmapKey& key, 
   return d;
 }
 
+}  // namespace
+
+Descriptor describeCloudAccumulated(const Cloud& cloud_S, const SubmapKey& key, const Pose& T_O_S,
+                                    TrunkAccumulator* accumulator,
+                                    const TrunkExtractorParams& extractor_params,
+                                    const DescriptorParams& descriptor_params,
+                                    DescribeTimings* timings, TrunkExtractionResult* extraction,
+                                    AccumulatedTrunks* accumulated) {
+  Descriptor d = describeAccumulatedUnfitted(cloud_S, key, T_O_S, accumulator, extractor_params,
+                                             descriptor_params, timings, extraction, accumulated);
+  fitDescriptorBytes(&d, descriptor_params.max_bytes);
+  return d;
+}
+
 Descriptor describeLevelledCloudAccumulated(
     const Cloud& cloud_S, const Eigen::Quaterniond& R_L_S, const SubmapKey& key, const Pose& T_O_S,
     TrunkAccumulator* accumulator, const TrunkExtractorParams& extractor_params,
@@ -199,10 +206,11 @@ Descriptor describeLevelledCloudAccumulated(
   const double rotate_ms = msSince(t0);
   Pose T_O_L = T_O_S;
   T_O_L.linear() = T_O_S.rotation() * R_L_S.normalized().conjugate().toRotationMatrix();
-  Descriptor d = describeCloudAccumulated(cloud_L, key, T_O_L, accumulator, extractor_params,
-                                          descriptor_params, timings, extraction, accumulated);
+  Descriptor d = describeAccumulatedUnfitted(cloud_L, key, T_O_L, accumulator, extractor_params,
+                                             descriptor_params, timings, extraction, accumulated);
   if (timings) timings->total_ms += rotate_ms;
   d.level_rotation = R_L_S.normalized();
+  fitDescriptorBytes(&d, descriptor_params.max_bytes);
   return d;
 }
 

@@ -157,6 +157,57 @@ GroundMap makeGroundMap(const float* x, const float* y, const float* z, size_t n
   return m;
 }
 
+namespace {
+
+// The w x h cells of m from column c0, row r0 (inside m).
+GroundMap cropCells(const GroundMap& m, int32_t c0, int32_t r0, int32_t w, int32_t h) {
+  GroundMap out = m;
+  out.x0 = m.x0 + c0;
+  out.y0 = m.y0 + r0;
+  out.width = w;
+  out.height = h;
+  out.z.resize(static_cast<size_t>(w) * h);
+  for (int32_t r = 0; r < h; ++r) {
+    const auto row = m.z.begin() + static_cast<std::ptrdiff_t>(r0 + r) * m.width + c0;
+    std::copy(row, row + w, out.z.begin() + static_cast<std::ptrdiff_t>(r) * w);
+  }
+  return out;
+}
+
+// m with twice its z step. Values 2k and 2k + 1 both become k, with z0 raised by a quarter of
+// the new step, so the rounding errors (-+ step / 4) cancel over a map (no bias in dz).
+GroundMap coarserSteps(const GroundMap& m) {
+  GroundMap out = m;
+  out.z_step_m = 2.0 * m.z_step_m;
+  out.z0_m = m.z0_m + 0.25 * out.z_step_m;
+  for (int16_t& v : out.z) {
+    if (v != GroundMap::kUnknown) v = static_cast<int16_t>(v >= 0 ? v / 2 : -((1 - v) / 2));
+  }
+  return out;
+}
+
+}  // namespace
+
+GroundMap fitGroundMapBytes(GroundMap m, size_t max_bytes) {
+  if (max_bytes == 0 || m.empty()) return m;
+  // Coarser heights first (a map's differences are averaged over hundreds of cells, where
+  // half-step errors cancel), then fewer cells: a crop loses whole stretches of ground that a
+  // loop's partner may share only at the edge.
+  if (encodeGroundMap(m).size() > max_bytes) m = coarserSteps(m);
+  for (int attempt = 0; attempt < 12; ++attempt) {
+    const size_t bytes = encodeGroundMap(m).size();
+    if (bytes <= max_bytes) return m;
+    // Bytes grow about with the area: shrink both sides by the square root of the excess, a
+    // little more so that one or two crops usually do.
+    const double side = 0.97 * std::sqrt(static_cast<double>(max_bytes) / bytes);
+    const int32_t w = std::max(1, static_cast<int32_t>(m.width * side));
+    const int32_t h = std::max(1, static_cast<int32_t>(m.height * side));
+    if (w == m.width && h == m.height) break;
+    m = cropCells(m, (m.width - w) / 2, (m.height - h) / 2, w, h);
+  }
+  return encodeGroundMap(m).size() <= max_bytes ? m : GroundMap();
+}
+
 std::vector<uint8_t> encodeGroundMap(const GroundMap& m) {
   if (m.empty()) return {};
   if (!m.wellFormed()) throw std::runtime_error("ground map is not well formed");

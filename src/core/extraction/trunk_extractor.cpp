@@ -492,6 +492,21 @@ Trunks keepDistinctTrunks(std::vector<FoundTrunk> found, const TrunkExtractorPar
   return trunks;
 }
 
+GroundMap groundMapAroundTrunks(const Trunks& trunks, const float* x, const float* y,
+                                const float* z, size_t n, const Eigen::Vector3d& origin,
+                                const TrunkExtractorParams& p) {
+  if (!(p.ground_map_cell_m > 0.0) || trunks.empty()) return GroundMap();
+  // Only around the trunks: loops align trunks, so only there can two maps overlap.
+  Eigen::Vector2d lo(trunks[0].x, trunks[0].y), hi = lo;
+  for (const TrunkLandmark& t : trunks) {
+    lo = lo.cwiseMin(Eigen::Vector2d(t.x, t.y));
+    hi = hi.cwiseMax(Eigen::Vector2d(t.x, t.y));
+  }
+  const Eigen::Vector2d margin = Eigen::Vector2d::Constant(p.ground_map_margin_m);
+  return makeGroundMap(x, y, z, n, origin, lo - margin, hi + margin, p.ground_map_cell_m,
+                       p.ground_map_z_step_m, static_cast<uint32_t>(p.ground_map_min_points));
+}
+
 GroundMap groundMapIfFewBasesSeen(const Trunks& trunks, const LocalPoints& pts,
                                   const TrunkExtractorParams& p) {
   const size_t seen = static_cast<size_t>(std::count_if(
@@ -500,17 +515,8 @@ GroundMap groundMapIfFewBasesSeen(const Trunks& trunks, const LocalPoints& pts,
       !(static_cast<double>(seen) < p.ground_map_below_seen * trunks.size())) {
     return GroundMap();
   }
-  // Only around the trunks: loops align trunks, so only there can two maps overlap.
-  Eigen::Vector2d lo(trunks[0].x, trunks[0].y), hi = lo;
-  for (const TrunkLandmark& t : trunks) {
-    lo = lo.cwiseMin(Eigen::Vector2d(t.x, t.y));
-    hi = hi.cwiseMax(Eigen::Vector2d(t.x, t.y));
-  }
-  const Eigen::Vector2d margin = Eigen::Vector2d::Constant(p.ground_map_margin_m);
-  return makeGroundMap(pts.x.data(), pts.y.data(), pts.z.data(), pts.size(),
-                       Eigen::Vector3d(pts.ox, pts.oy, pts.oz), lo - margin, hi + margin,
-                       p.ground_map_cell_m, p.ground_map_z_step_m,
-                       static_cast<uint32_t>(p.ground_map_min_points));
+  return groundMapAroundTrunks(trunks, pts.x.data(), pts.y.data(), pts.z.data(), pts.size(),
+                               Eigen::Vector3d(pts.ox, pts.oy, pts.oz), p);
 }
 
 namespace {

@@ -22,6 +22,10 @@ struct DescriptorParams {
   double edge_hist_max_m = 16.0;   ///< upper edge of h^e; longer edges fall in the last bin [m]
   int radius_hist_bins = 10;       ///< bins of the radius histogram h^r
   double radius_hist_max_m = 0.5;  ///< upper edge of h^r; larger radii fall in the last bin [m]
+  /// The encoded descriptor (about the message on the units' radio link, DESIGN: <= 8 KB) at
+  /// most this: the ground map, the one part that can give way, is cropped about its centre to
+  /// fit; 0: no limit [bytes]
+  int max_bytes = 7800;
 
   std::string validate() const;
 
@@ -35,6 +39,7 @@ struct DescriptorParams {
     v("edge_hist_max_m", edge_hist_max_m);
     v("radius_hist_bins", radius_hist_bins);
     v("radius_hist_max_m", radius_hist_max_m);
+    v("max_bytes", max_bytes);
   }
 };
 
@@ -90,7 +95,12 @@ bool triangleLess(const Triangle& a, const Triangle& b);
 Descriptor buildDescriptor(const Trunks& trunks, const DescriptorParams& params);
 
 struct TrunkExtractionResult;
-/// buildDescriptor on an extraction's trunks, with the extraction's footprint attached.
+/// Crops d's ground map until encodeDescriptor(*d) takes at most max_bytes (0: no limit), or
+/// drops it when the rest alone does not fit. Called last, once identity and levelling are set.
+void fitDescriptorBytes(Descriptor* d, int max_bytes);
+
+/// buildDescriptor on an extraction's trunks, with the extraction's footprint and ground map
+/// attached (the describe* functions then fit it to params.max_bytes).
 Descriptor describeSubmap(const TrunkExtractionResult& extraction, const DescriptorParams& params);
 
 /// Compact wire encoding (what crosses the radio link): trunks as float32, faces as uint16

@@ -311,8 +311,14 @@ TrunkExtractorParams scaledForDensity(const TrunkExtractorParams& p, double scal
 Trunks keepDistinctTrunks(std::vector<FoundTrunk> found, const TrunkExtractorParams& p,
                           TrunkExtractionStats* stats);
 
-/// The lowest surface around the trunks (their box plus ground_map_margin_m), when fewer than
-/// ground_map_below_seen of them have a seen base; else (or ground_map_cell_m 0) empty.
+/// The lowest surface of the points (x, y, z) + origin around the trunks (their box plus
+/// ground_map_margin_m); empty without trunks or with ground_map_cell_m 0.
+GroundMap groundMapAroundTrunks(const Trunks& trunks, const float* x, const float* y,
+                                const float* z, size_t n, const Eigen::Vector3d& origin,
+                                const TrunkExtractorParams& p);
+
+/// groundMapAroundTrunks of the local points when fewer than ground_map_below_seen of the
+/// trunks have a seen base; else empty.
 GroundMap groundMapIfFewBasesSeen(const Trunks& trunks, const LocalPoints& pts,
                                   const TrunkExtractorParams& p);
 

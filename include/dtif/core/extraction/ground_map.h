@@ -46,6 +46,12 @@ GroundMap makeGroundMap(const float* x, const float* y, const float* z, size_t n
                         const Eigen::Vector2d& hi, double cell_m, double z_step_m,
                         uint32_t min_points);
 
+/// The map cropped, about its centre, until its wire form (encodeGroundMap) takes at most
+/// max_bytes (0: no limit): a descriptor crosses a radio link and has a budget (DESIGN: 8 KB),
+/// and the cells far out are the ones a loop's partner is least likely to share. A map that no
+/// crop brings under the budget comes back empty.
+GroundMap fitGroundMapBytes(GroundMap m, size_t max_bytes);
+
 /// Wire form: f32 cell, f32 z step, f64 z0, i32 x0, y0, u16 width, height, then the zlib
 /// stream of the row-major cells, each as its difference to a neighbour (left, else above,
 /// else the previous value) in one byte: -128 empty, -127 escape followed by the i16 value.

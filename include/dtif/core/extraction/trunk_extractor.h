@@ -98,11 +98,11 @@ struct TrunkExtractorParams {
   /// bases fixes: built when fewer than ground_map_below_seen of the trunks have a seen base
   /// (0: never, above 1: always). It costs descriptor bytes: the dense_slope scene's mean
   /// descriptor grows from 2.4 to 7.3 kB.
-  double ground_map_cell_m = 0.5;      ///< cell of the ground map; 0: none [m]
-  double ground_map_z_step_m = 0.05;   ///< quantisation of its elevations [m]
-  double ground_map_below_seen = 0.4;  ///< seen-base share under which a map is built [0..1.01]
-  double ground_map_margin_m = 2.0;    ///< the map covers the trunks' box plus this [m]
-  int ground_map_min_points = 10;      ///< a cell with fewer points stays empty
+  double ground_map_cell_m = 0.5;       ///< cell of the ground map; 0: none [m]
+  double ground_map_z_step_m = 0.05;    ///< quantisation of its elevations [m]
+  double ground_map_below_seen = 1.01;  ///< seen-base share under which a map is built [0..1.01]
+  double ground_map_margin_m = 2.0;     ///< the map covers the trunks' box plus this [m]
+  int ground_map_min_points = 10;       ///< a cell with fewer points stays empty
   /// Density adaptation: the trunk-detection point counts (min_column_points, min_fit_points)
   /// hold for clouds at least as dense as density_reference; sparser clouds (a unit that keeps
   /// every n-th return, a slower sensor) get them scaled by density / density_reference, at
