@@ -7,7 +7,8 @@
 //  - while no bag plays, each unit warns naming the topic it waits on;
 //  - descriptors and loop closures carry robot-qualified frames (<robot>/camera_init);
 //  - TF links the odometry frames of every pair of robots that has an inter-robot loop, within
-//    tolerance of ground truth, and each unit's body frame is published;
+//    tolerance of ground truth at the robots' latest submaps, and every unit's body frame is in
+//    the first robot's tree (all robots joined);
 //  - every loop closure is a true positive of the evaluation protocol;
 //  - each robot's submaps are levelled to within 1.5 deg of gravity (~scene_append may tilt the
 //    units' camera_init, as upstream FAST-LIO2 leaves it).
@@ -96,7 +97,7 @@ TEST(FleetBagsRostest, StockUnitsGetQualifiedFramesAndTfBetweenRobots) {
   tf2_ros::TransformListener tf_listener(tf_buffer);
 
   // The scene as a dataset and a bag per unit, generated here (a few seconds).
-  const fs::path dir = test::scratchDir("fleet_bags_rostest");
+  const fs::path dir = test::scratchDir("fleet_bags_rostest_" + scene);
   ASSERT_EQ(test::simulateScene(scene, dir,
                                 "--bag " + (dir / "unit.bag").string() + " --bag-layout fastlio",
                                 scene_append),
@@ -207,25 +208,34 @@ TEST(FleetBagsRostest, StockUnitsGetQualifiedFramesAndTfBetweenRobots) {
   }
   ASSERT_FALSE(latest.empty()) << "no inter-robot loop on " << scene;
 
-  // TF between the odometry frames of each linked pair, against ground truth at the submaps of
-  // their latest loop: it must put the query submap where it truly is in the candidate's
-  // odometry frame, T_Oc_Sq = T_Oc_Sc * inverse(T_W_Sc) * T_W_Sq, within the evaluation
-  // protocol's tolerance of a true loop (2 deg, 0.5 m; measured at the origin of the query's
-  // odometry frame instead, the translation error would grow with its distance, tens of m).
+  // TF between the odometry frames of each linked pair, against ground truth at each robot's
+  // latest submap: the map merge places a robot's odometry frame by its latest submap (where the
+  // robot is now), so on long routes the TF drifts away from older loops' submaps by the
+  // odometry's own drift. It must put the query robot's latest submap where it truly is in the
+  // candidate's odometry frame, T_Oc_Sq = T_Oc_Sc * inverse(T_W_Sc) * T_W_Sq: within 1 deg, and
+  // within 0.5 m (a true loop's tolerance) plus what 0.5 deg of relative rotation moves a point
+  // at the two submaps' distance (the robots may be 70 m apart; the merged map's own accuracy
+  // is checked by map_merge.test).
   for (const auto& [pair, lc] : latest) {
     const std::string fc = lc->candidate_robot + "/camera_init";
     const std::string fq = lc->query_robot + "/camera_init";
     std::string error;
     ASSERT_TRUE(tf_buffer.canTransform(fc, fq, ros::Time(0), ros::Duration(5.0), &error)) << error;
     const Pose T_Oc_Oq = toPose(tf_buffer.lookupTransform(fc, fq, ros::Time(0)).transform);
-    const auto& sq = ds.submaps[position.at({lc->query_robot, lc->query_id})];
-    const auto& sc = ds.submaps[position.at({lc->candidate_robot, lc->candidate_id})];
+    const auto& dq = last.at(lc->query_robot);
+    const auto& dc = last.at(lc->candidate_robot);
+    const auto& sq = ds.submaps[position.at({lc->query_robot, dq->submap_id})];
+    const auto& sc = ds.submaps[position.at({lc->candidate_robot, dc->submap_id})];
     const Pose truth = sc.T_O_S * ds.T_W_S.at(sc.id).inverse() * ds.T_W_S.at(sq.id);
     const PoseError e = poseError(truth, T_Oc_Oq * sq.T_O_S);
-    std::cout << "TF " << fc << " <- " << fq << " at submap " << sq.id << ": " << e.rot_deg
-              << " deg, " << e.trans_m << " m from ground truth\n";
-    EXPECT_LE(e.rot_deg, 2.0) << fc << " <- " << fq;
-    EXPECT_LE(e.trans_m, 0.5) << fc << " <- " << fq;
+    const double apart_m =
+        (ds.T_W_S.at(sc.id).translation() - ds.T_W_S.at(sq.id).translation()).norm();
+    const double tol_m = 0.5 + apart_m * std::sin(0.5 * M_PI / 180.0);
+    std::cout << "TF " << fc << " <- " << fq << " at submaps " << sc.id << ", " << sq.id << " ("
+              << apart_m << " m apart): " << e.rot_deg << " deg, " << e.trans_m
+              << " m from ground truth (tolerance " << tol_m << " m)\n";
+    EXPECT_LE(e.rot_deg, 1.0) << fc << " <- " << fq;
+    EXPECT_LE(e.trans_m, tol_m) << fc << " <- " << fq;
   }
   // Each unit's body, from its odometry; the units' own /tf stayed out of the fleet's.
   for (const std::string& r : robots) {
