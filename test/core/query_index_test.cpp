@@ -345,6 +345,56 @@ std::vector<std::shared_ptr<const Descriptor>> standViews(const Trunks& world, u
   return out;
 }
 
+TEST(QueryIndex, SupportFromBoundsEqualsTheDirectTests) {
+  // accumulateSupport decides a pair from the query triangle's bounds (masks of a whole window
+  // first, then only the pairs that give support) or, without exact bounds, by consistentEdges
+  // pair by pair: the same counts, faces and neighbour triangles alike, in a natural stand and
+  // a jittered plantation (windows of thousands of near-equal triangles).
+  std::mt19937 rng(31);
+  const std::vector<std::vector<std::shared_ptr<const Descriptor>>> stands{
+      standViews(test::randomStand(rng, 100, 70, 600), 5),
+      standViews(test::plantation(rng, 100, 70, 3.0, 0.15), 6)};
+  MatcherParams p;
+  size_t strong = 0, weak = 0, kept = 0;
+  for (const auto& views : stands) {
+    for (size_t i = 0; i + 1 < views.size(); ++i) {
+      const Descriptor &q = *views[i], &c = *views[i + 1];
+      const auto tq = matchTriangles(q, p.neighbour_triangles);
+      const auto tc = matchTriangles(c, p.neighbour_triangles);
+      const auto bounds = consistencyBounds(tq, p);
+      auto direct = bounds;
+      for (ConsistencyBounds& b : direct) b.exact = false;
+      size_t pairs_a = 0, pairs_b = 0;
+      const auto a = matcher_stages::accumulateSupport(tq, tc, q.trunks.size(), c.trunks.size(), p,
+                                                       &pairs_a, &bounds);
+      const auto b = matcher_stages::accumulateSupport(tq, tc, q.trunks.size(), c.trunks.size(), p,
+                                                       &pairs_b, &direct);
+      EXPECT_EQ(pairs_a, pairs_b);
+      ASSERT_EQ(a.strong, b.strong);
+      ASSERT_EQ(a.weak, b.weak);
+      EXPECT_EQ(a.touched, b.touched);  // first touch first: the same pairs in the same order
+      for (size_t k = 0; k < a.strong.size(); ++k) strong += a.strong[k] > 0, weak += a.weak[k] > 0;
+      // The heaviest K (selected, then sorted) are the first K of all of them sorted.
+      MatcherParams all = p;
+      all.max_correspondences = 1 << 30;
+      const auto every = matcher_stages::weightedCorrespondences(a, q, c, all);
+      MatcherParams few = p;
+      few.max_correspondences = 40;
+      const auto top = matcher_stages::weightedCorrespondences(a, q, c, few);
+      ASSERT_EQ(top.size(), std::min<size_t>(40, every.size()));
+      for (size_t k = 0; k < top.size(); ++k) {
+        EXPECT_EQ(top[k].iq, every[k].iq);
+        EXPECT_EQ(top[k].ic, every[k].ic);
+        EXPECT_EQ(top[k].w, every[k].w);
+      }
+      kept += every.size() > top.size();
+    }
+  }
+  EXPECT_GT(strong, 1000u);  // the cases under test happened
+  EXPECT_GT(weak, 1000u);
+  EXPECT_GT(kept, 10u);
+}
+
 /// The loop query keeps: every candidate matched and verified in screening order (matchPair),
 /// the highest score kept, the first of equal ones.
 std::optional<Loop> bruteBestLoop(const LoopDetector& det, const Descriptor& q,

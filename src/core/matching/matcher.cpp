@@ -125,16 +125,6 @@ bool consistentRange(float a, double rel, double abs_tol, float* lo, float* hi) 
   return true;
 }
 
-/// edgeMask from the query triangle's bounds, without branches; a pair that is not a pair of
-/// faces only needs to know whether all is consistent (7) or not (0).
-inline int boundsMask(const ConsistencyBounds& b, const Triangle& c, bool faces) {
-  auto in = [&](int j, float v) { return static_cast<int>(v >= b.lo[j]) & (v <= b.hi[j]); };
-  const int l0 = in(0, c.len[0]), l1 = in(1, c.len[1]), l2 = in(2, c.len[2]);
-  const int r0 = in(3, c.r[0]), r1 = in(4, c.r[1]), r2 = in(5, c.r[2]);
-  if (!faces) return (l0 & l1 & l2 & r0 & r1 & r2) * 7;
-  return (l0 & r0 & r2) | ((l1 & r0 & r1) << 1) | ((l2 & r1 & r2) << 2);  // as edgeMask
-}
-
 }  // namespace
 
 std::vector<ConsistencyBounds> consistencyBounds(const std::vector<MatchTriangle>& t,
@@ -381,32 +371,59 @@ int consistentEdges(const Triangle& q, const Triangle& c, const MatcherParams& p
 namespace {
 
 /// The candidate triangles' values as columns, so that a query triangle's test against a run
-/// of them is a loop over contiguous floats that the compiler vectorises.
+/// of them is a loop over contiguous floats that the compiler vectorises; `face` is 7 for a
+/// Delaunay face, 0 for a neighbour triangle.
 struct TriangleColumns {
   std::array<std::vector<float>, 6> v;  // len[0..2], r[0..2]
+  std::vector<uint8_t> face;
   void assign(const std::vector<MatchTriangle>& t) {
     for (int a = 0; a < 6; ++a) v[a].resize(t.size());
+    face.resize(t.size());
     for (size_t j = 0; j < t.size(); ++j) {
       for (int a = 0; a < 3; ++a) {
         v[a][j] = t[j].t.len[a];
         v[3 + a][j] = t[j].t.r[a];
       }
+      face[j] = t[j].delaunay ? 7 : 0;
     }
   }
 };
 
-/// full[j - from] = 1 when every value of candidate triangle j lies in b's intervals (the
-/// non-face case of boundsMask), for j in [from, to).
-void fullyInBounds(const TriangleColumns& c, const ConsistencyBounds& b, size_t from, size_t to,
-                   std::vector<uint8_t>* full) {
+/// mask[j - from] = the mask of query triangle b against candidate triangle j, for j in
+/// [from, to) as edgeMask would give it for a pair of faces (q_face and c_j a face), else 7
+/// when fully consistent and 0 otherwise: from b's intervals, without branches. The partial
+/// mask is 7 exactly when every value is in its interval (each edge needs its length and both
+/// end radii), so the non-face case is "partial mask == 7".
+void boundsMasks(const TriangleColumns& c, const ConsistencyBounds& b, bool q_face, size_t from,
+                 size_t to, std::vector<uint8_t>* mask) {
   const size_t n = to - from;
-  full->assign(n, 1);
-  uint8_t* f = full->data();
-  for (int a = 0; a < 6; ++a) {
-    const float* x = c.v[a].data() + from;
-    const float lo = b.lo[a], hi = b.hi[a];
-    for (size_t j = 0; j < n; ++j) f[j] &= static_cast<uint8_t>((x[j] >= lo) & (x[j] <= hi));
+  mask->resize(n);
+  uint8_t* m = mask->data();
+  const float* x[6];
+  for (int a = 0; a < 6; ++a) x[a] = c.v[a].data() + from;
+  const uint8_t* face = c.face.data() + from;
+  const uint8_t q7 = q_face ? 7 : 0;
+  for (size_t j = 0; j < n; ++j) {
+    uint8_t in[6];
+    for (int a = 0; a < 6; ++a)
+      in[a] = static_cast<uint8_t>((x[a][j] >= b.lo[a]) & (x[a][j] <= b.hi[a]));
+    const uint8_t partial = static_cast<uint8_t>(
+        (in[0] & in[3] & in[5]) | ((in[1] & in[3] & in[4]) << 1) | ((in[2] & in[4] & in[5]) << 2));
+    const uint8_t full = static_cast<uint8_t>(-static_cast<uint8_t>(partial == 7));  // 0 or 0xff
+    m[j] = static_cast<uint8_t>(partial & ((q7 & face[j]) | full));
   }
+}
+
+/// The scratch of accumulateSupport, one per thread. Out of line: a thread_local of a shared
+/// library is reached through __tls_get_addr, which the compiler re-called inside the
+/// triangle-pair loop when the scratch was used there directly.
+struct SupportScratch {
+  TriangleColumns cols;
+  std::vector<uint8_t> mask;
+};
+__attribute__((noinline)) SupportScratch& supportScratch() {
+  thread_local SupportScratch scratch;
+  return scratch;
 }
 
 }  // namespace
@@ -430,13 +447,9 @@ VertexSupport accumulateSupport(const std::vector<MatchTriangle>& tq,
     if (sup.strong[k] == 0 && sup.weak[k] == 0) sup.touched.push_back(static_cast<uint32_t>(k));
     if (m[k] < 65535) ++m[k];
   };
-  struct Scratch {
-    TriangleColumns cols;
-    std::vector<uint8_t> full;
-  };
-  thread_local Scratch scratch;  // one TLS lookup per call, not one per use
+  SupportScratch& scratch = supportScratch();
   TriangleColumns& cols = scratch.cols;
-  std::vector<uint8_t>& full = scratch.full;
+  std::vector<uint8_t>& mask = scratch.mask;
   cols.assign(tc);
   const std::vector<float>& len0 = cols.v[0];
   const double rel = params.edge_rel_tol, abs_tol = params.edge_abs_tol_m;
@@ -460,30 +473,45 @@ VertexSupport accumulateSupport(const std::vector<MatchTriangle>& tq,
         len0.begin());
     *triangle_pairs += to - from;
     // Eq. (3.4): chi_a per canonical edge; only a pair of faces needs the partial mask.
-    const auto support = [&](size_t j, int mask, bool faces) {
+    const auto support = [&](size_t j, int m) {
       const Triangle& c = tc[j].t;
-      if (mask == 7) {
+      if (m == 7) {
         for (int a = 0; a < 3; ++a) bump(sup.strong, q.v[a], c.v[a]);  // Eq. (3.6)
-      } else if (mask != 0 && faces) {
-        // Neighbour triangles share their edges many times over: their partial matches would
-        // pile up weak support on every edge; only Delaunay faces give weak support (Eq. 3.7).
-        for (int a = 0; a < 3; ++a) {  // Eq. (3.7)
-          if (!(mask & (1 << a))) continue;
-          bump(sup.weak, q.v[kEdgeEnds[a][0]], c.v[kEdgeEnds[a][0]]);
-          bump(sup.weak, q.v[kEdgeEnds[a][1]], c.v[kEdgeEnds[a][1]]);
-        }
+        return;
+      }
+      // Neighbour triangles share their edges many times over: their partial matches would
+      // pile up weak support on every edge; only Delaunay faces give weak support (Eq. 3.7).
+      for (int a = 0; a < 3; ++a) {  // Eq. (3.7)
+        if (!(m & (1 << a))) continue;
+        bump(sup.weak, q.v[kEdgeEnds[a][0]], c.v[kEdgeEnds[a][0]]);
+        bump(sup.weak, q.v[kEdgeEnds[a][1]], c.v[kEdgeEnds[a][1]]);
       }
     };
-    if (b.exact) fullyInBounds(cols, b, from, to, &full);
-    for (size_t j = from; j < to; ++j) {
-      const Triangle& c = tc[j].t;
-      const bool faces = mq.delaunay && tc[j].delaunay;
-      support(j,
-              !b.exact ? (faces ? edgeMask(q, c, params) : fullyConsistent(q, c, params) * 7)
-              : full[j - from] ? 7
-              : faces          ? boundsMask(b, c, true)
-                               : 0,
-              faces);
+    if (!b.exact) {
+      for (size_t j = from; j < to; ++j) {
+        const Triangle& c = tc[j].t;
+        const bool faces = mq.delaunay && tc[j].delaunay;
+        const int m = faces ? edgeMask(q, c, params) : fullyConsistent(q, c, params) * 7;
+        if (m != 0) support(j, m);
+      }
+      continue;
+    }
+    // Masks first (vectorised), then only the pairs that give support: in a lattice stand
+    // ~125,000 pairs per candidate fall in the windows and under a tenth of them support.
+    boundsMasks(cols, b, mq.delaunay, from, to, &mask);
+    const uint8_t* m = mask.data();
+    const size_t n = to - from;
+    size_t j = 0;
+    for (; j + 8 <= n; j += 8) {
+      uint64_t word = 0;
+      std::memcpy(&word, m + j, sizeof word);
+      if (word == 0) continue;
+      for (size_t k = j; k < j + 8; ++k) {
+        if (m[k] != 0) support(from + k, m[k]);
+      }
+    }
+    for (; j < n; ++j) {
+      if (m[j] != 0) support(from + j, m[j]);
     }
   }
   return sup;
@@ -515,11 +543,16 @@ std::vector<Correspondence> weightedCorrespondences(const VertexSupport& support
   // Eq. (3.10), heaviest first; ties by index (the flat index orders by query, then candidate
   // trunk) so the order is total and deterministic (the heaviest K sorted are then the first K
   // of the whole list sorted).
+  // The order is strict (indices differ), so selecting the heaviest K and then sorting them
+  // gives partial_sort's result, in O(n + K log K) rather than O(n log K) (thousands of pairs
+  // in a lattice stand).
   const size_t keep = std::min(weighted.size(), static_cast<size_t>(params.max_correspondences));
-  std::partial_sort(weighted.begin(), weighted.begin() + keep, weighted.end(),
-                    [](const auto& a, const auto& b) {
-                      return a.first != b.first ? a.first > b.first : a.second < b.second;
-                    });
+  const auto heavier = [](const auto& a, const auto& b) {
+    return a.first != b.first ? a.first > b.first : a.second < b.second;
+  };
+  if (keep < weighted.size())
+    std::nth_element(weighted.begin(), weighted.begin() + keep, weighted.end(), heavier);
+  std::sort(weighted.begin(), weighted.begin() + keep, heavier);
   std::vector<Correspondence> out(keep);
   const size_t nc = support.nc;
   for (size_t i = 0; i < keep; ++i) {
