@@ -232,6 +232,55 @@ TEST(QueryIndex, VoteTableEqualsAnOrderedMapThroughGrowth) {
   EXPECT_EQ(pair_vote_stages::VoteAccumulator{}.find(0, 0, 0), nullptr);
 }
 
+TEST(QueryIndex, VotesFallInTheBinsOfTheirOwnAtan2) {
+  // accumulateVotes bins the turned vote (yaw + pi) from the first one's atan2 unless that lies
+  // within a hair of a bin edge: against every vote binned by its own atan2 and floor, on
+  // random directions and on directions whose turned yaw falls on, or 1e-12 rad beside, an edge.
+  const MatcherParams params;
+  const int64_t n_yaw = std::llround(360.0 / params.vote_yaw_bin_deg);
+  const double yaw_bin = 2.0 * M_PI / static_cast<double>(n_yaw);
+  std::mt19937 rng(41);
+  std::uniform_real_distribution<double> angle(-M_PI, M_PI), xy(-30.0, 30.0);
+  auto pair = [&](double a, int i) {
+    return pair_vote_stages::TrunkPair{3.0, std::cos(a), std::sin(a), {xy(rng), xy(rng)}, i, i + 1};
+  };
+  std::vector<pair_vote_stages::TrunkPair> pq, pc;
+  for (int i = 0; i < 40; ++i) pq.push_back(pair(angle(rng), i));
+  for (int i = 0; i < 40; ++i) pc.push_back(pair(angle(rng), i));
+  for (int k = 0; k < 60; ++k) {  // on the edges: candidate direction = query's + edge - pi
+    const auto& q = pq[static_cast<size_t>(k) % pq.size()];
+    const double edge = static_cast<double>(k % n_yaw) * yaw_bin + (k % 3 - 1) * 1e-12;
+    pc.push_back(pair(std::atan2(q.sin_a, q.cos_a) + edge - M_PI, 100 + k));
+  }
+  const auto acc = pair_vote_stages::accumulateVotes(pq, pc, params);
+  std::map<std::tuple<int64_t, int64_t, int64_t>, std::array<double, 3>> ref;
+  for (const auto& a : pq) {
+    for (const auto& b : pc) {
+      const double cy = b.cos_a * a.cos_a + b.sin_a * a.sin_a;
+      const double sy = b.sin_a * a.cos_a - b.cos_a * a.sin_a;
+      for (const double sign : {1.0, -1.0}) {
+        const double c = sign * cy, s = sign * sy;
+        const Eigen::Vector2d t(b.mid.x() - (c * a.mid.x() - s * a.mid.y()),
+                                b.mid.y() - (s * a.mid.x() + c * a.mid.y()));
+        double yaw = std::atan2(s, c);
+        if (yaw < 0.0) yaw += 2.0 * M_PI;
+        const int64_t iyaw = std::min<int64_t>(static_cast<int64_t>(yaw / yaw_bin), n_yaw - 1);
+        auto& r = ref[{iyaw, static_cast<int64_t>(std::floor(t.x() / params.vote_xy_bin_m)),
+                       static_cast<int64_t>(std::floor(t.y() / params.vote_xy_bin_m))}];
+        r[0] += 1.0, r[1] += c, r[2] += s;
+      }
+    }
+  }
+  ASSERT_EQ(acc.bins.size(), ref.size());
+  for (const auto& b : acc.bins) {
+    const auto it = ref.find({b.iyaw, b.ix, b.iy});
+    ASSERT_NE(it, ref.end()) << b.iyaw << " " << b.ix << " " << b.iy;
+    EXPECT_EQ(b.count, it->second[0]);
+    EXPECT_DOUBLE_EQ(b.cos_sum, it->second[1]);
+    EXPECT_DOUBLE_EQ(b.sin_sum, it->second[2]);
+  }
+}
+
 /// matchTriangles as it was before the squared-distance bound: every trunk pair's hypot sorted.
 std::vector<MatchTriangle> referenceMatchTriangles(const Descriptor& d, int k) {
   const int n = static_cast<int>(d.trunks.size());
