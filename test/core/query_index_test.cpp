@@ -233,9 +233,10 @@ TEST(QueryIndex, VoteTableEqualsAnOrderedMapThroughGrowth) {
 }
 
 TEST(QueryIndex, VotesFallInTheBinsOfTheirOwnAtan2) {
-  // accumulateVotes bins the turned vote (yaw + pi) from the first one's atan2 unless that lies
-  // within a hair of a bin edge: against every vote binned by its own atan2 and floor, on
-  // random directions and on directions whose turned yaw falls on, or 1e-12 rad beside, an edge.
+  // accumulateVotes bins each vote from an approximate yaw unless that lies within a hair of a
+  // bin edge: against every vote binned by its own atan2 and floor, on random directions and
+  // on directions whose yaws fall on, or beside (within the approximation's error and far
+  // below it), a bin edge.
   const MatcherParams params;
   const int64_t n_yaw = std::llround(360.0 / params.vote_yaw_bin_deg);
   const double yaw_bin = 2.0 * M_PI / static_cast<double>(n_yaw);
@@ -245,12 +246,13 @@ TEST(QueryIndex, VotesFallInTheBinsOfTheirOwnAtan2) {
     return pair_vote_stages::TrunkPair{3.0, std::cos(a), std::sin(a), {xy(rng), xy(rng)}, i, i + 1};
   };
   std::vector<pair_vote_stages::TrunkPair> pq, pc;
-  for (int i = 0; i < 40; ++i) pq.push_back(pair(angle(rng), i));
-  for (int i = 0; i < 40; ++i) pc.push_back(pair(angle(rng), i));
-  for (int k = 0; k < 60; ++k) {  // on the edges: candidate direction = query's + edge - pi
+  for (int i = 0; i < 100; ++i) pq.push_back(pair(angle(rng), i));
+  for (int i = 0; i < 100; ++i) pc.push_back(pair(angle(rng), i));
+  const double beside[] = {-3e-5, -1e-5, -1e-12, 0.0, 1e-12, 1e-5, 3e-5};
+  for (int k = 0; k < 700; ++k) {  // candidate direction = query's + edge (+ pi: turned vote)
     const auto& q = pq[static_cast<size_t>(k) % pq.size()];
-    const double edge = static_cast<double>(k % n_yaw) * yaw_bin + (k % 3 - 1) * 1e-12;
-    pc.push_back(pair(std::atan2(q.sin_a, q.cos_a) + edge - M_PI, 100 + k));
+    const double edge = static_cast<double>(k % n_yaw) * yaw_bin + beside[k % 7];
+    pc.push_back(pair(std::atan2(q.sin_a, q.cos_a) + edge - (k % 2) * M_PI, 100 + k));
   }
   const auto acc = pair_vote_stages::accumulateVotes(pq, pc, params);
   std::map<std::tuple<int64_t, int64_t, int64_t>, std::array<double, 3>> ref;
