@@ -420,6 +420,9 @@ void boundsMasks(const TriangleColumns& c, const ConsistencyBounds& b, bool q_fa
 struct SupportScratch {
   TriangleColumns cols;
   std::vector<uint8_t> mask;
+  /// E^s | E^w << 16 per vertex pair while counting (one load and store per count, not two
+  /// loads of separate arrays); all zero between calls.
+  std::vector<uint32_t> packed;
 };
 __attribute__((noinline)) SupportScratch& supportScratch() {
   thread_local SupportScratch scratch;
@@ -440,16 +443,27 @@ VertexSupport accumulateSupport(const std::vector<MatchTriangle>& tq,
   VertexSupport sup;
   sup.nq = nq;
   sup.nc = nc;
-  sup.strong.assign(nq * nc, 0);
-  sup.weak.assign(nq * nc, 0);
-  auto bump = [&](std::vector<uint16_t>& m, int iq, int ic) {
-    const size_t k = static_cast<size_t>(iq) * nc + ic;
-    if (sup.strong[k] == 0 && sup.weak[k] == 0) sup.touched.push_back(static_cast<uint32_t>(k));
-    if (m[k] < 65535) ++m[k];
-  };
   SupportScratch& scratch = supportScratch();
   TriangleColumns& cols = scratch.cols;
   std::vector<uint8_t>& mask = scratch.mask;
+  if (scratch.packed.size() < nq * nc) scratch.packed.resize(nq * nc, 0);
+  uint32_t* packed = scratch.packed.data();
+  // packed is all zero again after the call: the copy below clears what it copies, and this
+  // guard what an exception (an allocation failing in push_back) would leave.
+  struct Clear {
+    uint32_t* packed;
+    const std::vector<uint32_t>& touched;
+    ~Clear() {
+      for (const uint32_t k : touched) packed[k] = 0;
+    }
+  } clear{packed, sup.touched};
+  constexpr int kStrong = 0, kWeak = 16;  // the count's shift in packed
+  auto bump = [&](int shift, int iq, int ic) {
+    const size_t k = static_cast<size_t>(iq) * nc + ic;
+    const uint32_t v = packed[k];
+    if (v == 0) sup.touched.push_back(static_cast<uint32_t>(k));
+    if ((v >> shift & 0xffffu) != 0xffffu) packed[k] = v + (1u << shift);  // saturates
+  };
   cols.assign(tc);
   const std::vector<float>& len0 = cols.v[0];
   const double rel = params.edge_rel_tol, abs_tol = params.edge_abs_tol_m;
@@ -476,15 +490,15 @@ VertexSupport accumulateSupport(const std::vector<MatchTriangle>& tq,
     const auto support = [&](size_t j, int m) {
       const Triangle& c = tc[j].t;
       if (m == 7) {
-        for (int a = 0; a < 3; ++a) bump(sup.strong, q.v[a], c.v[a]);  // Eq. (3.6)
+        for (int a = 0; a < 3; ++a) bump(kStrong, q.v[a], c.v[a]);  // Eq. (3.6)
         return;
       }
       // Neighbour triangles share their edges many times over: their partial matches would
       // pile up weak support on every edge; only Delaunay faces give weak support (Eq. 3.7).
       for (int a = 0; a < 3; ++a) {  // Eq. (3.7)
         if (!(m & (1 << a))) continue;
-        bump(sup.weak, q.v[kEdgeEnds[a][0]], c.v[kEdgeEnds[a][0]]);
-        bump(sup.weak, q.v[kEdgeEnds[a][1]], c.v[kEdgeEnds[a][1]]);
+        bump(kWeak, q.v[kEdgeEnds[a][0]], c.v[kEdgeEnds[a][0]]);
+        bump(kWeak, q.v[kEdgeEnds[a][1]], c.v[kEdgeEnds[a][1]]);
       }
     };
     if (!b.exact) {
@@ -513,6 +527,13 @@ VertexSupport accumulateSupport(const std::vector<MatchTriangle>& tq,
     for (; j < n; ++j) {
       if (m[j] != 0) support(from + j, m[j]);
     }
+  }
+  sup.strong.assign(nq * nc, 0);
+  sup.weak.assign(nq * nc, 0);
+  for (const uint32_t k : sup.touched) {
+    sup.strong[k] = static_cast<uint16_t>(packed[k] & 0xffffu);
+    sup.weak[k] = static_cast<uint16_t>(packed[k] >> 16);
+    packed[k] = 0;
   }
   return sup;
 }
