@@ -2,8 +2,10 @@
 #include "dtif/core/pose/pose_estimator.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <numeric>
 #include <sstream>
 
@@ -97,12 +99,59 @@ bool farFromZero(double d, double sep) {
   return std::fabs(wrapAngle(d)) > sep;
 }
 
+/// An arc end of the yaw sweep: its angle and the weight it adds (opens) or removes (closes).
+struct Event {
+  double angle;
+  double dw;
+};
+
+/// The events by angle, opening before closing at equal angles (the sweep's order): a radix
+/// sort on the angles' bits (stable, 8 bits a pass, passes where all share the byte skipped),
+/// then each run of equal angles by weight. Elements equal in both are equal in every bit
+/// except for an angle of +0 against -0, so this is the order std::sort gives by the same
+/// comparison; a yaw sweep over ~10^4 TIMs spent a sixth of a query sorting.
+void sortEvents(std::vector<Event>* ev) {
+  const auto before = [](const Event& x, const Event& y) {
+    return x.angle < y.angle || (x.angle == y.angle && x.dw > y.dw);  // open before close
+  };
+  const size_t n = ev->size();
+  if (n < 256) {
+    std::sort(ev->begin(), ev->end(), before);
+    return;
+  }
+  // Keys in the order of the angles (+0 and -0 alike): negative ones with every bit flipped,
+  // others with the sign bit set.
+  std::vector<uint64_t> key(n), key_tmp(n);
+  for (size_t i = 0; i < n; ++i) {
+    uint64_t b = 0;
+    const double a = (*ev)[i].angle + 0.0;  // -0 becomes +0
+    std::memcpy(&b, &a, sizeof b);
+    key[i] = (b >> 63) ? ~b : b | (uint64_t{1} << 63);
+  }
+  std::vector<Event> tmp(n);
+  for (int shift = 0; shift < 64; shift += 8) {
+    std::array<size_t, 257> start{};
+    for (size_t i = 0; i < n; ++i) ++start[((key[i] >> shift) & 0xff) + 1];
+    if (std::find(start.begin() + 1, start.end(), n) != start.end()) continue;  // one bucket
+    for (size_t d = 1; d < start.size(); ++d) start[d] += start[d - 1];
+    for (size_t i = 0; i < n; ++i) {
+      const size_t to = start[(key[i] >> shift) & 0xff]++;
+      tmp[to] = (*ev)[i];
+      key_tmp[to] = key[i];
+    }
+    ev->swap(tmp);
+    key.swap(key_tmp);
+  }
+  for (size_t i = 0; i < n;) {
+    size_t j = i + 1;
+    while (j < n && key[j] == key[i]) ++j;
+    if (j - i > 1) std::sort(ev->begin() + i, ev->begin() + j, before);
+    i = j;
+  }
+}
+
 ArcSweep consensusYaw(const std::vector<Tim>& tims, double beta) {
   constexpr double kSeparation = 10.0 * M_PI / 180.0;
-  struct Event {
-    double angle;
-    double dw;
-  };
   std::vector<Event> ev;
   ev.reserve(tims.size() * 2);
   double wrap_start = 0.0;  // weight of arcs covering angle -pi
@@ -123,9 +172,7 @@ ArcSweep consensusYaw(const std::vector<Tim>& tims, double beta) {
     ev.push_back({e, -m.w});
     if (s > e) wrap_start += m.w;  // the arc covers -pi
   }
-  std::sort(ev.begin(), ev.end(), [](const Event& x, const Event& y) {
-    return x.angle < y.angle || (x.angle == y.angle && x.dw > y.dw);  // open before close
-  });
+  sortEvents(&ev);
   ArcSweep out;
   double cur = wrap_start;
   out.best = cur;
