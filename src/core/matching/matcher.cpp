@@ -429,6 +429,87 @@ __attribute__((noinline)) SupportScratch& supportScratch() {
   return scratch;
 }
 
+/// The vertex support being counted, in the scratch's packed table; out() copies it into
+/// sup. The table is all zero again afterwards: out() clears what it copies, the destructor
+/// what an exception (an allocation failing in push_back) would leave.
+class SupportCounts {
+ public:
+  SupportCounts(std::vector<uint32_t>* table, VertexSupport* sup) : sup_(*sup) {
+    if (table->size() < sup_.nq * sup_.nc) table->resize(sup_.nq * sup_.nc, 0);
+    packed_ = table->data();
+  }
+  ~SupportCounts() {
+    for (const uint32_t k : sup_.touched) packed_[k] = 0;
+  }
+  /// Eq. (3.4)-(3.7) for one triangle pair of mask m (7: all edges consistent): strong
+  /// support to its three vertex pairs, else weak support to the ends of its consistent edges.
+  /// Masks other than 0 and 7 come from pairs of Delaunay faces only: neighbour triangles share
+  /// their edges many times over, and their partial matches would pile up weak support.
+  void add(const Triangle& q, const Triangle& c, int m) {
+    if (m == 7) {
+      for (int a = 0; a < 3; ++a) bump(kStrong, q.v[a], c.v[a]);  // Eq. (3.6)
+      return;
+    }
+    for (int a = 0; a < 3; ++a) {  // Eq. (3.7)
+      if (!(m & (1 << a))) continue;
+      bump(kWeak, q.v[kEdgeEnds[a][0]], c.v[kEdgeEnds[a][0]]);
+      bump(kWeak, q.v[kEdgeEnds[a][1]], c.v[kEdgeEnds[a][1]]);
+    }
+  }
+  void out() {
+    sup_.strong.assign(sup_.nq * sup_.nc, 0);
+    sup_.weak.assign(sup_.nq * sup_.nc, 0);
+    for (const uint32_t k : sup_.touched) {
+      sup_.strong[k] = static_cast<uint16_t>(packed_[k] & 0xffffu);
+      sup_.weak[k] = static_cast<uint16_t>(packed_[k] >> 16);
+      packed_[k] = 0;
+    }
+  }
+
+ private:
+  static constexpr int kStrong = 0, kWeak = 16;  // the count's shift in a packed word
+  void bump(int shift, int iq, int ic) {
+    const size_t k = static_cast<size_t>(iq) * sup_.nc + ic;
+    const uint32_t v = packed_[k];
+    if (v == 0) sup_.touched.push_back(static_cast<uint32_t>(k));
+    if ((v >> shift & 0xffffu) != 0xffffu) packed_[k] = v + (1u << shift);  // saturates
+  }
+  VertexSupport& sup_;
+  uint32_t* packed_ = nullptr;
+};
+
+/// The candidate triangles (sorted by len[0]) whose longest edge can pass Cons_l with l:
+/// [first, second). A pair whose longest edges disagree could still give weak support through
+/// e2/e3 in Alg. 1; dtif drops that evidence on purpose: such edge-only coincidences are the
+/// bulk of random support.
+std::pair<size_t, size_t> lengthWindow(const std::vector<float>& len0, double l,
+                                       const MatcherParams& params) {
+  const double rel = params.edge_rel_tol, abs_tol = params.edge_abs_tol_m;
+  const double lo = std::min(l - abs_tol, l * (1.0 - rel));
+  const double hi = std::max(l + abs_tol, l / (1.0 - rel));
+  const auto from =
+      std::lower_bound(len0.begin(), len0.end(), lo, [](float x, double v) { return x < v; });
+  const auto to = std::upper_bound(from, len0.end(), hi, [](double v, float x) { return v < x; });
+  return {static_cast<size_t>(from - len0.begin()), static_cast<size_t>(to - len0.begin())};
+}
+
+/// f(k, m[k]) for every k < n with m[k] != 0, in order; eight zero bytes are skipped at once.
+template <class F>
+void forEachNonzero(const uint8_t* m, size_t n, const F& f) {
+  size_t j = 0;
+  for (; j + 8 <= n; j += 8) {
+    uint64_t word = 0;
+    std::memcpy(&word, m + j, sizeof word);
+    if (word == 0) continue;
+    for (size_t k = j; k < j + 8; ++k) {
+      if (m[k] != 0) f(k, m[k]);
+    }
+  }
+  for (; j < n; ++j) {
+    if (m[j] != 0) f(j, m[j]);
+  }
+}
+
 }  // namespace
 
 VertexSupport accumulateSupport(const std::vector<MatchTriangle>& tq,
@@ -444,97 +525,28 @@ VertexSupport accumulateSupport(const std::vector<MatchTriangle>& tq,
   sup.nq = nq;
   sup.nc = nc;
   SupportScratch& scratch = supportScratch();
-  TriangleColumns& cols = scratch.cols;
-  std::vector<uint8_t>& mask = scratch.mask;
-  if (scratch.packed.size() < nq * nc) scratch.packed.resize(nq * nc, 0);
-  uint32_t* packed = scratch.packed.data();
-  // packed is all zero again after the call: the copy below clears what it copies, and this
-  // guard what an exception (an allocation failing in push_back) would leave.
-  struct Clear {
-    uint32_t* packed;
-    const std::vector<uint32_t>& touched;
-    ~Clear() {
-      for (const uint32_t k : touched) packed[k] = 0;
-    }
-  } clear{packed, sup.touched};
-  constexpr int kStrong = 0, kWeak = 16;  // the count's shift in packed
-  auto bump = [&](int shift, int iq, int ic) {
-    const size_t k = static_cast<size_t>(iq) * nc + ic;
-    const uint32_t v = packed[k];
-    if (v == 0) sup.touched.push_back(static_cast<uint32_t>(k));
-    if ((v >> shift & 0xffffu) != 0xffffu) packed[k] = v + (1u << shift);  // saturates
-  };
-  cols.assign(tc);
-  const std::vector<float>& len0 = cols.v[0];
-  const double rel = params.edge_rel_tol, abs_tol = params.edge_abs_tol_m;
+  SupportCounts counts(&scratch.packed, &sup);
+  scratch.cols.assign(tc);
   for (size_t i = 0; i < tq.size(); ++i) {
     const MatchTriangle& mq = tq[i];
-    const Triangle& q = mq.t;
-    const ConsistencyBounds& b = bounds[i];
-    // Triangles are sorted by len[0]; Cons_l on e1 bounds l_c to [lo, hi], so a binary search
-    // finds the only candidate triangles whose longest edge can be consistent. A pair whose
-    // longest edges disagree could still give weak support through e2/e3 in Alg. 1; dtif drops
-    // that evidence on purpose: such edge-only coincidences are the bulk of random support.
-    const double l = q.len[0];
-    const double lo = std::min(l - abs_tol, l * (1.0 - rel));
-    const double hi = std::max(l + abs_tol, l / (1.0 - rel));
-    const size_t from = static_cast<size_t>(
-        std::lower_bound(len0.begin(), len0.end(), lo, [](float x, double v) { return x < v; }) -
-        len0.begin());
-    const size_t to = static_cast<size_t>(
-        std::upper_bound(len0.begin() + static_cast<std::ptrdiff_t>(from), len0.end(), hi,
-                         [](double v, float x) { return v < x; }) -
-        len0.begin());
+    const auto [from, to] = lengthWindow(scratch.cols.v[0], mq.t.len[0], params);
     *triangle_pairs += to - from;
-    // Eq. (3.4): chi_a per canonical edge; only a pair of faces needs the partial mask.
-    const auto support = [&](size_t j, int m) {
-      const Triangle& c = tc[j].t;
-      if (m == 7) {
-        for (int a = 0; a < 3; ++a) bump(kStrong, q.v[a], c.v[a]);  // Eq. (3.6)
-        return;
-      }
-      // Neighbour triangles share their edges many times over: their partial matches would
-      // pile up weak support on every edge; only Delaunay faces give weak support (Eq. 3.7).
-      for (int a = 0; a < 3; ++a) {  // Eq. (3.7)
-        if (!(m & (1 << a))) continue;
-        bump(kWeak, q.v[kEdgeEnds[a][0]], c.v[kEdgeEnds[a][0]]);
-        bump(kWeak, q.v[kEdgeEnds[a][1]], c.v[kEdgeEnds[a][1]]);
-      }
-    };
-    if (!b.exact) {
+    if (!bounds[i].exact) {
       for (size_t j = from; j < to; ++j) {
-        const Triangle& c = tc[j].t;
+        const Triangle &q = mq.t, &c = tc[j].t;
         const bool faces = mq.delaunay && tc[j].delaunay;
         const int m = faces ? edgeMask(q, c, params) : fullyConsistent(q, c, params) * 7;
-        if (m != 0) support(j, m);
+        if (m != 0) counts.add(q, c, m);
       }
       continue;
     }
     // Masks first (vectorised), then only the pairs that give support: in a lattice stand
     // ~125,000 pairs per candidate fall in the windows and under a tenth of them support.
-    boundsMasks(cols, b, mq.delaunay, from, to, &mask);
-    const uint8_t* m = mask.data();
-    const size_t n = to - from;
-    size_t j = 0;
-    for (; j + 8 <= n; j += 8) {
-      uint64_t word = 0;
-      std::memcpy(&word, m + j, sizeof word);
-      if (word == 0) continue;
-      for (size_t k = j; k < j + 8; ++k) {
-        if (m[k] != 0) support(from + k, m[k]);
-      }
-    }
-    for (; j < n; ++j) {
-      if (m[j] != 0) support(from + j, m[j]);
-    }
+    boundsMasks(scratch.cols, bounds[i], mq.delaunay, from, to, &scratch.mask);
+    forEachNonzero(scratch.mask.data(), to - from,
+                   [&](size_t k, uint8_t m) { counts.add(mq.t, tc[from + k].t, m); });
   }
-  sup.strong.assign(nq * nc, 0);
-  sup.weak.assign(nq * nc, 0);
-  for (const uint32_t k : sup.touched) {
-    sup.strong[k] = static_cast<uint16_t>(packed[k] & 0xffffu);
-    sup.weak[k] = static_cast<uint16_t>(packed[k] >> 16);
-    packed[k] = 0;
-  }
+  counts.out();
   return sup;
 }
 
