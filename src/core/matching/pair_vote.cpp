@@ -43,6 +43,30 @@ inline double approxAtan2(double y, double x) {
   return y < 0.0 ? -a : a;
 }
 
+/// The vote accumulator's yaw bins: n_yaw of yaw_bin [rad] from 0, a yaw in [-pi, pi] or
+/// [0, 2 pi) wrapped into them.
+struct YawBins {
+  YawBins(int64_t n, double bin) : n_yaw(n), yaw_bin(bin), hair(kYawHair / bin) {}
+  int64_t n_yaw;
+  double yaw_bin;
+  double hair;  ///< kYawHair in bins
+  int64_t exact(double yaw) const {
+    if (yaw < 0.0) yaw += kTwoPi;
+    return std::min<int64_t>(static_cast<int64_t>(yaw / yaw_bin), n_yaw - 1);
+  }
+  /// The bin of an approximate yaw `near` (within kApproxYawErr of the exact one) when it lies
+  /// clear of the bin edges (and of the wrap), else exact(yaw()): the bin of the exact yaw
+  /// either way.
+  template <class Yaw>
+  int64_t of(double near, const Yaw& yaw) const {
+    const double pos = (near < 0.0 ? near + kTwoPi : near) / yaw_bin;
+    const double frac = pos - static_cast<double>(floorIndex(pos));
+    const bool clear =
+        frac > hair && frac < 1.0 - hair && pos > 0.0 && pos < static_cast<double>(n_yaw) - hair;
+    return clear ? static_cast<int64_t>(pos) : exact(yaw());
+  }
+};
+
 inline int64_t packBin(int64_t iyaw, int64_t ix, int64_t iy) {
   // 12 bits of yaw (up to 4096 bins), 26 bits per translation axis (+-33,000 bins).
   constexpr int64_t kHalf = int64_t{1} << 25;
@@ -151,30 +175,16 @@ VoteAccumulator accumulateVotes(const std::vector<TrunkPair>& pq, const std::vec
     VoteBin& b = acc.at(iyaw, floorIndex(t.x() / xy_bin), floorIndex(t.y() / xy_bin));
     b.count += 1.0, b.cos_sum += cy, b.sin_sum += sy, b.t_sum += t;
   };
-  auto yawBin = [&](double yaw) {
-    if (yaw < 0.0) yaw += kTwoPi;
-    return std::min<int64_t>(static_cast<int64_t>(yaw / yaw_bin), n_yaw - 1);
-  };
-  // The yaw bin of an approximate yaw `near` (within kApproxYawErr of the exact one) when it
-  // lies clear of the bin edges (and of the wrap), else of exact(): the bin the exact yaw
-  // falls in either way.
-  const double hair = kYawHair / yaw_bin;
-  auto binOf = [&](double near, const auto& exact) {
-    const double pos = (near < 0.0 ? near + kTwoPi : near) / yaw_bin;
-    const double frac = pos - static_cast<double>(floorIndex(pos));
-    const bool clear =
-        frac > hair && frac < 1.0 - hair && pos > 0.0 && pos < static_cast<double>(n_yaw) - hair;
-    return clear ? static_cast<int64_t>(pos) : yawBin(exact());
-  };
+  const YawBins bins(n_yaw, yaw_bin);
   forCompatible([&](const TrunkPair& a, const TrunkPair& b) {
     // yaw = direction of b - direction of a pairs a.i with b.i and a.j with b.j;
     // yaw + pi pairs a.i with b.j and a.j with b.i.
     const double cy = b.cos_a * a.cos_a + b.sin_a * a.sin_a;
     const double sy = b.sin_a * a.cos_a - b.cos_a * a.sin_a;
     const double yaw = approxAtan2(sy, cy);
-    vote(binOf(yaw, [&] { return std::atan2(sy, cy); }), cy, sy, a.mid, b.mid);
+    vote(bins.of(yaw, [&] { return std::atan2(sy, cy); }), cy, sy, a.mid, b.mid);
     const double turned = yaw < 0.0 ? yaw + M_PI : yaw - M_PI;
-    vote(binOf(turned, [&] { return std::atan2(-sy, -cy); }), -cy, -sy, a.mid, b.mid);
+    vote(bins.of(turned, [&] { return std::atan2(-sy, -cy); }), -cy, -sy, a.mid, b.mid);
   });
   return acc;
 }
