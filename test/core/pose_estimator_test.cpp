@@ -208,6 +208,72 @@ TEST(PoseStages, EstimateYawIsExactOnCleanTimsAndReportsConsensus) {
   EXPECT_LT(yaw.runner_up, 0.5 * yaw.consensus);  // short TIMs only, far from the yaw
 }
 
+/// The yaw sweep's consensus and runner-up as consensusYaw computed them with std::sort and
+/// wrapAngle throughout: (best, runner-up).
+std::pair<double, double> referenceSweep(const std::vector<pose_stages::Tim>& tims, double beta) {
+  const auto wrap = [](double a) { return std::atan2(std::sin(a), std::cos(a)); };
+  std::vector<std::pair<double, double>> ev;  // (angle, dw)
+  double wrap_start = 0.0;
+  for (const auto& m : tims) {
+    const double a = std::hypot(m.qx, m.qy), b = std::hypot(m.cx, m.cy);
+    const double cosd = (a * a + b * b - beta * beta) / (2.0 * a * b);
+    if (cosd > 1.0) continue;
+    const double half = cosd <= -1.0 ? M_PI : std::acos(cosd);
+    const double phi = std::atan2(m.qx * m.cy - m.qy * m.cx, m.qx * m.cx + m.qy * m.cy);
+    if (half >= M_PI) {
+      wrap_start += m.w;
+      continue;
+    }
+    const double s = wrap(phi - half), e = wrap(phi + half);
+    ev.emplace_back(s, m.w);
+    ev.emplace_back(e, -m.w);
+    if (s > e) wrap_start += m.w;
+  }
+  std::sort(ev.begin(), ev.end(), [](const auto& x, const auto& y) {
+    return x.first < y.first || (x.first == y.first && x.second > y.second);
+  });
+  double cur = wrap_start, best = cur, theta = -M_PI;
+  for (size_t i = 0; i < ev.size(); ++i) {
+    cur += ev[i].second;
+    if (cur > best + 1e-12) {
+      best = cur;
+      theta = 0.5 * (ev[i].first + (i + 1 < ev.size() ? ev[i + 1].first : M_PI));
+    }
+  }
+  const auto far = [&](double ang) { return std::fabs(wrap(ang - theta)) > 10.0 * M_PI / 180.0; };
+  double cur2 = wrap_start, runner = far(-M_PI) ? cur2 : 0.0;
+  for (size_t i = 0; i < ev.size(); ++i) {
+    cur2 += ev[i].second;
+    const double next = i + 1 < ev.size() ? ev[i + 1].first : M_PI;
+    if (far(0.5 * (ev[i].first + next))) runner = std::max(runner, cur2);
+  }
+  return {best, runner};
+}
+
+TEST(PoseStages, YawSweepEqualsTheFullSortWithWrappedAngles) {
+  // Hundreds of TIMs (the sweep's radix sort and its shortcut around wrapAngle), with outliers
+  // and with duplicated TIMs (arc ends at equal angles), against the sweep done plainly.
+  std::mt19937 rng(19);
+  size_t cases = 0;
+  for (const double outliers : {0.0, 0.3, 0.7}) {
+    const Pose T = test::poseXyYaw(2.0, 1.0, 0.0, 1.0 - outliers);
+    const auto corrs = makeCorrs(rng, T, 120, outliers, 0.02);
+    std::vector<double> w;
+    for (const Correspondence& c : corrs) w.push_back(c.w);
+    const PoseEstimatorParams p;
+    std::vector<pose_stages::Tim> tims = pose_stages::translationInvariantMeasurements(corrs, w, p);
+    const size_t n = tims.size();
+    for (size_t i = 0; i < n; i += 3) tims.push_back(tims[i]);  // equal arc ends
+    ASSERT_GT(tims.size(), 200u) << outliers;                   // over 256 arc ends: the radix sort
+    const pose_stages::YawEstimate yaw = pose_stages::estimateYaw(tims, p);
+    const auto [best, runner] = referenceSweep(tims, p.beta_yaw_m);
+    EXPECT_EQ(yaw.consensus, best);
+    EXPECT_EQ(yaw.runner_up, runner);
+    cases += runner > 0.0;
+  }
+  EXPECT_GT(cases, 0u);  // a runner-up was there to find
+}
+
 TEST(PoseStages, RotationInliersNeedAFifthOfTheBestVoteCount) {
   using pose_stages::Tim;
   std::vector<Tim> tims;

@@ -232,6 +232,57 @@ TEST(QueryIndex, VoteTableEqualsAnOrderedMapThroughGrowth) {
   EXPECT_EQ(pair_vote_stages::VoteAccumulator{}.find(0, 0, 0), nullptr);
 }
 
+TEST(QueryIndex, VotesFallInTheBinsOfTheirOwnAtan2) {
+  // accumulateVotes bins each vote from an approximate yaw unless that lies within a hair of a
+  // bin edge: against every vote binned by its own atan2 and floor, on random directions and
+  // on directions whose yaws fall on, or beside (within the approximation's error and far
+  // below it), a bin edge.
+  const MatcherParams params;
+  const int64_t n_yaw = std::llround(360.0 / params.vote_yaw_bin_deg);
+  const double yaw_bin = 2.0 * M_PI / static_cast<double>(n_yaw);
+  std::mt19937 rng(41);
+  std::uniform_real_distribution<double> angle(-M_PI, M_PI), xy(-30.0, 30.0);
+  auto pair = [&](double a, int i) {
+    return pair_vote_stages::TrunkPair{3.0, std::cos(a), std::sin(a), {xy(rng), xy(rng)}, i, i + 1};
+  };
+  std::vector<pair_vote_stages::TrunkPair> pq, pc;
+  for (int i = 0; i < 100; ++i) pq.push_back(pair(angle(rng), i));
+  for (int i = 0; i < 100; ++i) pc.push_back(pair(angle(rng), i));
+  const double beside[] = {-3e-5, -1e-5, -1e-12, 0.0, 1e-12, 1e-5, 3e-5};
+  for (int k = 0; k < 700; ++k) {  // candidate direction = query's + edge (+ pi: turned vote)
+    const auto& q = pq[static_cast<size_t>(k) % pq.size()];
+    const double edge = static_cast<double>(k % n_yaw) * yaw_bin + beside[k % 7];
+    pc.push_back(pair(std::atan2(q.sin_a, q.cos_a) + edge - (k % 2) * M_PI, 100 + k));
+  }
+  const auto acc = pair_vote_stages::accumulateVotes(pq, pc, params);
+  std::map<std::tuple<int64_t, int64_t, int64_t>, std::array<double, 3>> ref;
+  for (const auto& a : pq) {
+    for (const auto& b : pc) {
+      const double cy = b.cos_a * a.cos_a + b.sin_a * a.sin_a;
+      const double sy = b.sin_a * a.cos_a - b.cos_a * a.sin_a;
+      for (const double sign : {1.0, -1.0}) {
+        const double c = sign * cy, s = sign * sy;
+        const Eigen::Vector2d t(b.mid.x() - (c * a.mid.x() - s * a.mid.y()),
+                                b.mid.y() - (s * a.mid.x() + c * a.mid.y()));
+        double yaw = std::atan2(s, c);
+        if (yaw < 0.0) yaw += 2.0 * M_PI;
+        const int64_t iyaw = std::min<int64_t>(static_cast<int64_t>(yaw / yaw_bin), n_yaw - 1);
+        auto& r = ref[{iyaw, static_cast<int64_t>(std::floor(t.x() / params.vote_xy_bin_m)),
+                       static_cast<int64_t>(std::floor(t.y() / params.vote_xy_bin_m))}];
+        r[0] += 1.0, r[1] += c, r[2] += s;
+      }
+    }
+  }
+  ASSERT_EQ(acc.bins.size(), ref.size());
+  for (const auto& b : acc.bins) {
+    const auto it = ref.find({b.iyaw, b.ix, b.iy});
+    ASSERT_NE(it, ref.end()) << b.iyaw << " " << b.ix << " " << b.iy;
+    EXPECT_EQ(b.count, it->second[0]);
+    EXPECT_DOUBLE_EQ(b.cos_sum, it->second[1]);
+    EXPECT_DOUBLE_EQ(b.sin_sum, it->second[2]);
+  }
+}
+
 /// matchTriangles as it was before the squared-distance bound: every trunk pair's hypot sorted.
 std::vector<MatchTriangle> referenceMatchTriangles(const Descriptor& d, int k) {
   const int n = static_cast<int>(d.trunks.size());
@@ -343,6 +394,56 @@ std::vector<std::shared_ptr<const Descriptor>> standViews(const Trunks& world, u
         test::describe(test::observe(rng, world, centre, T_w_s), a ? "a" : "b", k, 100.0 * k)));
   }
   return out;
+}
+
+TEST(QueryIndex, SupportFromBoundsEqualsTheDirectTests) {
+  // accumulateSupport decides a pair from the query triangle's bounds (masks of a whole window
+  // first, then only the pairs that give support) or, without exact bounds, by consistentEdges
+  // pair by pair: the same counts, faces and neighbour triangles alike, in a natural stand and
+  // a jittered plantation (windows of thousands of near-equal triangles).
+  std::mt19937 rng(31);
+  const std::vector<std::vector<std::shared_ptr<const Descriptor>>> stands{
+      standViews(test::randomStand(rng, 100, 70, 600), 5),
+      standViews(test::plantation(rng, 100, 70, 3.0, 0.15), 6)};
+  MatcherParams p;
+  size_t strong = 0, weak = 0, kept = 0;
+  for (const auto& views : stands) {
+    for (size_t i = 0; i + 1 < views.size(); ++i) {
+      const Descriptor &q = *views[i], &c = *views[i + 1];
+      const auto tq = matchTriangles(q, p.neighbour_triangles);
+      const auto tc = matchTriangles(c, p.neighbour_triangles);
+      const auto bounds = consistencyBounds(tq, p);
+      auto direct = bounds;
+      for (ConsistencyBounds& b : direct) b.exact = false;
+      size_t pairs_a = 0, pairs_b = 0;
+      const auto a = matcher_stages::accumulateSupport(tq, tc, q.trunks.size(), c.trunks.size(), p,
+                                                       &pairs_a, &bounds);
+      const auto b = matcher_stages::accumulateSupport(tq, tc, q.trunks.size(), c.trunks.size(), p,
+                                                       &pairs_b, &direct);
+      EXPECT_EQ(pairs_a, pairs_b);
+      ASSERT_EQ(a.strong, b.strong);
+      ASSERT_EQ(a.weak, b.weak);
+      EXPECT_EQ(a.touched, b.touched);  // first touch first: the same pairs in the same order
+      for (size_t k = 0; k < a.strong.size(); ++k) strong += a.strong[k] > 0, weak += a.weak[k] > 0;
+      // The heaviest K (selected, then sorted) are the first K of all of them sorted.
+      MatcherParams all = p;
+      all.max_correspondences = 1 << 30;
+      const auto every = matcher_stages::weightedCorrespondences(a, q, c, all);
+      MatcherParams few = p;
+      few.max_correspondences = 40;
+      const auto top = matcher_stages::weightedCorrespondences(a, q, c, few);
+      ASSERT_EQ(top.size(), std::min<size_t>(40, every.size()));
+      for (size_t k = 0; k < top.size(); ++k) {
+        EXPECT_EQ(top[k].iq, every[k].iq);
+        EXPECT_EQ(top[k].ic, every[k].ic);
+        EXPECT_EQ(top[k].w, every[k].w);
+      }
+      kept += every.size() > top.size();
+    }
+  }
+  EXPECT_GT(strong, 1000u);  // the cases under test happened
+  EXPECT_GT(weak, 1000u);
+  EXPECT_GT(kept, 10u);
 }
 
 /// The loop query keeps: every candidate matched and verified in screening order (matchPair),

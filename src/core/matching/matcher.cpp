@@ -125,16 +125,6 @@ bool consistentRange(float a, double rel, double abs_tol, float* lo, float* hi) 
   return true;
 }
 
-/// edgeMask from the query triangle's bounds, without branches; a pair that is not a pair of
-/// faces only needs to know whether all is consistent (7) or not (0).
-inline int boundsMask(const ConsistencyBounds& b, const Triangle& c, bool faces) {
-  auto in = [&](int j, float v) { return static_cast<int>(v >= b.lo[j]) & (v <= b.hi[j]); };
-  const int l0 = in(0, c.len[0]), l1 = in(1, c.len[1]), l2 = in(2, c.len[2]);
-  const int r0 = in(3, c.r[0]), r1 = in(4, c.r[1]), r2 = in(5, c.r[2]);
-  if (!faces) return (l0 & l1 & l2 & r0 & r1 & r2) * 7;
-  return (l0 & r0 & r2) | ((l1 & r0 & r1) << 1) | ((l2 & r1 & r2) << 2);  // as edgeMask
-}
-
 }  // namespace
 
 std::vector<ConsistencyBounds> consistencyBounds(const std::vector<MatchTriangle>& t,
@@ -381,31 +371,142 @@ int consistentEdges(const Triangle& q, const Triangle& c, const MatcherParams& p
 namespace {
 
 /// The candidate triangles' values as columns, so that a query triangle's test against a run
-/// of them is a loop over contiguous floats that the compiler vectorises.
+/// of them is a loop over contiguous floats that the compiler vectorises; `face` is 7 for a
+/// Delaunay face, 0 for a neighbour triangle.
 struct TriangleColumns {
   std::array<std::vector<float>, 6> v;  // len[0..2], r[0..2]
+  std::vector<uint8_t> face;
   void assign(const std::vector<MatchTriangle>& t) {
     for (int a = 0; a < 6; ++a) v[a].resize(t.size());
+    face.resize(t.size());
     for (size_t j = 0; j < t.size(); ++j) {
       for (int a = 0; a < 3; ++a) {
         v[a][j] = t[j].t.len[a];
         v[3 + a][j] = t[j].t.r[a];
       }
+      face[j] = t[j].delaunay ? 7 : 0;
     }
   }
 };
 
-/// full[j - from] = 1 when every value of candidate triangle j lies in b's intervals (the
-/// non-face case of boundsMask), for j in [from, to).
-void fullyInBounds(const TriangleColumns& c, const ConsistencyBounds& b, size_t from, size_t to,
-                   std::vector<uint8_t>* full) {
+/// mask[j - from] = the mask of query triangle b against candidate triangle j, for j in
+/// [from, to) as edgeMask would give it for a pair of faces (q_face and c_j a face), else 7
+/// when fully consistent and 0 otherwise: from b's intervals, without branches. The partial
+/// mask is 7 exactly when every value is in its interval (each edge needs its length and both
+/// end radii), so the non-face case is "partial mask == 7".
+void boundsMasks(const TriangleColumns& c, const ConsistencyBounds& b, bool q_face, size_t from,
+                 size_t to, std::vector<uint8_t>* mask) {
   const size_t n = to - from;
-  full->assign(n, 1);
-  uint8_t* f = full->data();
-  for (int a = 0; a < 6; ++a) {
-    const float* x = c.v[a].data() + from;
-    const float lo = b.lo[a], hi = b.hi[a];
-    for (size_t j = 0; j < n; ++j) f[j] &= static_cast<uint8_t>((x[j] >= lo) & (x[j] <= hi));
+  mask->resize(n);
+  uint8_t* m = mask->data();
+  const float* x[6];
+  for (int a = 0; a < 6; ++a) x[a] = c.v[a].data() + from;
+  const uint8_t* face = c.face.data() + from;
+  const uint8_t q7 = q_face ? 7 : 0;
+  for (size_t j = 0; j < n; ++j) {
+    uint8_t in[6];
+    for (int a = 0; a < 6; ++a)
+      in[a] = static_cast<uint8_t>((x[a][j] >= b.lo[a]) & (x[a][j] <= b.hi[a]));
+    const uint8_t partial = static_cast<uint8_t>(
+        (in[0] & in[3] & in[5]) | ((in[1] & in[3] & in[4]) << 1) | ((in[2] & in[4] & in[5]) << 2));
+    const uint8_t full = static_cast<uint8_t>(-static_cast<uint8_t>(partial == 7));  // 0 or 0xff
+    m[j] = static_cast<uint8_t>(partial & ((q7 & face[j]) | full));
+  }
+}
+
+/// The scratch of accumulateSupport, one per thread. Out of line: a thread_local of a shared
+/// library is reached through __tls_get_addr, which the compiler re-called inside the
+/// triangle-pair loop when the scratch was used there directly.
+struct SupportScratch {
+  TriangleColumns cols;
+  std::vector<uint8_t> mask;
+  /// E^s | E^w << 16 per vertex pair while counting (one load and store per count, not two
+  /// loads of separate arrays); all zero between calls.
+  std::vector<uint32_t> packed;
+};
+__attribute__((noinline)) SupportScratch& supportScratch() {
+  thread_local SupportScratch scratch;
+  return scratch;
+}
+
+/// The vertex support being counted, in the scratch's packed table; out() copies it into
+/// sup. The table is all zero again afterwards: out() clears what it copies, the destructor
+/// what an exception (an allocation failing in push_back) would leave.
+class SupportCounts {
+ public:
+  SupportCounts(std::vector<uint32_t>* table, VertexSupport* sup) : sup_(*sup) {
+    if (table->size() < sup_.nq * sup_.nc) table->resize(sup_.nq * sup_.nc, 0);
+    packed_ = table->data();
+  }
+  ~SupportCounts() {
+    for (const uint32_t k : sup_.touched) packed_[k] = 0;
+  }
+  /// Eq. (3.4)-(3.7) for one triangle pair of mask m (7: all edges consistent): strong
+  /// support to its three vertex pairs, else weak support to the ends of its consistent edges.
+  /// Masks other than 0 and 7 come from pairs of Delaunay faces only: neighbour triangles share
+  /// their edges many times over, and their partial matches would pile up weak support.
+  void add(const Triangle& q, const Triangle& c, int m) {
+    if (m == 7) {
+      for (int a = 0; a < 3; ++a) bump(kStrong, q.v[a], c.v[a]);  // Eq. (3.6)
+      return;
+    }
+    for (int a = 0; a < 3; ++a) {  // Eq. (3.7)
+      if (!(m & (1 << a))) continue;
+      bump(kWeak, q.v[kEdgeEnds[a][0]], c.v[kEdgeEnds[a][0]]);
+      bump(kWeak, q.v[kEdgeEnds[a][1]], c.v[kEdgeEnds[a][1]]);
+    }
+  }
+  void out() {
+    sup_.strong.assign(sup_.nq * sup_.nc, 0);
+    sup_.weak.assign(sup_.nq * sup_.nc, 0);
+    for (const uint32_t k : sup_.touched) {
+      sup_.strong[k] = static_cast<uint16_t>(packed_[k] & 0xffffu);
+      sup_.weak[k] = static_cast<uint16_t>(packed_[k] >> 16);
+      packed_[k] = 0;
+    }
+  }
+
+ private:
+  static constexpr int kStrong = 0, kWeak = 16;  // the count's shift in a packed word
+  void bump(int shift, int iq, int ic) {
+    const size_t k = static_cast<size_t>(iq) * sup_.nc + ic;
+    const uint32_t v = packed_[k];
+    if (v == 0) sup_.touched.push_back(static_cast<uint32_t>(k));
+    if ((v >> shift & 0xffffu) != 0xffffu) packed_[k] = v + (1u << shift);  // saturates
+  }
+  VertexSupport& sup_;
+  uint32_t* packed_ = nullptr;
+};
+
+/// The candidate triangles (sorted by len[0]) whose longest edge can pass Cons_l with l:
+/// [first, second). A pair whose longest edges disagree could still give weak support through
+/// e2/e3 in Alg. 1; dtif drops that evidence on purpose: such edge-only coincidences are the
+/// bulk of random support.
+std::pair<size_t, size_t> lengthWindow(const std::vector<float>& len0, double l,
+                                       const MatcherParams& params) {
+  const double rel = params.edge_rel_tol, abs_tol = params.edge_abs_tol_m;
+  const double lo = std::min(l - abs_tol, l * (1.0 - rel));
+  const double hi = std::max(l + abs_tol, l / (1.0 - rel));
+  const auto from =
+      std::lower_bound(len0.begin(), len0.end(), lo, [](float x, double v) { return x < v; });
+  const auto to = std::upper_bound(from, len0.end(), hi, [](double v, float x) { return v < x; });
+  return {static_cast<size_t>(from - len0.begin()), static_cast<size_t>(to - len0.begin())};
+}
+
+/// f(k, m[k]) for every k < n with m[k] != 0, in order; eight zero bytes are skipped at once.
+template <class F>
+void forEachNonzero(const uint8_t* m, size_t n, const F& f) {
+  size_t j = 0;
+  for (; j + 8 <= n; j += 8) {
+    uint64_t word = 0;
+    std::memcpy(&word, m + j, sizeof word);
+    if (word == 0) continue;
+    for (size_t k = j; k < j + 8; ++k) {
+      if (m[k] != 0) f(k, m[k]);
+    }
+  }
+  for (; j < n; ++j) {
+    if (m[j] != 0) f(j, m[j]);
   }
 }
 
@@ -423,69 +524,29 @@ VertexSupport accumulateSupport(const std::vector<MatchTriangle>& tq,
   VertexSupport sup;
   sup.nq = nq;
   sup.nc = nc;
-  sup.strong.assign(nq * nc, 0);
-  sup.weak.assign(nq * nc, 0);
-  auto bump = [&](std::vector<uint16_t>& m, int iq, int ic) {
-    const size_t k = static_cast<size_t>(iq) * nc + ic;
-    if (sup.strong[k] == 0 && sup.weak[k] == 0) sup.touched.push_back(static_cast<uint32_t>(k));
-    if (m[k] < 65535) ++m[k];
-  };
-  struct Scratch {
-    TriangleColumns cols;
-    std::vector<uint8_t> full;
-  };
-  thread_local Scratch scratch;  // one TLS lookup per call, not one per use
-  TriangleColumns& cols = scratch.cols;
-  std::vector<uint8_t>& full = scratch.full;
-  cols.assign(tc);
-  const std::vector<float>& len0 = cols.v[0];
-  const double rel = params.edge_rel_tol, abs_tol = params.edge_abs_tol_m;
+  SupportScratch& scratch = supportScratch();
+  SupportCounts counts(&scratch.packed, &sup);
+  scratch.cols.assign(tc);
   for (size_t i = 0; i < tq.size(); ++i) {
     const MatchTriangle& mq = tq[i];
-    const Triangle& q = mq.t;
-    const ConsistencyBounds& b = bounds[i];
-    // Triangles are sorted by len[0]; Cons_l on e1 bounds l_c to [lo, hi], so a binary search
-    // finds the only candidate triangles whose longest edge can be consistent. A pair whose
-    // longest edges disagree could still give weak support through e2/e3 in Alg. 1; dtif drops
-    // that evidence on purpose: such edge-only coincidences are the bulk of random support.
-    const double l = q.len[0];
-    const double lo = std::min(l - abs_tol, l * (1.0 - rel));
-    const double hi = std::max(l + abs_tol, l / (1.0 - rel));
-    const size_t from = static_cast<size_t>(
-        std::lower_bound(len0.begin(), len0.end(), lo, [](float x, double v) { return x < v; }) -
-        len0.begin());
-    const size_t to = static_cast<size_t>(
-        std::upper_bound(len0.begin() + static_cast<std::ptrdiff_t>(from), len0.end(), hi,
-                         [](double v, float x) { return v < x; }) -
-        len0.begin());
+    const auto [from, to] = lengthWindow(scratch.cols.v[0], mq.t.len[0], params);
     *triangle_pairs += to - from;
-    // Eq. (3.4): chi_a per canonical edge; only a pair of faces needs the partial mask.
-    const auto support = [&](size_t j, int mask, bool faces) {
-      const Triangle& c = tc[j].t;
-      if (mask == 7) {
-        for (int a = 0; a < 3; ++a) bump(sup.strong, q.v[a], c.v[a]);  // Eq. (3.6)
-      } else if (mask != 0 && faces) {
-        // Neighbour triangles share their edges many times over: their partial matches would
-        // pile up weak support on every edge; only Delaunay faces give weak support (Eq. 3.7).
-        for (int a = 0; a < 3; ++a) {  // Eq. (3.7)
-          if (!(mask & (1 << a))) continue;
-          bump(sup.weak, q.v[kEdgeEnds[a][0]], c.v[kEdgeEnds[a][0]]);
-          bump(sup.weak, q.v[kEdgeEnds[a][1]], c.v[kEdgeEnds[a][1]]);
-        }
+    if (!bounds[i].exact) {
+      for (size_t j = from; j < to; ++j) {
+        const Triangle &q = mq.t, &c = tc[j].t;
+        const bool faces = mq.delaunay && tc[j].delaunay;
+        const int m = faces ? edgeMask(q, c, params) : fullyConsistent(q, c, params) * 7;
+        if (m != 0) counts.add(q, c, m);
       }
-    };
-    if (b.exact) fullyInBounds(cols, b, from, to, &full);
-    for (size_t j = from; j < to; ++j) {
-      const Triangle& c = tc[j].t;
-      const bool faces = mq.delaunay && tc[j].delaunay;
-      support(j,
-              !b.exact ? (faces ? edgeMask(q, c, params) : fullyConsistent(q, c, params) * 7)
-              : full[j - from] ? 7
-              : faces          ? boundsMask(b, c, true)
-                               : 0,
-              faces);
+      continue;
     }
+    // Masks first (vectorised), then only the pairs that give support: in a lattice stand
+    // ~125,000 pairs per candidate fall in the windows and under a tenth of them support.
+    boundsMasks(scratch.cols, bounds[i], mq.delaunay, from, to, &scratch.mask);
+    forEachNonzero(scratch.mask.data(), to - from,
+                   [&](size_t k, uint8_t m) { counts.add(mq.t, tc[from + k].t, m); });
   }
+  counts.out();
   return sup;
 }
 
@@ -515,11 +576,16 @@ std::vector<Correspondence> weightedCorrespondences(const VertexSupport& support
   // Eq. (3.10), heaviest first; ties by index (the flat index orders by query, then candidate
   // trunk) so the order is total and deterministic (the heaviest K sorted are then the first K
   // of the whole list sorted).
+  // The order is strict (indices differ), so selecting the heaviest K and then sorting them
+  // gives partial_sort's result, in O(n + K log K) rather than O(n log K) (thousands of pairs
+  // in a lattice stand).
   const size_t keep = std::min(weighted.size(), static_cast<size_t>(params.max_correspondences));
-  std::partial_sort(weighted.begin(), weighted.begin() + keep, weighted.end(),
-                    [](const auto& a, const auto& b) {
-                      return a.first != b.first ? a.first > b.first : a.second < b.second;
-                    });
+  const auto heavier = [](const auto& a, const auto& b) {
+    return a.first != b.first ? a.first > b.first : a.second < b.second;
+  };
+  if (keep < weighted.size())
+    std::nth_element(weighted.begin(), weighted.begin() + keep, weighted.end(), heavier);
+  std::sort(weighted.begin(), weighted.begin() + keep, heavier);
   std::vector<Correspondence> out(keep);
   const size_t nc = support.nc;
   for (size_t i = 0; i < keep; ++i) {

@@ -135,8 +135,14 @@ bool fitTiltPlane(const TiltSamples& smp, const Eigen::Vector2d& centre,
         const double w = scale * tukeyWeight(g.dz[k] - J.dot(s), c);
         if (w == 0.0) continue;
         n_kept += group == 1;
-        A += w * J * J.transpose();
-        b += w * J * g.dz[k];
+        // A += w J J^T and b += w J dz as Eigen's outer product computes them, entry (i, j)
+        // as J_j (w J_i), over J's three nonzero entries only: the others add zeros.
+        const int o = group;
+        const double x = J(2), y = J(3), wx = w * x, wy = w * y;
+        A(o, o) += w, A(2, o) += wx, A(3, o) += wy;
+        A(o, 2) += x * w, A(2, 2) += x * wx, A(3, 2) += x * wy;
+        A(o, 3) += y * w, A(2, 3) += y * wx, A(3, 3) += y * wy;
+        b(o) += w * g.dz[k], b(2) += wx * g.dz[k], b(3) += wy * g.dz[k];
       }
     };
     add(smp.bases, 0, kTukeyC, 1.0);

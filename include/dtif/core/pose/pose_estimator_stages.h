@@ -19,6 +19,9 @@ struct Tim {
   int a, b;
   double qx, qy, cx, cy;  // d^q_ab, d^c_ab
   double w;               // omega_ab
+  /// |d^q_ab|, |d^c_ab| (hypot) as translationInvariantMeasurements measured them, so that the
+  /// yaw sweep need not measure them again; negative: not measured (a TIM made by hand).
+  double lq = -1.0, lc = -1.0;
 };
 
 /// Eq. (3.13): the TIMs over the correspondence pairs (a fixed subsample beyond
