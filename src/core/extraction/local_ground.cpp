@@ -310,7 +310,11 @@ std::vector<float> heightsAboveGround(const LocalPoints& pts, const GroundGrid& 
   return h;
 }
 
-void heightsAboveGround(const LocalPoints& pts, const GroundGrid& grid, std::vector<float>* out) {
+namespace {
+
+// heightsAboveGround into *out, and with a slab (not null) heightsAndSlab's slab too.
+void heightsPass(const LocalPoints& pts, const GroundGrid& grid, const TrunkExtractorParams* p,
+                 std::vector<float>* out, std::vector<uint32_t>* slab) {
   std::vector<float>& h = *out;
   const size_t n = pts.size();
   // Each cell's plane about its centre, once per cell instead of two divisions per point.
@@ -327,10 +331,38 @@ void heightsAboveGround(const LocalPoints& pts, const GroundGrid& grid, std::vec
   const PointCell cell_of(grid);
   const float *X = pts.x.data(), *Y = pts.y.data(), *Z = pts.z.data();
   float* H = h.data();
+  if (!slab) {
+    for (size_t i = 0; i < n; ++i) {
+      const Centred& cc = cells[cell_of(X[i], Y[i])];
+      H[i] = static_cast<float>(Z[i] - cc.pl.at(X[i] - cc.x0, Y[i] - cc.y0));
+    }
+    return;
+  }
+  // Branch-free, as slabColumns selects: about a quarter of the points are in the slab, in no
+  // predictable pattern.
+  slab->resize(n);
+  uint32_t* S = slab->data();
+  size_t ns = 0;
+  const double lo = p->slab_min_h_m, hi = p->slab_max_h_m;
   for (size_t i = 0; i < n; ++i) {
     const Centred& cc = cells[cell_of(X[i], Y[i])];
-    H[i] = static_cast<float>(Z[i] - cc.pl.at(X[i] - cc.x0, Y[i] - cc.y0));
+    const float hv = static_cast<float>(Z[i] - cc.pl.at(X[i] - cc.x0, Y[i] - cc.y0));
+    H[i] = hv;
+    S[ns] = static_cast<uint32_t>(i);
+    ns += static_cast<size_t>((hv >= lo) & (hv < hi));
   }
+  slab->resize(ns);
+}
+
+}  // namespace
+
+void heightsAboveGround(const LocalPoints& pts, const GroundGrid& grid, std::vector<float>* out) {
+  heightsPass(pts, grid, nullptr, out, nullptr);
+}
+
+void heightsAndSlab(const LocalPoints& pts, const GroundGrid& grid, const TrunkExtractorParams& p,
+                    std::vector<float>* h, std::vector<uint32_t>* slab) {
+  heightsPass(pts, grid, &p, h, slab);
 }
 
 Footprint trunkFootprint(const Cloud& cloud, const TrunkExtractorParams& p) {

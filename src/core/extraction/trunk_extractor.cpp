@@ -418,8 +418,10 @@ void fitCandidate(const LocalPoints& pts, const std::vector<float>& h, const Gro
                   std::vector<FoundTrunk>* found, TrunkExtractionStats* st) {
   std::vector<Eigen::Vector2d> band;
   std::vector<float> h_band;
-  for (uint32_t k = cand.start[l]; k < cand.start[l + 1]; ++k) {
-    const uint32_t i = cand.points[k];
+  const uint32_t* idx = cand.points.data() + cand.start[l];
+  const size_t np = cand.start[l + 1] - cand.start[l];
+  for (size_t k = 0; k < np; ++k) {
+    const uint32_t i = idx[k];
     const double hi = h[i];
     if (hi >= p.fit_min_h_m && hi <= p.fit_max_h_m) {
       band.emplace_back(pts.x[i], pts.y[i]);
@@ -520,7 +522,7 @@ namespace {
 bool findTrunks(const LocalPoints& pts, const std::vector<float>& h, const GroundGrid& ground,
                 const TrunkExtractorParams& p, VoxelColumns* cols, std::vector<FoundTrunk>* found,
                 TrunkExtractionStats* st) {
-  slabColumns(pts, h, p, cols);
+  columnsOfSlab(pts, h, p, cols);  // the slab from heightsAndSlab
   if (cols->slab.empty()) return false;
   st->candidate_columns = cols->passing;
   const TrunkCandidates cand = clusterColumns(*cols, p);
@@ -559,7 +561,7 @@ TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorPara
   const GroundGrid& ground = ws.ground;
   estimateLocalGround(pts, p, &ws.ground);
   const std::vector<float>& h = ws.h;
-  heightsAboveGround(pts, ground, &ws.h);
+  heightsAndSlab(pts, ground, p, &ws.h, &ws.cols.slab);
   // DATASET.md's overlap cells, so verification measures an aligned pair's overlap as the
   // protocol does.
   result.footprint = all_inside && marks && finite == cloud.size() && marks->complete()
