@@ -35,8 +35,10 @@ void groundOfCell(const GroundGrid& grid, size_t c, const TrunkExtractorParams& 
   std::fill(s->smin.begin(), s->smin.end(), std::numeric_limits<float>::infinity());
   std::fill(s->sopen.begin(), s->sopen.end(), 1);
   s->sidx.resize(e - b);
+  // The first read of the sorted points since binGroundGrid wrote them.
   for (uint32_t k = b; k < e; ++k) {
     const GroundGrid::SortedPoint& q = grid.sorted[k];
+    prefetchAhead(grid.sorted.data(), k, grid.sorted.size());
     const int sx = std::clamp(static_cast<int>(s->by_sub(q.x - x0)), 0, ns - 1);
     const int sy = std::clamp(static_cast<int>(s->by_sub(q.y - y0)), 0, ns - 1);
     const int sc = sy * ns + sx;
@@ -205,13 +207,17 @@ void binGroundGrid(const LocalPoints& pts, const TrunkExtractorParams& p, Ground
   const PointCell cell_of(grid);
   // Raw pointers: through the members the compiler reloads them at every point.
   uint32_t* count = grid.start.data() + 1;
-  for (size_t i = 0; i < n; ++i) ++count[cell_of(X[i], Y[i])];
+  for (size_t i = 0; i < n; ++i) {
+    prefetchAhead(X, i, n), prefetchAhead(Y, i, n);
+    ++count[cell_of(X[i], Y[i])];
+  }
   for (size_t c = 0; c < gcells; ++c) grid.start[c + 1] += grid.start[c];
   std::vector<uint32_t> fill(grid.start.begin(), grid.start.end() - 1);
   grid.sorted.resize(n);
   GroundGrid::SortedPoint* out_pts = grid.sorted.data();
   const float* Z = pts.z.data();
   for (size_t i = 0; i < n; ++i) {
+    prefetchAhead(X, i, n), prefetchAhead(Y, i, n), prefetchAhead(Z, i, n);
     out_pts[fill[cell_of(X[i], Y[i])]++] = {X[i], Y[i], Z[i]};
   }
 }
@@ -333,6 +339,7 @@ void heightsPass(const LocalPoints& pts, const GroundGrid& grid, const TrunkExtr
   float* H = h.data();
   if (!slab) {
     for (size_t i = 0; i < n; ++i) {
+      prefetchAhead(X, i, n), prefetchAhead(Y, i, n), prefetchAhead(Z, i, n);
       const Centred& cc = cells[cell_of(X[i], Y[i])];
       H[i] = static_cast<float>(Z[i] - cc.pl.at(X[i] - cc.x0, Y[i] - cc.y0));
     }
@@ -345,6 +352,7 @@ void heightsPass(const LocalPoints& pts, const GroundGrid& grid, const TrunkExtr
   size_t ns = 0;
   const double lo = p->slab_min_h_m, hi = p->slab_max_h_m;
   for (size_t i = 0; i < n; ++i) {
+    prefetchAhead(X, i, n), prefetchAhead(Y, i, n), prefetchAhead(Z, i, n);
     const Centred& cc = cells[cell_of(X[i], Y[i])];
     const float hv = static_cast<float>(Z[i] - cc.pl.at(X[i] - cc.x0, Y[i] - cc.y0));
     H[i] = hv;

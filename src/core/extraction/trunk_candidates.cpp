@@ -120,6 +120,7 @@ void slabCells(const LocalPoints& pts, VoxelColumns* cols, double cs, std::vecto
   const uint32_t* slab = cols->slab.data();
   const size_t ns = cols->slab.size();
   for (size_t k = 0; k < ns; ++k) {
+    prefetchGather(pts.x.data(), slab, k, ns), prefetchGather(pts.y.data(), slab, k, ns);
     const uint32_t i = slab[k];
     const int64_t cx = floorIndex(pts.x[i] / cs), cy = floorIndex(pts.y[i] / cs);
     (*cxs)[k] = cx, (*cys)[k] = cy;
@@ -178,6 +179,7 @@ void columnsOfSlab(const LocalPoints& pts, const std::vector<float>& h,
   cols.slab_col.resize(cols.slab.size());
   // Columns are numbered in order of their first slab point, whichever index holds them.
   for (size_t k = 0; k < cols.slab.size(); ++k) {
+    prefetchGather(h.data(), cols.slab.data(), k, cols.slab.size());
     const uint32_t i = cols.slab[k];
     const int64_t ix = CX[k], iy = CY[k];
     const int next = static_cast<int>(cols.ix.size());

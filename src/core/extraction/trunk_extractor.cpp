@@ -191,6 +191,7 @@ BaseRing gatherBaseRing(const GroundGrid& grid, double cx, double cy, double r,
       double x0, y0;
       grid.cellCentre(c, &x0, &y0);
       for (uint32_t k = grid.start[c]; k < grid.start[c + 1]; ++k) {
+        prefetchAhead(grid.sorted.data(), k, grid.sorted.size());  // the row's next cells
         const GroundGrid::SortedPoint& q = grid.sorted[k];
         const double dx = q.x - cx, dy = q.y - cy;
         const double d2 = dx * dx + dy * dy;
@@ -421,6 +422,8 @@ void fitCandidate(const LocalPoints& pts, const std::vector<float>& h, const Gro
   const uint32_t* idx = cand.points.data() + cand.start[l];
   const size_t np = cand.start[l + 1] - cand.start[l];
   for (size_t k = 0; k < np; ++k) {
+    prefetchGather(h.data(), idx, k, np), prefetchGather(pts.x.data(), idx, k, np);
+    prefetchGather(pts.y.data(), idx, k, np);
     const uint32_t i = idx[k];
     const double hi = h[i];
     if (hi >= p.fit_min_h_m && hi <= p.fit_max_h_m) {

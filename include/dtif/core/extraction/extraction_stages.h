@@ -49,6 +49,22 @@ class Divisor {
   bool pow2_;
 };
 
+/// Asks for a[i + ahead] (at most the last of its n elements) before a pass over a reaches it;
+/// changes no value. The passes over the points stall where the hardware prefetcher stops (at
+/// page boundaries); about 1 KB ahead keeps them streaming.
+template <class T>
+inline void prefetchAhead(const T* a, size_t i, size_t n) {
+  constexpr size_t ahead = 1024 / sizeof(T);
+  __builtin_prefetch(a + std::min(i + ahead, n - 1));
+}
+
+/// Asks for a[index[k + ahead]] (at most index's last) before a gather through index reaches it.
+template <class T>
+inline void prefetchGather(const T* a, const uint32_t* index, size_t k, size_t n) {
+  constexpr size_t ahead = 16;
+  __builtin_prefetch(a + index[std::min(k + ahead, n - 1)]);
+}
+
 /// Horizontal distance of an offset: std::hypot is exact but slow, and the local coordinates
 /// here are small and well scaled [m].
 inline double planarDist(double dx, double dy) { return std::sqrt(dx * dx + dy * dy); }
