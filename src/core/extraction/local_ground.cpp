@@ -25,6 +25,39 @@ struct SubColumns {
   std::vector<float> zs;    // ground points of the cell [m]
 };
 
+// The sub-columns of the points b..e-1 of a cell with corner (x0, y0): each point's sub-column
+// (s->sidx, by k - b), their lowest points and which are open. Raw pointers and locals: through
+// the members the compiler reloads them at every point (a char store may alias anything). The
+// open test branch-free: it follows no pattern.
+void openSubColumns(const GroundGrid& grid, uint32_t b, uint32_t e, double x0, double y0,
+                    const TrunkExtractorParams& p, SubColumns* s) {
+  const int ns = s->ns;
+  std::fill(s->smin.begin(), s->smin.end(), std::numeric_limits<float>::infinity());
+  std::fill(s->sopen.begin(), s->sopen.end(), 1);
+  s->sidx.resize(e - b);
+  const GroundGrid::SortedPoint* P = grid.sorted.data();
+  float* smin = s->smin.data();
+  char* sopen = s->sopen.data();
+  int* sidx = s->sidx.data();
+  const Divisor by_sub = s->by_sub;
+  // The first read of the sorted points since binGroundGrid wrote them.
+  for (uint32_t k = b; k < e; ++k) {
+    const GroundGrid::SortedPoint& q = P[k];
+    prefetchAhead(P, k, grid.sorted.size());
+    const int sx = std::clamp(static_cast<int>(by_sub(q.x - x0)), 0, ns - 1);
+    const int sy = std::clamp(static_cast<int>(by_sub(q.y - y0)), 0, ns - 1);
+    const int sc = sy * ns + sx;
+    sidx[k - b] = sc;
+    smin[sc] = std::min(smin[sc], q.z);
+  }
+  const double gap = p.ground_open_gap_m, top = p.ground_open_top_m;
+  for (uint32_t k = b; k < e; ++k) {
+    const int sc = sidx[k - b];
+    const float dz = P[k].z - smin[sc];
+    sopen[sc] &= static_cast<char>(!((dz > gap) & (dz <= top)));
+  }
+}
+
 // Ground evidence of cell c (which holds points): its open sub-columns and their ground points.
 void groundOfCell(const GroundGrid& grid, size_t c, const TrunkExtractorParams& p, SubColumns* s,
                   GroundCells* cells) {
@@ -32,30 +65,23 @@ void groundOfCell(const GroundGrid& grid, size_t c, const TrunkExtractorParams& 
   const int ns = s->ns;
   const double x0 = grid.minx + static_cast<double>(c % grid.nx) * grid.cell_m;
   const double y0 = grid.miny + static_cast<double>(c / grid.nx) * grid.cell_m;
-  std::fill(s->smin.begin(), s->smin.end(), std::numeric_limits<float>::infinity());
-  std::fill(s->sopen.begin(), s->sopen.end(), 1);
-  s->sidx.resize(e - b);
-  // The first read of the sorted points since binGroundGrid wrote them.
+  openSubColumns(grid, b, e, x0, y0, p, s);
+  // The ground points, branch-free.
+  const GroundGrid::SortedPoint* P = grid.sorted.data();
+  const float* smin = s->smin.data();
+  const char* sopen = s->sopen.data();
+  const int* sidx = s->sidx.data();
+  const double band = p.ground_band_m;
+  s->zs.resize(e - b);
+  float* zs_out = s->zs.data();
+  size_t nz = 0;
   for (uint32_t k = b; k < e; ++k) {
-    const GroundGrid::SortedPoint& q = grid.sorted[k];
-    prefetchAhead(grid.sorted.data(), k, grid.sorted.size());
-    const int sx = std::clamp(static_cast<int>(s->by_sub(q.x - x0)), 0, ns - 1);
-    const int sy = std::clamp(static_cast<int>(s->by_sub(q.y - y0)), 0, ns - 1);
-    const int sc = sy * ns + sx;
-    s->sidx[k - b] = sc;
-    s->smin[sc] = std::min(s->smin[sc], q.z);
+    const int sc = sidx[k - b];
+    const float z = P[k].z;
+    zs_out[nz] = z;
+    nz += static_cast<size_t>((sopen[sc] != 0) & (z - smin[sc] <= band));
   }
-  for (uint32_t k = b; k < e; ++k) {
-    const int sc = s->sidx[k - b];
-    const float dz = grid.sorted[k].z - s->smin[sc];
-    if (dz > p.ground_open_gap_m && dz <= p.ground_open_top_m) s->sopen[sc] = 0;
-  }
-  s->zs.clear();
-  for (uint32_t k = b; k < e; ++k) {
-    const int sc = s->sidx[k - b];
-    const float z = grid.sorted[k].z;
-    if (s->sopen[sc] && z - s->smin[sc] <= p.ground_band_m) s->zs.push_back(z);
-  }
+  s->zs.resize(nz);
   int nopen = 0;
   for (size_t sc = 0; sc < s->smin.size(); ++sc) {
     nopen += s->sopen[sc] && std::isfinite(s->smin[sc]);
