@@ -206,6 +206,32 @@ TEST(ExtractionStages, ColumnsAndCandidatesOfTwoCylinders) {
   EXPECT_EQ(clusterColumns(slabColumns(pts, h, wide), wide).count, 1);
 }
 
+// The heights pass that also selects the slab gives the heights and the slab (in point order)
+// of the separate stages, and its columns are slabColumns'.
+TEST(ExtractionStages, HeightsAndSlabInOnePassMatchTheSeparateStages) {
+  std::mt19937 rng(13);
+  LocalPoints pts;
+  addGround(&pts, slopeZ, 12.0, 0.08, &rng, {{4.0, 4.0}});
+  addCylinder(&pts, slopeZ, 4.0, 4.0, 0.2, 0.0, 3.5, &rng);
+  const TrunkExtractorParams p;
+  const GroundGrid grid = estimateLocalGround(pts, p);
+  const std::vector<float> h = heightsAboveGround(pts, grid);
+  const VoxelColumns cols = slabColumns(pts, h, p);
+  std::vector<float> h1 = {1.0f};  // storage reused
+  VoxelColumns one;
+  heightsAndSlab(pts, grid, p, &h1, &one.slab);
+  EXPECT_EQ(h1, h);
+  EXPECT_EQ(one.slab, cols.slab);
+  EXPECT_GT(one.slab.size(), 100u);
+  EXPECT_LT(one.slab.size(), pts.size() / 2);
+  columnsOfSlab(pts, h1, p, &one);
+  EXPECT_EQ(one.slab_col, cols.slab_col);
+  EXPECT_EQ(one.ix, cols.ix);
+  EXPECT_EQ(one.iy, cols.iy);
+  EXPECT_EQ(one.pass, cols.pass);
+  EXPECT_EQ(one.passing, cols.passing);
+}
+
 TEST(ExtractionStages, CircleFitOnANoisyHalfArc) {
   std::mt19937 rng(21);
   std::normal_distribution<double> nz(0.0, 0.004);

@@ -207,6 +207,36 @@ void pointTerms(const std::vector<Eigen::Vector2d>& xy, double cx, double cy, do
   }
 }
 
+// The points a Gauss-Newton step can weigh, in their order: those within c_tukey + kSlack of
+// the circle when they were gathered. A point farther than that has |d - r| >= c_tukey, hence
+// weight 0, as long as the circle has moved (centre and radius, summed) less than kSlack since:
+// skipping it changes no sum. Gathered again from all points once it has moved more.
+class NearPoints {
+ public:
+  std::vector<Eigen::Vector2d> xy;
+
+  void update(const std::vector<Eigen::Vector2d>& all, double cx, double cy, double r,
+              double c_tukey) {
+    if (gathered_ && moved_ < kSlack - kRounding) return;
+    xy.clear();
+    const double reach = c_tukey + kSlack;
+    for (const Eigen::Vector2d& q : all) {
+      if (std::abs(planarDist(q.x() - cx, q.y() - cy) - r) < reach) xy.push_back(q);
+    }
+    gathered_ = true;
+    moved_ = 0.0;
+  }
+  void moved(const Eigen::Vector3d& step) {
+    moved_ += std::abs(step(0)) + std::abs(step(1)) + std::abs(step(2));
+  }
+
+ private:
+  static constexpr double kSlack = 0.05;     // [m]
+  static constexpr double kRounding = 1e-6;  // far above the rounding of d - r [m]
+  bool gathered_ = false;
+  double moved_ = 0.0;
+};
+
 // Kasa on the inliers of the RANSAC circle (when plausible), then Tukey-weighted geometric
 // refinement (Gauss-Newton), which removes the Kasa bias on partial arcs.
 Circle refineCircle(const std::vector<Eigen::Vector2d>& xy, const Circle& start,
@@ -224,11 +254,13 @@ Circle refineCircle(const std::vector<Eigen::Vector2d>& xy, const Circle& start,
   }
   const double c_tukey = 2.0 * tol;
   PointTerms t;
+  NearPoints near;
   for (int it = 0; it < 15; ++it) {
-    pointTerms(xy, cx, cy, r, c_tukey, &t);
+    near.update(xy, cx, cy, r, c_tukey);
+    pointTerms(near.xy, cx, cy, r, c_tukey, &t);
     Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
     Eigen::Vector3d g = Eigen::Vector3d::Zero();
-    for (size_t m = 0; m < n; ++m) {
+    for (size_t m = 0; m < near.xy.size(); ++m) {
       if (t.d[m] < 1e-9) continue;
       const double e = t.e[m], w = t.w[m];
       if (w <= 0.0) continue;
@@ -241,6 +273,7 @@ Circle refineCircle(const std::vector<Eigen::Vector2d>& xy, const Circle& start,
     const Eigen::Vector3d step = -A.ldlt().solve(g);
     if (!step.allFinite()) break;
     cx += step(0), cy += step(1), r += step(2);
+    near.moved(step);
     if (step.norm() < 1e-7) break;
   }
   Circle c;

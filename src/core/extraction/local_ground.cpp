@@ -25,6 +25,39 @@ struct SubColumns {
   std::vector<float> zs;    // ground points of the cell [m]
 };
 
+// The sub-columns of the points b..e-1 of a cell with corner (x0, y0): each point's sub-column
+// (s->sidx, by k - b), their lowest points and which are open. Raw pointers and locals: through
+// the members the compiler reloads them at every point (a char store may alias anything). The
+// open test branch-free: it follows no pattern.
+void openSubColumns(const GroundGrid& grid, uint32_t b, uint32_t e, double x0, double y0,
+                    const TrunkExtractorParams& p, SubColumns* s) {
+  const int ns = s->ns;
+  std::fill(s->smin.begin(), s->smin.end(), std::numeric_limits<float>::infinity());
+  std::fill(s->sopen.begin(), s->sopen.end(), 1);
+  s->sidx.resize(e - b);
+  const GroundGrid::SortedPoint* P = grid.sorted.data();
+  float* smin = s->smin.data();
+  char* sopen = s->sopen.data();
+  int* sidx = s->sidx.data();
+  const Divisor by_sub = s->by_sub;
+  // The first read of the sorted points since binGroundGrid wrote them.
+  for (uint32_t k = b; k < e; ++k) {
+    const GroundGrid::SortedPoint& q = P[k];
+    prefetchAhead(P, k, grid.sorted.size());
+    const int sx = std::clamp(static_cast<int>(by_sub(q.x - x0)), 0, ns - 1);
+    const int sy = std::clamp(static_cast<int>(by_sub(q.y - y0)), 0, ns - 1);
+    const int sc = sy * ns + sx;
+    sidx[k - b] = sc;
+    smin[sc] = std::min(smin[sc], q.z);
+  }
+  const double gap = p.ground_open_gap_m, top = p.ground_open_top_m;
+  for (uint32_t k = b; k < e; ++k) {
+    const int sc = sidx[k - b];
+    const float dz = P[k].z - smin[sc];
+    sopen[sc] &= static_cast<char>(!((dz > gap) & (dz <= top)));
+  }
+}
+
 // Ground evidence of cell c (which holds points): its open sub-columns and their ground points.
 void groundOfCell(const GroundGrid& grid, size_t c, const TrunkExtractorParams& p, SubColumns* s,
                   GroundCells* cells) {
@@ -32,28 +65,23 @@ void groundOfCell(const GroundGrid& grid, size_t c, const TrunkExtractorParams& 
   const int ns = s->ns;
   const double x0 = grid.minx + static_cast<double>(c % grid.nx) * grid.cell_m;
   const double y0 = grid.miny + static_cast<double>(c / grid.nx) * grid.cell_m;
-  std::fill(s->smin.begin(), s->smin.end(), std::numeric_limits<float>::infinity());
-  std::fill(s->sopen.begin(), s->sopen.end(), 1);
-  s->sidx.resize(e - b);
+  openSubColumns(grid, b, e, x0, y0, p, s);
+  // The ground points, branch-free.
+  const GroundGrid::SortedPoint* P = grid.sorted.data();
+  const float* smin = s->smin.data();
+  const char* sopen = s->sopen.data();
+  const int* sidx = s->sidx.data();
+  const double band = p.ground_band_m;
+  s->zs.resize(e - b);
+  float* zs_out = s->zs.data();
+  size_t nz = 0;
   for (uint32_t k = b; k < e; ++k) {
-    const GroundGrid::SortedPoint& q = grid.sorted[k];
-    const int sx = std::clamp(static_cast<int>(s->by_sub(q.x - x0)), 0, ns - 1);
-    const int sy = std::clamp(static_cast<int>(s->by_sub(q.y - y0)), 0, ns - 1);
-    const int sc = sy * ns + sx;
-    s->sidx[k - b] = sc;
-    s->smin[sc] = std::min(s->smin[sc], q.z);
+    const int sc = sidx[k - b];
+    const float z = P[k].z;
+    zs_out[nz] = z;
+    nz += static_cast<size_t>((sopen[sc] != 0) & (z - smin[sc] <= band));
   }
-  for (uint32_t k = b; k < e; ++k) {
-    const int sc = s->sidx[k - b];
-    const float dz = grid.sorted[k].z - s->smin[sc];
-    if (dz > p.ground_open_gap_m && dz <= p.ground_open_top_m) s->sopen[sc] = 0;
-  }
-  s->zs.clear();
-  for (uint32_t k = b; k < e; ++k) {
-    const int sc = s->sidx[k - b];
-    const float z = grid.sorted[k].z;
-    if (s->sopen[sc] && z - s->smin[sc] <= p.ground_band_m) s->zs.push_back(z);
-  }
+  s->zs.resize(nz);
   int nopen = 0;
   for (size_t sc = 0; sc < s->smin.size(); ++sc) {
     nopen += s->sopen[sc] && std::isfinite(s->smin[sc]);
@@ -205,13 +233,17 @@ void binGroundGrid(const LocalPoints& pts, const TrunkExtractorParams& p, Ground
   const PointCell cell_of(grid);
   // Raw pointers: through the members the compiler reloads them at every point.
   uint32_t* count = grid.start.data() + 1;
-  for (size_t i = 0; i < n; ++i) ++count[cell_of(X[i], Y[i])];
+  for (size_t i = 0; i < n; ++i) {
+    prefetchAhead(X, i, n), prefetchAhead(Y, i, n);
+    ++count[cell_of(X[i], Y[i])];
+  }
   for (size_t c = 0; c < gcells; ++c) grid.start[c + 1] += grid.start[c];
   std::vector<uint32_t> fill(grid.start.begin(), grid.start.end() - 1);
   grid.sorted.resize(n);
   GroundGrid::SortedPoint* out_pts = grid.sorted.data();
   const float* Z = pts.z.data();
   for (size_t i = 0; i < n; ++i) {
+    prefetchAhead(X, i, n), prefetchAhead(Y, i, n), prefetchAhead(Z, i, n);
     out_pts[fill[cell_of(X[i], Y[i])]++] = {X[i], Y[i], Z[i]};
   }
 }
@@ -310,7 +342,11 @@ std::vector<float> heightsAboveGround(const LocalPoints& pts, const GroundGrid& 
   return h;
 }
 
-void heightsAboveGround(const LocalPoints& pts, const GroundGrid& grid, std::vector<float>* out) {
+namespace {
+
+// heightsAboveGround into *out, and with a slab (not null) heightsAndSlab's slab too.
+void heightsPass(const LocalPoints& pts, const GroundGrid& grid, const TrunkExtractorParams* p,
+                 std::vector<float>* out, std::vector<uint32_t>* slab) {
   std::vector<float>& h = *out;
   const size_t n = pts.size();
   // Each cell's plane about its centre, once per cell instead of two divisions per point.
@@ -327,10 +363,40 @@ void heightsAboveGround(const LocalPoints& pts, const GroundGrid& grid, std::vec
   const PointCell cell_of(grid);
   const float *X = pts.x.data(), *Y = pts.y.data(), *Z = pts.z.data();
   float* H = h.data();
-  for (size_t i = 0; i < n; ++i) {
-    const Centred& cc = cells[cell_of(X[i], Y[i])];
-    H[i] = static_cast<float>(Z[i] - cc.pl.at(X[i] - cc.x0, Y[i] - cc.y0));
+  if (!slab) {
+    for (size_t i = 0; i < n; ++i) {
+      prefetchAhead(X, i, n), prefetchAhead(Y, i, n), prefetchAhead(Z, i, n);
+      const Centred& cc = cells[cell_of(X[i], Y[i])];
+      H[i] = static_cast<float>(Z[i] - cc.pl.at(X[i] - cc.x0, Y[i] - cc.y0));
+    }
+    return;
   }
+  // Branch-free, as slabColumns selects: about a quarter of the points are in the slab, in no
+  // predictable pattern.
+  slab->resize(n);
+  uint32_t* S = slab->data();
+  size_t ns = 0;
+  const double lo = p->slab_min_h_m, hi = p->slab_max_h_m;
+  for (size_t i = 0; i < n; ++i) {
+    prefetchAhead(X, i, n), prefetchAhead(Y, i, n), prefetchAhead(Z, i, n);
+    const Centred& cc = cells[cell_of(X[i], Y[i])];
+    const float hv = static_cast<float>(Z[i] - cc.pl.at(X[i] - cc.x0, Y[i] - cc.y0));
+    H[i] = hv;
+    S[ns] = static_cast<uint32_t>(i);
+    ns += static_cast<size_t>((hv >= lo) & (hv < hi));
+  }
+  slab->resize(ns);
+}
+
+}  // namespace
+
+void heightsAboveGround(const LocalPoints& pts, const GroundGrid& grid, std::vector<float>* out) {
+  heightsPass(pts, grid, nullptr, out, nullptr);
+}
+
+void heightsAndSlab(const LocalPoints& pts, const GroundGrid& grid, const TrunkExtractorParams& p,
+                    std::vector<float>* h, std::vector<uint32_t>* slab) {
+  heightsPass(pts, grid, &p, h, slab);
 }
 
 Footprint trunkFootprint(const Cloud& cloud, const TrunkExtractorParams& p) {

@@ -117,8 +117,11 @@ void slabCells(const LocalPoints& pts, VoxelColumns* cols, double cs, std::vecto
   int64_t x0 = std::numeric_limits<int64_t>::max(), y0 = x0;
   int64_t x1 = std::numeric_limits<int64_t>::min(), y1 = x1;
   cxs->resize(cols->slab.size()), cys->resize(cols->slab.size());
-  for (size_t k = 0; k < cols->slab.size(); ++k) {
-    const uint32_t i = cols->slab[k];
+  const uint32_t* slab = cols->slab.data();
+  const size_t ns = cols->slab.size();
+  for (size_t k = 0; k < ns; ++k) {
+    prefetchGather(pts.x.data(), slab, k, ns), prefetchGather(pts.y.data(), slab, k, ns);
+    const uint32_t i = slab[k];
     const int64_t cx = floorIndex(pts.x[i] / cs), cy = floorIndex(pts.y[i] / cs);
     (*cxs)[k] = cx, (*cys)[k] = cy;
     x0 = std::min(x0, cx), x1 = std::max(x1, cx);
@@ -146,23 +149,28 @@ VoxelColumns slabColumns(const LocalPoints& pts, const std::vector<float>& h,
 
 void slabColumns(const LocalPoints& pts, const std::vector<float>& h, const TrunkExtractorParams& p,
                  VoxelColumns* out) {
+  // Branch-free: about a quarter of the points are in the slab, in no predictable pattern.
+  out->slab.resize(pts.size());
+  size_t ns = 0;
+  const double lo = p.slab_min_h_m, hi = p.slab_max_h_m;
+  for (size_t i = 0; i < pts.size(); ++i) {
+    out->slab[ns] = static_cast<uint32_t>(i);
+    ns += static_cast<size_t>((h[i] >= lo) & (h[i] < hi));
+  }
+  out->slab.resize(ns);
+  columnsOfSlab(pts, h, p, out);
+}
+
+void columnsOfSlab(const LocalPoints& pts, const std::vector<float>& h,
+                   const TrunkExtractorParams& p, VoxelColumns* out) {
   VoxelColumns& cols = *out;
-  cols.slab.clear(), cols.slab_col.clear(), cols.ix.clear(), cols.iy.clear();
+  cols.slab_col.clear(), cols.ix.clear(), cols.iy.clear();
   cols.count.clear(), cols.mask.clear(), cols.pass.clear(), cols.grid.clear();
   cols.passing = 0;
   cols.gx0 = cols.gy0 = cols.gw = cols.gh = 0;
   const double cs = p.column_cell_m;
   const int nlayers =
       std::max(1, static_cast<int>(std::ceil((p.slab_max_h_m - p.slab_min_h_m) / p.layer_h_m)));
-  // Branch-free: about a quarter of the points are in the slab, in no predictable pattern.
-  cols.slab.resize(pts.size());
-  size_t ns = 0;
-  const double lo = p.slab_min_h_m, hi = p.slab_max_h_m;
-  for (size_t i = 0; i < pts.size(); ++i) {
-    cols.slab[ns] = static_cast<uint32_t>(i);
-    ns += static_cast<size_t>((h[i] >= lo) & (h[i] < hi));
-  }
-  cols.slab.resize(ns);
   if (cols.slab.empty()) return;
   thread_local std::vector<int64_t> cxs_of_thread, cys_of_thread;  // kept between submaps
   std::vector<int64_t>&cxs = cxs_of_thread, &cys = cys_of_thread;  // each slab point's cell
@@ -171,6 +179,7 @@ void slabColumns(const LocalPoints& pts, const std::vector<float>& h, const Trun
   cols.slab_col.resize(cols.slab.size());
   // Columns are numbered in order of their first slab point, whichever index holds them.
   for (size_t k = 0; k < cols.slab.size(); ++k) {
+    prefetchGather(h.data(), cols.slab.data(), k, cols.slab.size());
     const uint32_t i = cols.slab[k];
     const int64_t ix = CX[k], iy = CY[k];
     const int next = static_cast<int>(cols.ix.size());

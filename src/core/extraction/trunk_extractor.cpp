@@ -191,6 +191,7 @@ BaseRing gatherBaseRing(const GroundGrid& grid, double cx, double cy, double r,
       double x0, y0;
       grid.cellCentre(c, &x0, &y0);
       for (uint32_t k = grid.start[c]; k < grid.start[c + 1]; ++k) {
+        prefetchAhead(grid.sorted.data(), k, grid.sorted.size());  // the row's next cells
         const GroundGrid::SortedPoint& q = grid.sorted[k];
         const double dx = q.x - cx, dy = q.y - cy;
         const double d2 = dx * dx + dy * dy;
@@ -418,8 +419,12 @@ void fitCandidate(const LocalPoints& pts, const std::vector<float>& h, const Gro
                   std::vector<FoundTrunk>* found, TrunkExtractionStats* st) {
   std::vector<Eigen::Vector2d> band;
   std::vector<float> h_band;
-  for (uint32_t k = cand.start[l]; k < cand.start[l + 1]; ++k) {
-    const uint32_t i = cand.points[k];
+  const uint32_t* idx = cand.points.data() + cand.start[l];
+  const size_t np = cand.start[l + 1] - cand.start[l];
+  for (size_t k = 0; k < np; ++k) {
+    prefetchGather(h.data(), idx, k, np), prefetchGather(pts.x.data(), idx, k, np);
+    prefetchGather(pts.y.data(), idx, k, np);
+    const uint32_t i = idx[k];
     const double hi = h[i];
     if (hi >= p.fit_min_h_m && hi <= p.fit_max_h_m) {
       band.emplace_back(pts.x[i], pts.y[i]);
@@ -526,7 +531,7 @@ namespace {
 bool findTrunks(const LocalPoints& pts, const std::vector<float>& h, const GroundGrid& ground,
                 const TrunkExtractorParams& p, VoxelColumns* cols, std::vector<FoundTrunk>* found,
                 TrunkExtractionStats* st) {
-  slabColumns(pts, h, p, cols);
+  columnsOfSlab(pts, h, p, cols);  // the slab from heightsAndSlab
   if (cols->slab.empty()) return false;
   st->candidate_columns = cols->passing;
   const TrunkCandidates cand = clusterColumns(*cols, p);
@@ -565,7 +570,7 @@ TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorPara
   const GroundGrid& ground = ws.ground;
   estimateLocalGround(pts, p, &ws.ground);
   const std::vector<float>& h = ws.h;
-  heightsAboveGround(pts, ground, &ws.h);
+  heightsAndSlab(pts, ground, p, &ws.h, &ws.cols.slab);
   // DATASET.md's overlap cells, so verification measures an aligned pair's overlap as the
   // protocol does.
   result.footprint = all_inside && marks && finite == cloud.size() && marks->complete()

@@ -1,7 +1,8 @@
 // The stages of trunk extraction (paper Sec. 3.B), each usable and testable on its own.
 // extractTrunks (trunk_extractor.h) runs them in this order:
-//   toLocalPoints -> estimateLocalGround -> heightsAboveGround -> (trunkFootprint)
-//   -> slabColumns -> clusterColumns -> fitCandidate per candidate (fitCircleRobust,
+//   toLocalPoints -> estimateLocalGround -> heightsAboveGround with the slab (heightsAndSlab)
+//   -> (trunkFootprint) -> slabColumns (columnsOfSlab) -> clusterColumns -> fitCandidate per
+//   candidate (fitCircleRobust,
 //   stemLeans, stemBase) -> keepDistinctTrunks -> groundMapIfFewBasesSeen.
 //
 // Frames: the input cloud is gravity-aligned in the submap frame S. "Local" coordinates are S
@@ -47,6 +48,22 @@ class Divisor {
   double d_, inv_;
   bool pow2_;
 };
+
+/// Asks for a[i + ahead] (at most the last of its n elements) before a pass over a reaches it;
+/// changes no value. The passes over the points stall where the hardware prefetcher stops (at
+/// page boundaries); about 1 KB ahead keeps them streaming.
+template <class T>
+inline void prefetchAhead(const T* a, size_t i, size_t n) {
+  constexpr size_t ahead = 1024 / sizeof(T);
+  __builtin_prefetch(a + std::min(i + ahead, n - 1));
+}
+
+/// Asks for a[index[k + ahead]] (at most index's last) before a gather through index reaches it.
+template <class T>
+inline void prefetchGather(const T* a, const uint32_t* index, size_t k, size_t n) {
+  constexpr size_t ahead = 16;
+  __builtin_prefetch(a + index[std::min(k + ahead, n - 1)]);
+}
 
 /// Horizontal distance of an offset: std::hypot is exact but slow, and the local coordinates
 /// here are small and well scaled [m].
@@ -162,6 +179,10 @@ void estimateLocalGround(const LocalPoints& pts, const TrunkExtractorParams& p, 
 std::vector<float> heightsAboveGround(const LocalPoints& pts, const GroundGrid& grid);
 /// The same into *h, reusing its storage.
 void heightsAboveGround(const LocalPoints& pts, const GroundGrid& grid, std::vector<float>* h);
+/// The same, and in that pass the indices of the points in the trunk slab [slab_min_h_m,
+/// slab_max_h_m), in point order: slabColumns' slab (columnsOfSlab takes it from there).
+void heightsAndSlab(const LocalPoints& pts, const GroundGrid& grid, const TrunkExtractorParams& p,
+                    std::vector<float>* h, std::vector<uint32_t>* slab);
 
 /// DATASET.md's overlap cells of the cloud in S as a footprint of footprint_cell_m cells, the
 /// ground percentiles on at most footprint_max_samples points. Empty when footprint_cell_m is 0.
@@ -224,6 +245,9 @@ VoxelColumns slabColumns(const LocalPoints& pts, const std::vector<float>& h,
 /// The same into *cols, reusing its arrays' storage.
 void slabColumns(const LocalPoints& pts, const std::vector<float>& h, const TrunkExtractorParams& p,
                  VoxelColumns* cols);
+/// slabColumns of the slab already in cols->slab (heightsAndSlab's): the rest of *cols anew.
+void columnsOfSlab(const LocalPoints& pts, const std::vector<float>& h,
+                   const TrunkExtractorParams& p, VoxelColumns* cols);
 
 /// Slab points grouped by trunk candidate.
 struct TrunkCandidates {
