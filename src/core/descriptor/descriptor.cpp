@@ -220,10 +220,12 @@ Descriptor describeSubmap(const TrunkExtractionResult& extraction, const Descrip
 void fitDescriptorBytes(Descriptor* d, int max_bytes) {
   if (max_bytes <= 0 || d->ground_map.empty()) return;
   const size_t budget = static_cast<size_t>(max_bytes);
-  const size_t total = encodeDescriptor(*d).size();
-  if (total <= budget) return;
-  const size_t rest = total - encodeGroundMap(d->ground_map).size();
-  d->ground_map = rest < budget ? fitGroundMapBytes(d->ground_map, budget - rest) : GroundMap();
+  // The rest's bytes without the map (nothing to compress), then the map's own: the map's wire
+  // form follows its length, so the two add up.
+  GroundMap map = std::move(d->ground_map);
+  d->ground_map = GroundMap();
+  const size_t rest = encodeDescriptor(*d).size();
+  if (rest < budget) d->ground_map = fitGroundMapBytes(std::move(map), budget - rest);
 }
 
 Descriptor buildDescriptor(const Trunks& input, const DescriptorParams& params) {
