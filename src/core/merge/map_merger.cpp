@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <numeric>
 #include <set>
@@ -392,8 +393,9 @@ struct MapMerger::Impl {
   }
 
   // --- landmarks -----------------------------------------------------------------------------
-  /// Trunks with a seen base (a hidden base is a guess, and the centre was fitted at a height
-  /// relative to it) of the submaps of one component, in insertion order, moved into M.
+  /// The trunks of the submaps of one component, in insertion order, moved into M. A hidden
+  /// base is a guess (the centre was fitted relative to it, up a leaning stem): such trunks
+  /// count horizontally only, with a larger sigma, or not at all.
   std::vector<LandmarkObservation> landmarkObservations(int component) const {
     std::vector<LandmarkObservation> obs;
     for (size_t i = 0; i < nodes.size(); ++i) {
@@ -401,8 +403,9 @@ struct MapMerger::Impl {
       if (robots.at(n.robot).component != component) continue;
       const Pose T = n.pose();
       for (const TrunkLandmark& tr : n.trunks) {
-        if (!tr.base_seen) continue;
+        if (!tr.base_seen && !(p.landmark_hidden_base_sigma_xy_m > 0.0)) continue;
         LandmarkObservation o;
+        o.base_seen = tr.base_seen;
         o.submap = i;
         o.p_S = Eigen::Vector3d(tr.x, tr.y, tr.z);
         o.p_M = T * o.p_S;
@@ -428,9 +431,12 @@ struct MapMerger::Impl {
     std::vector<ceres::LossFunctionWrapper*> losses;
     addGraph(&problem, &quaternion, &losses);
     setLoss(losses, lossStages().back());
-    const Eigen::Vector3d sigmas(p.landmark_sigma_xy_m, p.landmark_sigma_xy_m,
-                                 p.landmark_sigma_z_m);
-    std::vector<Eigen::Vector3d> positions;  // landmark parameter blocks (stable: reserved)
+    const Eigen::Vector3d seen(p.landmark_sigma_xy_m, p.landmark_sigma_xy_m, p.landmark_sigma_z_m);
+    // A hidden base's elevation says nothing: an infinite sigma (a zero residual).
+    const double h = p.landmark_hidden_base_sigma_xy_m;
+    const Eigen::Vector3d hidden(h, h, std::numeric_limits<double>::infinity());
+    ceres::SubsetManifold horizontal(3, {2});  // a landmark no one saw the base of: z fixed
+    std::vector<Eigen::Vector3d> positions;    // landmark parameter blocks (stable: reserved)
     std::vector<std::pair<std::vector<LandmarkObservation>, std::vector<std::vector<size_t>>>>
         comps;
     for (int c = 0; c < countComponents(); ++c) {
@@ -448,11 +454,15 @@ struct MapMerger::Impl {
         Eigen::Vector3d mean = Eigen::Vector3d::Zero();
         for (size_t i : members) mean += obs[i].p_M;
         positions.push_back(mean / static_cast<double>(members.size()));
+        bool any_seen = false;
+        for (size_t i : members) any_seen = any_seen || obs[i].base_seen;
+        problem.AddParameterBlock(positions.back().data(), 3, any_seen ? nullptr : &horizontal);
         for (size_t i : members) {
           Node& n = nodes[obs[i].submap];
-          problem.AddResidualBlock(LandmarkCost::create(obs[i].p_S, sigmas),
-                                   new ceres::CauchyLoss(p.landmark_loss_scale),
-                                   n.q.coeffs().data(), n.t.data(), positions.back().data());
+          problem.AddResidualBlock(
+              LandmarkCost::create(obs[i].p_S, obs[i].base_seen ? seen : hidden),
+              new ceres::CauchyLoss(p.landmark_loss_scale), n.q.coeffs().data(), n.t.data(),
+              positions.back().data());
         }
         st->landmark_observations += members.size();
       }
@@ -595,6 +605,9 @@ std::string MergeParams::validate() const {
   }
   if (max_iterations < 1) e << "merge max_iterations must be >= 1; ";
   if (!(direct_solver_max_work >= 0.0)) e << "merge direct_solver_max_work must be >= 0; ";
+  if (!(landmark_hidden_base_sigma_xy_m >= 0.0)) {
+    e << "merge landmark_hidden_base_sigma_xy_m must be >= 0; ";
+  }
   for (double v : {landmark_gate_m, landmark_sigma_xy_m, landmark_sigma_z_m, landmark_loss_scale}) {
     if (!(v > 0.0)) e << "merge landmark gate, sigmas and loss scale must be > 0; ";
   }

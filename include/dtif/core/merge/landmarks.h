@@ -23,7 +23,8 @@ struct LandmarkObservation {
   size_t submap = 0;  ///< any id; observations of one submap are consecutive
   Eigen::Vector3d p_S = Eigen::Vector3d::Zero();
   Eigen::Vector3d p_M = Eigen::Vector3d::Zero();
-  double r = 0.0;  ///< radius [m]
+  double r = 0.0;         ///< radius [m]
+  bool base_seen = true;  ///< else p_S's elevation is a guess (horizontal only)
 };
 
 /// Groups observations into landmarks (physical trees), submap by submap in the given order:

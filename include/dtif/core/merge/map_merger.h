@@ -49,7 +49,7 @@ struct MergeParams {
   /// multiply-subtracts per submap-level pattern (AMD's estimate; x 6^3 flops), conjugate
   /// gradients above (a graph whose loops join every pass over the same paths).
   double direct_solver_max_work = 1e6;
-  /// Landmark refinement after the pose graph: every submap's trunks with a seen base are
+  /// Landmark refinement after the pose graph: every submap's trunks are
   /// associated across submaps and robots through the merged poses (landmarks.h), and the
   /// poses re-solved with submap-landmark factors (odometry and loop edges kept). Ties submaps
   /// that overlap without a detected loop.
@@ -59,10 +59,13 @@ struct MergeParams {
   int landmark_min_observations = 2;   ///< submaps that must see a tree to make it a landmark
   double landmark_sigma_xy_m = 0.05;   ///< a trunk centre's horizontal sigma [m]
   double landmark_sigma_z_m = 0.05;    ///< a seen stem base's vertical sigma [m]
-  double landmark_loss_scale = 2.0;    ///< Cauchy scale on landmark residuals, in sigmas
-  int landmark_rounds = 2;             ///< associate, solve; repeated (re-association)
-  StemFusionParams stems;              ///< YAML section `stems` (its own visit)
-  StemMapParams stem_map;              ///< field stem maps: fixed (fieldStemMapLoopParams)
+  /// Trunks whose base was hidden: horizontal only, with this sigma (their centre was fitted
+  /// relative to a guessed base, up a leaning stem); 0: left out [m].
+  double landmark_hidden_base_sigma_xy_m = 0.1;
+  double landmark_loss_scale = 2.0;  ///< Cauchy scale on landmark residuals, in sigmas
+  int landmark_rounds = 2;           ///< associate, solve; repeated (re-association)
+  StemFusionParams stems;            ///< YAML section `stems` (its own visit)
+  StemMapParams stem_map;            ///< field stem maps: fixed (fieldStemMapLoopParams)
   std::string validate() const;
 
   template <class V>
@@ -89,6 +92,7 @@ struct MergeParams {
     v("landmark_min_observations", landmark_min_observations);
     v("landmark_sigma_xy_m", landmark_sigma_xy_m);
     v("landmark_sigma_z_m", landmark_sigma_z_m);
+    v("landmark_hidden_base_sigma_xy_m", landmark_hidden_base_sigma_xy_m);
     v("landmark_loss_scale", landmark_loss_scale);
     v("landmark_rounds", landmark_rounds);
   }
