@@ -655,6 +655,12 @@ class MapMergeNodelet : public nodelet::Nodelet {
       if (req.directory.empty()) throw std::runtime_error("empty directory");
       fs::create_directories(req.directory);
       const fs::path dir(req.directory);
+      // The saved map is the landmark-refined one (too costly for every re-solve); the
+      // published TFs and paths follow it until the next solve.
+      const MergeSolveStats st = merger_.refine();
+      NODELET_INFO("save_map: landmark refinement %.1f ms (%zu landmarks)", st.landmark_ms,
+                   st.landmarks);
+      publishOutputs();
       const std::vector<MergedPose> poses = merger_.poses();
       writeMergedPosesCsv((dir / "merged_poses.csv").string(), poses);
       writeMergedStemsCsv((dir / "merged_stems.csv").string(), merger_.stems());

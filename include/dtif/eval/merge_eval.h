@@ -39,11 +39,13 @@ struct MergeRunStats {
   size_t solves = 0;
   size_t iterative_solves = 0;  ///< of them, with conjugate gradients (a dense factor)
   double solve_ms_total = 0.0, solve_ms_max = 0.0;
+  double landmark_ms = 0.0;  ///< the final solve's landmark refinement (MapMerger::refine)
   MergeSolveStats last;
 };
 
 /// Feeds the submaps and loops into a merger in acquisition order, solving after each submap
-/// that brings a loop (incremental, as online), and once at the end. `false_loop` (optional) is
+/// that brings a loop (incremental, as online), and once at the end with the landmark
+/// refinement (MapMerger::refine). `false_loop` (optional) is
 /// added with the last loop. Events are appended to *events when given.
 MapMerger runMerger(const MergeInput& in, const MergeParams& params,
                     const std::optional<Loop>& false_loop = std::nullopt,

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <numeric>
 #include <set>
@@ -14,6 +15,7 @@
 
 #include "core/merge/pose_graph_cost.h"
 #include "dtif/core/merge/factor_cost.h"
+#include "dtif/core/merge/landmarks.h"
 #include "dtif/core/merge/pcm.h"
 #include "dtif/core/timing.h"
 
@@ -85,6 +87,7 @@ struct MapMerger::Impl {
   StemMapRegistration registration;
   std::vector<MergedStem> stems;
   bool dirty = true;
+  bool refined = false;  // the landmark refinement ran on the current graph
 
   explicit Impl(const MergeParams& params) : p(params) {}
 
@@ -296,15 +299,13 @@ struct MapMerger::Impl {
   }
 
   // --- Ceres -------------------------------------------------------------------------------
-  MergeSolveStats solveGraph() {
-    MergeSolveStats st;
-    ceres::Problem::Options popt;
-    popt.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
-    ceres::Problem problem(popt);
-    ceres::EigenQuaternionManifold quaternion;
+  /// Every submap's pose, the odometry edges and the used loops (each with its loss wrapper in
+  /// `losses`); each robot's anchor submap fixed.
+  void addGraph(ceres::Problem* problem, ceres::Manifold* quaternion,
+                std::vector<ceres::LossFunctionWrapper*>* losses) {
     for (Node& n : nodes) {
-      problem.AddParameterBlock(n.q.coeffs().data(), 4, &quaternion);
-      problem.AddParameterBlock(n.t.data(), 3);
+      problem->AddParameterBlock(n.q.coeffs().data(), 4, quaternion);
+      problem->AddParameterBlock(n.t.data(), 3);
     }
     for (const auto& [name, r] : robots) {
       if (r.nodes.empty()) continue;
@@ -312,7 +313,7 @@ struct MapMerger::Impl {
         const size_t a = r.nodes[k - 1], b = r.nodes[k];
         const Pose T = odom(a, b);
         const double d = T.translation().norm();
-        problem.AddResidualBlock(
+        problem->AddResidualBlock(
             RelativePoseCost::create(T.translation(), Eigen::Quaterniond(T.rotation()),
                                      diagonalSqrtInformation(odomSigmas(d))),
             nullptr, nodes[a].q.coeffs().data(), nodes[a].t.data(), nodes[b].q.coeffs().data(),
@@ -320,35 +321,52 @@ struct MapMerger::Impl {
       }
       Node& anchor = nodes[r.nodes.front()];
       if (anchor.id == r.frame) {
-        problem.SetParameterBlockConstant(anchor.q.coeffs().data());
-        problem.SetParameterBlockConstant(anchor.t.data());
+        problem->SetParameterBlockConstant(anchor.q.coeffs().data());
+        problem->SetParameterBlockConstant(anchor.t.data());
       }
     }
-    std::vector<ceres::LossFunctionWrapper*> losses;
     for (const LoopRec& l : loops) {
       if (!l.used) continue;
-      losses.push_back(new ceres::LossFunctionWrapper(nullptr, ceres::TAKE_OWNERSHIP));
-      problem.AddResidualBlock(
+      losses->push_back(new ceres::LossFunctionWrapper(nullptr, ceres::TAKE_OWNERSHIP));
+      problem->AddResidualBlock(
           RelativePoseCost::create(l.T_a_b.translation(), Eigen::Quaterniond(l.T_a_b.rotation()),
                                    diagonalSqrtInformation(l.sigmas)),
-          losses.back(), nodes[l.a].q.coeffs().data(), nodes[l.a].t.data(),
+          losses->back(), nodes[l.a].q.coeffs().data(), nodes[l.a].t.data(),
           nodes[l.b].q.coeffs().data(), nodes[l.b].t.data());
     }
-    ceres::Solver::Options opt = linearSolverOptions(&st);
-    opt.max_num_iterations = p.max_iterations;
-    opt.num_threads = 1;
-    opt.logging_type = ceres::SILENT;
+  }
+
+  static ceres::Problem::Options problemOptions() {
+    ceres::Problem::Options popt;
+    popt.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+    return popt;
+  }
+
+  /// The robust stages of the loops' loss (none: least squares).
+  std::vector<double> lossStages() const {
+    const double s = p.robust_loss_scale;
+    return p.pcm ? std::vector<double>{0.0, s} : std::vector<double>{10.0 * s, 3.0 * s, s};
+  }
+
+  static void setLoss(const std::vector<ceres::LossFunctionWrapper*>& losses, double scale) {
+    for (ceres::LossFunctionWrapper* w : losses) {
+      w->Reset(scale > 0.0 ? new ceres::CauchyLoss(scale) : nullptr, ceres::TAKE_OWNERSHIP);
+    }
+  }
+
+  MergeSolveStats solveGraph() {
+    MergeSolveStats st;
+    ceres::Problem problem(problemOptions());
+    ceres::EigenQuaternionManifold quaternion;
+    std::vector<ceres::LossFunctionWrapper*> losses;
+    addGraph(&problem, &quaternion, &losses);
+    ceres::Solver::Options opt = solverOptions(&st);
     // Graduated robustness: a robust loss alone cannot pull a map that odometry has drifted by
     // many sigmas (every loop looks like an outlier), so the first stage trusts the loops PCM
     // kept (least squares; without PCM a wide Cauchy), the last uses robust_loss_scale.
-    const double s = p.robust_loss_scale;
-    const std::vector<double> stages =
-        p.pcm ? std::vector<double>{0.0, s} : std::vector<double>{10.0 * s, 3.0 * s, s};
+    const std::vector<double> stages = lossStages();
     for (size_t k = 0; k < stages.size(); ++k) {
-      for (ceres::LossFunctionWrapper* w : losses) {
-        w->Reset(stages[k] > 0.0 ? new ceres::CauchyLoss(stages[k]) : nullptr,
-                 ceres::TAKE_OWNERSHIP);
-      }
+      setLoss(losses, stages[k]);
       ceres::Solver::Summary summary;
       ceres::Solve(opt, &problem, &summary);
       st.iterations += static_cast<int>(summary.iterations.size());
@@ -356,6 +374,120 @@ struct MapMerger::Impl {
       st.final_cost = summary.final_cost;
     }
     return st;
+  }
+
+  ceres::Solver::Options solverOptions(MergeSolveStats* st) const {
+    ceres::Solver::Options opt = linearSolverOptions(st);
+    opt.max_num_iterations = p.max_iterations;
+    opt.num_threads = 1;
+    opt.logging_type = ceres::SILENT;
+    return opt;
+  }
+
+  int countComponents() const {
+    std::set<int> c;
+    for (const auto& [name, r] : robots) {
+      if (!r.nodes.empty()) c.insert(r.component);
+    }
+    return static_cast<int>(c.size());
+  }
+
+  // --- landmarks -----------------------------------------------------------------------------
+  /// The trunks of the submaps of one component, in insertion order, moved into M. A hidden
+  /// base is a guess (the centre was fitted relative to it, up a leaning stem): such trunks
+  /// count horizontally only, with a larger sigma, or not at all.
+  std::vector<LandmarkObservation> landmarkObservations(int component) const {
+    std::vector<LandmarkObservation> obs;
+    for (size_t i = 0; i < nodes.size(); ++i) {
+      const Node& n = nodes[i];
+      if (robots.at(n.robot).component != component) continue;
+      const Pose T = n.pose();
+      for (const TrunkLandmark& tr : n.trunks) {
+        if (!tr.base_seen && !(p.landmark_hidden_base_sigma_xy_m > 0.0)) continue;
+        LandmarkObservation o;
+        o.base_seen = tr.base_seen;
+        o.submap = i;
+        o.p_S = Eigen::Vector3d(tr.x, tr.y, tr.z);
+        o.p_M = T * o.p_S;
+        o.r = tr.r;
+        obs.push_back(o);
+      }
+    }
+    return obs;
+  }
+
+  LandmarkAssociationParams associationParams() const {
+    LandmarkAssociationParams a;
+    a.gate_m = p.landmark_gate_m;
+    a.radius_abs_tol_m = p.landmark_radius_tol_m;
+    a.min_observations = p.landmark_min_observations;
+    return a;
+  }
+
+  /// One round: associate through the current poses, then solve the graph with the landmarks.
+  void landmarkRound(MergeSolveStats* st) {
+    ceres::Problem problem(problemOptions());
+    ceres::EigenQuaternionManifold quaternion;
+    std::vector<ceres::LossFunctionWrapper*> losses;
+    addGraph(&problem, &quaternion, &losses);
+    setLoss(losses, lossStages().back());
+    const Eigen::Vector3d seen(p.landmark_sigma_xy_m, p.landmark_sigma_xy_m, p.landmark_sigma_z_m);
+    // A hidden base's elevation says nothing: an infinite sigma (a zero residual).
+    const double h = p.landmark_hidden_base_sigma_xy_m;
+    const Eigen::Vector3d hidden(h, h, std::numeric_limits<double>::infinity());
+    ceres::SubsetManifold horizontal(3, {2});  // a landmark no one saw the base of: z fixed
+    std::vector<Eigen::Vector3d> positions;    // landmark parameter blocks (stable: reserved)
+    std::vector<std::pair<std::vector<LandmarkObservation>, std::vector<std::vector<size_t>>>>
+        comps;
+    for (int c = 0; c < countComponents(); ++c) {
+      auto obs = landmarkObservations(c);
+      auto groups = associateLandmarks(obs, associationParams());
+      comps.emplace_back(std::move(obs), std::move(groups));
+    }
+    size_t total = 0;
+    for (const auto& c : comps) total += c.second.size();
+    positions.reserve(total);
+    st->landmarks = total;
+    st->landmark_observations = 0;
+    for (const auto& [obs, groups] : comps) {
+      for (const auto& members : groups) {
+        Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+        for (size_t i : members) mean += obs[i].p_M;
+        positions.push_back(mean / static_cast<double>(members.size()));
+        bool any_seen = false;
+        for (size_t i : members) any_seen = any_seen || obs[i].base_seen;
+        problem.AddParameterBlock(positions.back().data(), 3, any_seen ? nullptr : &horizontal);
+        for (size_t i : members) {
+          Node& n = nodes[obs[i].submap];
+          problem.AddResidualBlock(
+              LandmarkCost::create(obs[i].p_S, obs[i].base_seen ? seen : hidden),
+              new ceres::CauchyLoss(p.landmark_loss_scale), n.q.coeffs().data(), n.t.data(),
+              positions.back().data());
+        }
+        st->landmark_observations += members.size();
+      }
+    }
+    ceres::Solver::Options opt = solverOptions(st);
+    // Landmarks eliminated first: the reduced system is the submaps' (Schur complement).
+    opt.linear_solver_type = st->iterative ? ceres::ITERATIVE_SCHUR : ceres::SPARSE_SCHUR;
+    opt.preconditioner_type = ceres::SCHUR_JACOBI;
+    auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
+    for (Eigen::Vector3d& l : positions) ordering->AddElementToGroup(l.data(), 0);
+    for (Node& n : nodes) {
+      ordering->AddElementToGroup(n.q.coeffs().data(), 1);
+      ordering->AddElementToGroup(n.t.data(), 1);
+    }
+    opt.linear_solver_ordering = ordering;
+    ceres::Solver::Summary summary;
+    ceres::Solve(opt, &problem, &summary);
+    st->iterations += static_cast<int>(summary.iterations.size());
+    st->final_cost = summary.final_cost;
+  }
+
+  void refineWithLandmarks(MergeSolveStats* st) {
+    const auto t0 = std::chrono::steady_clock::now();
+    for (int k = 0; k < p.landmark_rounds; ++k) landmarkRound(st);
+    st->landmark_ms = msSince(t0);
   }
 
   // Sparse Cholesky, unless its factor would be dense: surveys that walk the same paths all
@@ -473,6 +605,15 @@ std::string MergeParams::validate() const {
   }
   if (max_iterations < 1) e << "merge max_iterations must be >= 1; ";
   if (!(direct_solver_max_work >= 0.0)) e << "merge direct_solver_max_work must be >= 0; ";
+  if (!(landmark_hidden_base_sigma_xy_m >= 0.0)) {
+    e << "merge landmark_hidden_base_sigma_xy_m must be >= 0; ";
+  }
+  for (double v : {landmark_gate_m, landmark_sigma_xy_m, landmark_sigma_z_m, landmark_loss_scale}) {
+    if (!(v > 0.0)) e << "merge landmark gate, sigmas and loss scale must be > 0; ";
+  }
+  if (!(landmark_radius_tol_m >= 0.0)) e << "merge landmark_radius_tol_m must be >= 0; ";
+  if (landmark_min_observations < 2) e << "merge landmark_min_observations must be >= 2; ";
+  if (landmark_rounds < 1) e << "merge landmark_rounds must be >= 1; ";
   e << stems.validate();
   return e.str();
 }
@@ -573,9 +714,23 @@ MergeSolveStats MapMerger::solve() {
     m.updateLoopResiduals();
     m.buildInventory();
     m.dirty = false;
+    m.refined = false;
   }
   for (const auto& l : m.loops) (l.used ? st.loops_used : st.loops_rejected)++;
   st.components = componentCount();
+  return st;
+}
+
+MergeSolveStats MapMerger::refine() {
+  Impl& m = *impl_;
+  MergeSolveStats st = solve();
+  if (!m.p.landmarks || m.refined || m.nodes.empty()) return st;
+  const auto t0 = std::chrono::steady_clock::now();
+  m.refineWithLandmarks(&st);
+  m.updateLoopResiduals();
+  m.buildInventory();
+  m.refined = true;
+  st.solve_ms += msSince(t0);
   return st;
 }
 
@@ -594,13 +749,7 @@ int MapMerger::component(const std::string& robot) const {
   return it == impl_->robots.end() ? -1 : it->second.component;
 }
 
-int MapMerger::componentCount() const {
-  std::set<int> c;
-  for (const auto& [name, r] : impl_->robots) {
-    if (!r.nodes.empty()) c.insert(r.component);
-  }
-  return static_cast<int>(c.size());
-}
+int MapMerger::componentCount() const { return impl_->countComponents(); }
 
 std::optional<Pose> MapMerger::pose(int64_t id) const {
   auto it = impl_->index.find(id);

@@ -47,4 +47,33 @@ class RelativePoseCost {
   Eigen::Matrix<double, 6, 6> sqrt_information_;
 };
 
+/// A submap's observation of a landmark: the observed point p_S moved into M by the submap's
+/// pose, minus the landmark's position, divided by the standard deviations (x, y, z).
+class LandmarkCost {
+ public:
+  LandmarkCost(const Eigen::Vector3d& p_S, const Eigen::Vector3d& sigmas)
+      : p_S_(p_S), inv_sigmas_(sigmas.cwiseInverse()) {}
+
+  template <typename T>
+  bool operator()(const T* const q_ptr, const T* const t_ptr, const T* const l_ptr,
+                  T* residuals_ptr) const {
+    Eigen::Map<const Eigen::Quaternion<T>> q(q_ptr);
+    Eigen::Map<const Eigen::Matrix<T, 3, 1>> t(t_ptr);
+    Eigen::Map<const Eigen::Matrix<T, 3, 1>> l(l_ptr);
+    Eigen::Map<Eigen::Matrix<T, 3, 1>> residuals(residuals_ptr);
+    residuals = (q * p_S_.template cast<T>() + t - l).cwiseProduct(inv_sigmas_.template cast<T>());
+    return true;
+  }
+
+  static ceres::CostFunction* create(const Eigen::Vector3d& p_S, const Eigen::Vector3d& sigmas) {
+    return new ceres::AutoDiffCostFunction<LandmarkCost, 3, 4, 3, 3>(new LandmarkCost(p_S, sigmas));
+  }
+
+  EIGEN_MAKE_ALIGNED_OPERATOR_NEW
+
+ private:
+  Eigen::Vector3d p_S_;
+  Eigen::Vector3d inv_sigmas_;
+};
+
 }  // namespace dtif

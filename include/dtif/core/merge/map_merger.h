@@ -49,8 +49,23 @@ struct MergeParams {
   /// multiply-subtracts per submap-level pattern (AMD's estimate; x 6^3 flops), conjugate
   /// gradients above (a graph whose loops join every pass over the same paths).
   double direct_solver_max_work = 1e6;
-  StemFusionParams stems;  ///< YAML section `stems` (its own visit)
-  StemMapParams stem_map;  ///< field stem maps: fixed (fieldStemMapLoopParams)
+  /// Landmark refinement after the pose graph: every submap's trunks are
+  /// associated across submaps and robots through the merged poses (landmarks.h), and the
+  /// poses re-solved with submap-landmark factors (odometry and loop edges kept). Ties submaps
+  /// that overlap without a detected loop.
+  bool landmarks = true;
+  double landmark_gate_m = 0.3;        ///< association gate, horizontal [m]
+  double landmark_radius_tol_m = 0.1;  ///< radii agree within max(this, 0.5 r) [m]
+  int landmark_min_observations = 2;   ///< submaps that must see a tree to make it a landmark
+  double landmark_sigma_xy_m = 0.05;   ///< a trunk centre's horizontal sigma [m]
+  double landmark_sigma_z_m = 0.05;    ///< a seen stem base's vertical sigma [m]
+  /// Trunks whose base was hidden: horizontal only, with this sigma (their centre was fitted
+  /// relative to a guessed base, up a leaning stem); 0: left out [m].
+  double landmark_hidden_base_sigma_xy_m = 0.1;
+  double landmark_loss_scale = 2.0;  ///< Cauchy scale on landmark residuals, in sigmas
+  int landmark_rounds = 2;           ///< associate, solve; repeated (re-association)
+  StemFusionParams stems;            ///< YAML section `stems` (its own visit)
+  StemMapParams stem_map;            ///< field stem maps: fixed (fieldStemMapLoopParams)
   std::string validate() const;
 
   template <class V>
@@ -71,6 +86,15 @@ struct MergeParams {
     v("pcm_sigmas", pcm_sigmas);
     v("max_iterations", max_iterations);
     v("direct_solver_max_work", direct_solver_max_work);
+    v("landmarks", landmarks);
+    v("landmark_gate_m", landmark_gate_m);
+    v("landmark_radius_tol_m", landmark_radius_tol_m);
+    v("landmark_min_observations", landmark_min_observations);
+    v("landmark_sigma_xy_m", landmark_sigma_xy_m);
+    v("landmark_sigma_z_m", landmark_sigma_z_m);
+    v("landmark_hidden_base_sigma_xy_m", landmark_hidden_base_sigma_xy_m);
+    v("landmark_loss_scale", landmark_loss_scale);
+    v("landmark_rounds", landmark_rounds);
   }
 };
 
@@ -118,6 +142,8 @@ struct MergeSolveStats {
   double initial_cost = 0.0, final_cost = 0.0;
   size_t loops_used = 0, loops_rejected = 0;
   int components = 0;
+  double landmark_ms = 0.0;                         ///< the landmark refinement's share of solve_ms
+  size_t landmarks = 0, landmark_observations = 0;  ///< in the last refinement round
 };
 
 /// An edge of the pose graph (for export, e.g. g2o): T_from_to with its information matrix in
@@ -151,6 +177,11 @@ class MapMerger {
 
   /// PCM over the loops, then a warm-started Ceres solve. Cheap when nothing changed.
   MergeSolveStats solve();
+
+  /// solve(), then the landmark refinement (MergeParams::landmarks) of that solution: the final
+  /// map (dtif merge, save_map). Costlier than solve() (every trunk is a factor), so not run on
+  /// every loop; the next solve() starts from the refined poses. Cheap when nothing changed.
+  MergeSolveStats refine();
 
   /// Component changes since the last call.
   std::vector<MergeEvent> takeEvents();

@@ -1,0 +1,171 @@
+// Trunks as landmarks of the merged map: the association across submaps, and the map merger's
+// refinement with them recovering what drifting odometry got wrong where no loop was found.
+#include "dtif/core/merge/landmarks.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+#include <random>
+
+#include "dtif/core/merge/map_merger.h"
+#include "test_utils.h"
+
+namespace dtif {
+namespace {
+
+LandmarkObservation obs(size_t submap, double x, double y, double r) {
+  LandmarkObservation o;
+  o.submap = submap;
+  o.p_M = o.p_S = Eigen::Vector3d(x, y, 0.0);
+  o.r = r;
+  return o;
+}
+
+TEST(AssociateLandmarks, JoinsOneTreeAcrossSubmapsOncePerSubmap) {
+  const std::vector<LandmarkObservation> o = {
+      obs(0, 0.0, 0.0, 0.2),   obs(0, 5.0, 0.0, 0.3),                          // submap 0
+      obs(1, 0.1, 0.05, 0.21), obs(1, 0.15, 0.0, 0.2), obs(1, 5.0, 0.1, 0.3),  // submap 1
+      obs(2, 5.05, 0.0, 0.6)};  // radius far off: not the tree at (5, 0)
+  const auto groups = associateLandmarks(o, {});
+  // (0, 0): submap 0's and the nearer of submap 1's two (mutual); (5, 0): submaps 0 and 1.
+  ASSERT_EQ(groups.size(), 2u);
+  EXPECT_EQ(groups[0], (std::vector<size_t>{0, 2}));
+  EXPECT_EQ(groups[1], (std::vector<size_t>{1, 4}));
+}
+
+TEST(AssociateLandmarks, AmbiguousObservationsJoinNothing) {
+  // Two trees 0.5 m apart: an observation half way is within the 0.3 m gate of both.
+  const std::vector<LandmarkObservation> o = {obs(0, 0.0, 0.0, 0.2), obs(0, 0.5, 0.0, 0.2),
+                                              obs(1, 0.25, 0.0, 0.2), obs(2, 0.0, 0.0, 0.2)};
+  const auto groups = associateLandmarks(o, {});
+  ASSERT_EQ(groups.size(), 1u);
+  EXPECT_EQ(groups[0], (std::vector<size_t>{0, 3}));
+}
+
+/// Trees on a jittered 4 m grid over 60 m x 20 m.
+std::vector<Eigen::Vector4d> forest() {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> jitter(-1.0, 1.0), radius(0.1, 0.3), ground(-0.3, 0.3);
+  std::vector<Eigen::Vector4d> trees;  // x, y, base z, r
+  for (int i = 0; i < 16; ++i) {
+    for (int j = 0; j < 6; ++j) {
+      const double x = -4.0 + 4.0 * i + jitter(rng), y = -10.0 + 4.0 * j + jitter(rng);
+      const double z = ground(rng), r = radius(rng);
+      trees.emplace_back(x, y, z, r);
+    }
+  }
+  return trees;
+}
+
+/// The trees within 8 m of a submap, in its frame, with 1 cm of noise (fixed seed).
+Trunks observe(const std::vector<Eigen::Vector4d>& trees, const Pose& T_W_S, std::mt19937* rng) {
+  std::normal_distribution<double> noise(0.0, 0.01);
+  Trunks out;
+  for (const Eigen::Vector4d& t : trees) {
+    const Eigen::Vector3d p = T_W_S.inverse() * t.head<3>();
+    if (p.head<2>().norm() > 8.0) continue;
+    TrunkLandmark tr;
+    tr.x = p.x() + noise(*rng);
+    tr.y = p.y() + noise(*rng);
+    tr.z = p.z() + noise(*rng);
+    tr.r = t(3);
+    out.push_back(tr);
+  }
+  return out;
+}
+
+/// Robots a and b walk side by side 3 m apart along x, a submap every 4 m, seeing the same
+/// trees. One inter-robot loop at the start joins them; none after. b's odometry drifts
+/// (yaw 0.15 deg and 1 cm up per submap), so without landmarks its end is decimetres off; each
+/// submap's error relative to its predecessor is within the association gate.
+struct SideBySide {
+  std::vector<MergeSubmap> submaps;
+  std::map<int64_t, Pose> gt;
+  Loop loop;
+};
+
+SideBySide sideBySide() {
+  const auto trees = forest();
+  std::mt19937 rng(5);
+  SideBySide sc;
+  for (const std::string robot : {"a", "b"}) {
+    const bool b = robot == "b";
+    Pose T_O_S = Pose::Identity();
+    for (int k = 0; k < 13; ++k) {
+      const Pose T_W_S = test::makePose(4.0 * k, b ? 3.0 : 0.0, 0.0, 0.0, 0.0, 0.0);
+      if (k > 0 && b) T_O_S = T_O_S * test::makePose(4.0, 0.0, 0.01, 0.0, 0.0, 0.15 * M_PI / 180);
+      if (k > 0 && !b) T_O_S = T_O_S * test::makePose(4.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+      MergeSubmap s;
+      s.robot = robot;
+      s.id = (b ? 100 : 0) + k;
+      s.stamp = k;
+      s.T_O_S = T_O_S;
+      s.trunks = observe(trees, T_W_S, &rng);
+      sc.gt[s.id] = T_W_S;
+      sc.submaps.push_back(s);
+    }
+  }
+  sc.loop.query_id = 100;
+  sc.loop.query_robot = "b";
+  sc.loop.candidate_id = 0;
+  sc.loop.candidate_robot = "a";
+  sc.loop.T_c_q = sc.gt.at(0).inverse() * sc.gt.at(100);
+  sc.loop.covariance = Matrix6d::Identity() * 1e-4;
+  sc.loop.inliers = 10;
+  return sc;
+}
+
+/// Where b's k-th submap is relative to a's k-th: the error of that relative pose.
+std::pair<double, double> relativeError(const MapMerger& m, const SideBySide& sc, int k) {
+  const Pose est = m.pose(k)->inverse() * *m.pose(100 + k);
+  const Pose gt = sc.gt.at(k).inverse() * sc.gt.at(100 + k);
+  const Pose e = gt.inverse() * est;
+  return {e.translation().norm(), Eigen::AngleAxisd(e.linear()).angle()};
+}
+
+MapMerger mergeSideBySide(const SideBySide& sc, bool landmarks) {
+  MergeParams p;
+  p.landmarks = landmarks;
+  MapMerger m(p);
+  for (const auto& s : sc.submaps) m.addSubmap(s);
+  EXPECT_TRUE(m.addLoop(sc.loop));
+  m.refine();
+  return m;
+}
+
+TEST(LandmarkRefinement, RecoversTheRelativePoseOfSubmapsThatOverlapWithoutALoop) {
+  const SideBySide sc = sideBySide();
+  const MapMerger plain = mergeSideBySide(sc, false);
+  const auto [t0, r0] = relativeError(plain, sc, 12);
+  EXPECT_GT(t0, 0.15);  // b's drift, uncorrected: one loop at the start is all the graph has
+  EXPECT_GT(r0, 0.02);
+  const MapMerger refined = mergeSideBySide(sc, true);
+  // Along the whole walk, not just at the end. (Each robot's own path stays a compromise of
+  // the two odometries: the trees say where b is relative to a, not which of them drifted.)
+  for (int k = 0; k < 13; ++k) {
+    const auto [t1, r1] = relativeError(refined, sc, k);
+    EXPECT_LT(t1, 0.03) << k;
+    EXPECT_LT(r1, 0.002) << k;
+  }
+}
+
+TEST(LandmarkRefinement, ChangesNothingWhenOff) {
+  const SideBySide sc = sideBySide();
+  MergeParams p;
+  p.landmarks = false;
+  MapMerger a(p), b(p);
+  for (const auto& s : sc.submaps) {
+    a.addSubmap(s);
+    b.addSubmap(s);
+  }
+  a.addLoop(sc.loop);
+  b.addLoop(sc.loop);
+  a.solve();
+  b.refine();
+  for (const MergedPose& q : a.poses()) {
+    EXPECT_TRUE(q.T_M_S.isApprox(*b.pose(q.id), 1e-12)) << q.id;
+  }
+}
+
+}  // namespace
+}  // namespace dtif
