@@ -450,7 +450,8 @@ struct MapMerger::Impl {
     st->landmarks = total;
     st->landmark_observations = 0;
     for (const auto& [obs, groups] : comps) {
-      for (const auto& members : groups) {
+      for (const auto& all_members : groups) {
+        const std::vector<size_t> members = spreadObservations(obs, all_members);
         Eigen::Vector3d mean = Eigen::Vector3d::Zero();
         for (size_t i : members) mean += obs[i].p_M;
         positions.push_back(mean / static_cast<double>(members.size()));
@@ -482,6 +483,23 @@ struct MapMerger::Impl {
     ceres::Solve(opt, &problem, &summary);
     st->iterations += static_cast<int>(summary.iterations.size());
     st->final_cost = summary.final_cost;
+  }
+
+  // At most landmark_max_observations of a landmark's observations, evenly spread over them
+  // (in submap order), one with a seen base among them when any has one (it fixes the height).
+  std::vector<size_t> spreadObservations(const std::vector<LandmarkObservation>& obs,
+                                         const std::vector<size_t>& members) const {
+    const size_t k = static_cast<size_t>(p.landmark_max_observations);
+    if (k == 0 || members.size() <= k) return members;
+    std::vector<size_t> kept;
+    kept.reserve(k);
+    for (size_t j = 0; j < k; ++j) kept.push_back(members[j * (members.size() - 1) / (k - 1)]);
+    const auto seen = [&](size_t i) { return obs[i].base_seen; };
+    if (std::none_of(kept.begin(), kept.end(), seen)) {
+      const auto first = std::find_if(members.begin(), members.end(), seen);
+      if (first != members.end()) kept.back() = *first;
+    }
+    return kept;
   }
 
   void refineWithLandmarks(MergeSolveStats* st) {
@@ -614,6 +632,9 @@ std::string MergeParams::validate() const {
   if (!(landmark_radius_tol_m >= 0.0)) e << "merge landmark_radius_tol_m must be >= 0; ";
   if (landmark_min_observations < 2) e << "merge landmark_min_observations must be >= 2; ";
   if (landmark_rounds < 1) e << "merge landmark_rounds must be >= 1; ";
+  if (landmark_max_observations < 0 || landmark_max_observations == 1) {
+    e << "merge landmark_max_observations must be 0 (all) or >= 2; ";
+  }
   e << stems.validate();
   return e.str();
 }

@@ -61,11 +61,15 @@ struct MergeParams {
   double landmark_sigma_z_m = 0.05;    ///< a seen stem base's vertical sigma [m]
   /// Trunks whose base was hidden: horizontal only, with this sigma (their centre was fitted
   /// relative to a guessed base, up a leaning stem); 0: left out [m].
-  double landmark_hidden_base_sigma_xy_m = 0.1;
+  double landmark_hidden_base_sigma_xy_m = 0.2;
   double landmark_loss_scale = 2.0;  ///< Cauchy scale on landmark residuals, in sigmas
   int landmark_rounds = 2;           ///< associate, solve; repeated (re-association)
-  StemFusionParams stems;            ///< YAML section `stems` (its own visit)
-  StemMapParams stem_map;            ///< field stem maps: fixed (fieldStemMapLoopParams)
+  /// A tree seen by more submaps keeps this many of its observations, spread over them: a
+  /// survey of laps sees every tree from dozens of submaps, and each landmark couples all of
+  /// its submaps in the reduced system (the soak test's 712 submaps: 111 s with all); 0: all
+  int landmark_max_observations = 8;
+  StemFusionParams stems;  ///< YAML section `stems` (its own visit)
+  StemMapParams stem_map;  ///< field stem maps: fixed (fieldStemMapLoopParams)
   std::string validate() const;
 
   template <class V>
@@ -95,6 +99,7 @@ struct MergeParams {
     v("landmark_hidden_base_sigma_xy_m", landmark_hidden_base_sigma_xy_m);
     v("landmark_loss_scale", landmark_loss_scale);
     v("landmark_rounds", landmark_rounds);
+    v("landmark_max_observations", landmark_max_observations);
   }
 };
 
