@@ -406,7 +406,7 @@ void boundsMasks(const TriangleColumns& c, const ConsistencyBounds& b, bool q_fa
   for (size_t j = 0; j < n; ++j) {
     uint8_t in[6];
     for (int a = 0; a < 6; ++a)
-      in[a] = static_cast<uint8_t>((x[a][j] >= b.lo[a]) & (x[a][j] <= b.hi[a]));
+      in[a] = static_cast<uint8_t>(static_cast<int>(x[a][j] >= b.lo[a]) & (x[a][j] <= b.hi[a]));
     const uint8_t partial = static_cast<uint8_t>(
         (in[0] & in[3] & in[5]) | ((in[1] & in[3] & in[4]) << 1) | ((in[2] & in[4] & in[5]) << 2));
     const uint8_t full = static_cast<uint8_t>(-static_cast<uint8_t>(partial == 7));  // 0 or 0xff
@@ -543,8 +543,9 @@ VertexSupport accumulateSupport(const std::vector<MatchTriangle>& tq,
     // Masks first (vectorised), then only the pairs that give support: in a lattice stand
     // ~125,000 pairs per candidate fall in the windows and under a tenth of them support.
     boundsMasks(scratch.cols, bounds[i], mq.delaunay, from, to, &scratch.mask);
+    const MatchTriangle* window = tc.data() + from;  // a lambda cannot capture `from` (C++17)
     forEachNonzero(scratch.mask.data(), to - from,
-                   [&](size_t k, uint8_t m) { counts.add(mq.t, tc[from + k].t, m); });
+                   [&](size_t k, uint8_t m) { counts.add(mq.t, window[k].t, m); });
   }
   counts.out();
   return sup;
