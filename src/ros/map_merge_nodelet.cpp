@@ -237,6 +237,7 @@ class MapMergeNodelet : public nodelet::Nodelet {
               const std::vector<dtif::LoopClosure::ConstPtr>& ls,
               const std::vector<std::pair<std::string, sensor_msgs::PointCloud2::ConstPtr>>& cs) {
     std::unique_lock<std::mutex> lock(merge_mutex_);
+    if (!ds.empty() || !ls.empty()) ++generation_;
     // Submaps in (stamp, robot) order: simultaneous first submaps of two robots enter in the
     // same order every run, so a component's anchor (its earliest robot) is reproducible.
     std::sort(ds.begin(), ds.end(), [](const auto& a, const auto& b) {
@@ -558,6 +559,7 @@ class MapMergeNodelet : public nodelet::Nodelet {
   }
 
   void resetMap() {
+    ++generation_;
     merger_ = newMerger();
     stem_map_registered_ = false;
     frames_ = ros_glue::MapFrames(node_.map_frame);
@@ -611,13 +613,13 @@ class MapMergeNodelet : public nodelet::Nodelet {
     return true;
   }
 
-  // The merged cloud of a component in its frame (merge_mutex_ held); null when no clouds.
-  Cloud::Ptr mergedCloud(int component) const {
+  // The merged cloud of a component in its frame from the given poses; null when no clouds.
+  Cloud::Ptr mergedCloud(const std::vector<MergedPose>& poses,
+                         const std::map<int64_t, Cloud::Ptr>& clouds, int component) const {
     Cloud::Ptr all(new Cloud);
     std::map<int64_t, const MergedPose*> by_id;
-    const std::vector<MergedPose> poses = merger_.poses();
     for (const MergedPose& p : poses) by_id[p.id] = &p;
-    for (const auto& [id, cloud] : clouds_) {
+    for (const auto& [id, cloud] : clouds) {
       auto p = by_id.find(id);
       if (p == by_id.end() || p->second->component != component) continue;
       Cloud moved;
@@ -631,7 +633,7 @@ class MapMergeNodelet : public nodelet::Nodelet {
   bool onPublishCloud(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
     std::lock_guard<std::mutex> lock(merge_mutex_);
     const int c = componentOfFrame(node_.map_frame);
-    Cloud::Ptr cloud = c >= 0 ? mergedCloud(c) : nullptr;
+    Cloud::Ptr cloud = c >= 0 ? mergedCloud(merger_.poses(), clouds_, c) : nullptr;
     if (!cloud) {
       res.success = false;
       res.message = "no submap clouds in " + node_.map_frame +
@@ -648,30 +650,49 @@ class MapMergeNodelet : public nodelet::Nodelet {
     return true;
   }
 
-  bool onSaveMap(dtif::SaveMap::Request& req, dtif::SaveMap::Response& res) {
+  // What save_map writes, copied under merge_mutex_: the landmark refinement and the files take
+  // seconds on a large map (2.4 s on the soak test's 712 submaps), and the worker goes on
+  // merging meanwhile.
+  struct SaveSnapshot {
+    MapMerger merger;
+    uint64_t generation = 0;
+    int component = -1;                    // the component in node_.map_frame
+    std::map<int64_t, Cloud::Ptr> clouds;  // submap clouds are replaced, never modified
+    std::map<int64_t, Key> own;            // merger id -> (robot, own submap id)
+    std::map<int64_t, double> stamps;      // merger id -> anchor stamp
+  };
+
+  SaveSnapshot saveSnapshot() {
     std::lock_guard<std::mutex> lock(merge_mutex_);
+    SaveSnapshot snap{merger_, generation_, componentOfFrame(node_.map_frame),
+                      clouds_, {},          stamp_of_};
+    for (const auto& [key, id] : global_id_) snap.own[id] = key;
+    return snap;
+  }
+
+  bool onSaveMap(dtif::SaveMap::Request& req, dtif::SaveMap::Response& res) {
     namespace fs = std::filesystem;
     try {
       if (req.directory.empty()) throw std::runtime_error("empty directory");
       fs::create_directories(req.directory);
       const fs::path dir(req.directory);
-      // The saved map is the landmark-refined one (too costly for every re-solve); the
-      // published TFs and paths follow it until the next solve.
-      const MergeSolveStats st = merger_.refine();
+      SaveSnapshot snap = saveSnapshot();
+      // The saved map is the landmark-refined one (too costly for every re-solve).
+      const MergeSolveStats st = snap.merger.refine();
       NODELET_INFO("save_map: landmark refinement %.1f ms (%zu landmarks)", st.landmark_ms,
                    st.landmarks);
-      publishOutputs();
-      const std::vector<MergedPose> poses = merger_.poses();
+      const std::vector<MergedPose> poses = snap.merger.poses();
       writeMergedPosesCsv((dir / "merged_poses.csv").string(), poses);
-      writeMergedStemsCsv((dir / "merged_stems.csv").string(), merger_.stems());
-      writeG2o((dir / "pose_graph.g2o").string(), poses, merger_.graphEdges());
-      writeSubmapIds((dir / "submap_ids.csv").string());
+      writeMergedStemsCsv((dir / "merged_stems.csv").string(), snap.merger.stems());
+      writeG2o((dir / "pose_graph.g2o").string(), poses, snap.merger.graphEdges());
+      writeSubmapIds((dir / "submap_ids.csv").string(), poses, snap);
       res.files = {"merged_poses.csv", "merged_stems.csv", "pose_graph.g2o", "submap_ids.csv"};
-      const int c = componentOfFrame(node_.map_frame);
-      if (Cloud::Ptr cloud = c >= 0 ? mergedCloud(c) : nullptr) {
+      if (Cloud::Ptr cloud =
+              snap.component >= 0 ? mergedCloud(poses, snap.clouds, snap.component) : nullptr) {
         writePcdAtomically((dir / "merged_cloud.pcd").string(), *cloud);
         res.files.push_back("merged_cloud.pcd");
       }
+      adoptRefined(&snap);
       res.success = true;
       res.message = "saved " + std::to_string(poses.size()) + " submaps to " + req.directory;
     } catch (const std::exception& e) {
@@ -682,17 +703,30 @@ class MapMergeNodelet : public nodelet::Nodelet {
     return true;
   }
 
+  // The published TFs and paths follow the refined map until the next solve, which starts from
+  // it; unless submaps or loops arrived while saving: then the live map keeps its own solve.
+  void adoptRefined(SaveSnapshot* snap) {
+    std::lock_guard<std::mutex> lock(merge_mutex_);
+    if (snap->generation != generation_) {
+      NODELET_INFO(
+          "save_map: the map changed while saving; the saved files are the map as it "
+          "was when save_map was called");
+      return;
+    }
+    merger_ = std::move(snap->merger);
+    publishOutputs();
+  }
+
   // submap_ids.csv: the merged map's ids (merged_poses.csv, pose_graph.g2o) as the robots' own
   // submap ids and anchor stamps; chain is the merger's robot ("<robot>@database": loaded).
-  void writeSubmapIds(const std::string& path) const {
-    std::map<int64_t, std::pair<std::string, int64_t>> own;
-    for (const auto& [key, id] : global_id_) own[id] = key;
+  static void writeSubmapIds(const std::string& path, const std::vector<MergedPose>& poses,
+                             const SaveSnapshot& snap) {
     std::ostringstream out;
     out << "id,chain,robot,submap_id,stamp\n" << std::setprecision(17);
-    for (const MergedPose& p : merger_.poses()) {
-      const auto& k = own.at(p.id);
+    for (const MergedPose& p : poses) {
+      const Key& k = snap.own.at(p.id);
       out << p.id << ',' << p.robot << ',' << k.first << ',' << k.second << ','
-          << stamp_of_.at(p.id) << '\n';
+          << snap.stamps.at(p.id) << '\n';
     }
     writeTextAtomically(path, out.str());
   }
@@ -747,7 +781,8 @@ class MapMergeNodelet : public nodelet::Nodelet {
   std::deque<dtif::LoopClosure::ConstPtr> pending_loops_;
   std::map<int, std::string> component_frame_;
   int64_t next_global_id_ = 0;
-  bool dirty_ = false;  // a database load wants a solve
+  bool dirty_ = false;       // a database load wants a solve
+  uint64_t generation_ = 0;  // counts changes of merger_'s graph (save_map's snapshots)
   size_t loops_used_ = 0, loops_rejected_ = 0, stems_count_ = 0;
   size_t solves_ = 0;
   double last_solve_ms_ = 0.0, max_solve_ms_ = 0.0;

@@ -194,5 +194,35 @@ TEST(LandmarkRefinement, ChangesNothingWhenOff) {
   }
 }
 
+TEST(LandmarkRefinement, ACopyRefinesWithoutTouchingTheOriginal) {
+  // save_map refines a copy off the merge lock while the original goes on taking submaps.
+  const SideBySide sc = sideBySide();
+  MapMerger live;
+  for (const auto& s : sc.submaps) live.addSubmap(s);
+  ASSERT_TRUE(live.addLoop(sc.loop));
+  live.solve();
+  const std::vector<MergedPose> before = live.poses();
+  MapMerger snapshot(live);
+  snapshot.refine();
+  const MapMerger refined_in_place = mergeSideBySide(sc, true);
+  for (const MergedPose& q : before) {
+    EXPECT_TRUE(live.pose(q.id)->isApprox(q.T_M_S, 1e-12)) << q.id;
+    EXPECT_TRUE(snapshot.pose(q.id)->isApprox(*refined_in_place.pose(q.id), 1e-9)) << q.id;
+  }
+  const auto [t_live, r_live] = relativeError(live, sc, 12);
+  const auto [t_snap, r_snap] = relativeError(snapshot, sc, 12);
+  EXPECT_GT(t_live, 0.15);  // the original is still the plain solve
+  EXPECT_LT(t_snap, 0.03);
+  live = snapshot;  // copy-assigned: the refined map, and independent of the snapshot after
+  snapshot.addSubmap([&] {
+    MergeSubmap s = sc.submaps.back();
+    s.id = 999;
+    s.stamp += 1.0;
+    return s;
+  }());
+  EXPECT_EQ(live.submapCount(), sc.submaps.size());
+  EXPECT_EQ(snapshot.submapCount(), sc.submaps.size() + 1);
+}
+
 }  // namespace
 }  // namespace dtif

@@ -646,6 +646,11 @@ MapMerger::MapMerger(const MergeParams& params) : impl_(std::make_unique<Impl>(p
 MapMerger::~MapMerger() = default;
 MapMerger::MapMerger(MapMerger&&) noexcept = default;
 MapMerger& MapMerger::operator=(MapMerger&&) noexcept = default;
+MapMerger::MapMerger(const MapMerger& other) : impl_(std::make_unique<Impl>(*other.impl_)) {}
+MapMerger& MapMerger::operator=(const MapMerger& other) {
+  if (this != &other) impl_ = std::make_unique<Impl>(*other.impl_);
+  return *this;
+}
 
 void MapMerger::addSubmap(const MergeSubmap& s) {
   Impl& m = *impl_;

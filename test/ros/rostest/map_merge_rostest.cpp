@@ -132,16 +132,21 @@ TEST(MapMergeRostest, EveryRobotsMapTfMatchesGroundTruth) {
       },
       10.0))
       << "the paths do not hold every submap";
-  for (const std::string robot : {"alpha", "bravo"}) {
-    const auto path = paths[robot].latest();
-    ASSERT_TRUE(path) << "no path of " << robot;
-    EXPECT_EQ(path->header.frame_id, "map");
-    for (const auto& [id, T] : test::pathPoses(ds, robot, *path)) {
-      est.push_back(T.translation());
-      gt.push_back(ds.T_W_S.at(id).translation());
-      robot_of.push_back(robot);
+  // The robots' latest paths in map: positions, ground truth and robot of every submap.
+  auto readPaths = [&](std::vector<Eigen::Vector3d>* est, std::vector<Eigen::Vector3d>* gt,
+                       std::vector<std::string>* robot_of) {
+    for (const std::string robot : {"alpha", "bravo"}) {
+      const auto path = paths[robot].latest();
+      ASSERT_TRUE(path) << "no path of " << robot;
+      EXPECT_EQ(path->header.frame_id, "map");
+      for (const auto& [id, T] : test::pathPoses(ds, robot, *path)) {
+        est->push_back(T.translation());
+        gt->push_back(ds.T_W_S.at(id).translation());
+        robot_of->push_back(robot);
+      }
     }
-  }
+  };
+  readPaths(&est, &gt, &robot_of);
   ASSERT_EQ(est.size(), ds.submaps.size()) << "a submap is missing from the paths";
   const std::vector<double> res = test::alignedResiduals(est, gt);
   std::map<std::string, std::vector<double>> per_robot;
@@ -167,11 +172,38 @@ TEST(MapMergeRostest, EveryRobotsMapTfMatchesGroundTruth) {
     EXPECT_LE(e, kTfTolM) << robot;
   }
 
-  // save_map writes the merged map's files.
+  // save_map writes the merged map's files, and the map the nodelet publishes is then the
+  // landmark-refined one: new paths, within the same tolerances.
+  const auto alpha_before = paths["alpha"].latest(), bravo_before = paths["bravo"].latest();
   dtif::SaveMap save;
   save.request.directory = (dir / "map").string();
   ASSERT_TRUE(ros::service::call("/map_merge/save_map", save));
   EXPECT_TRUE(save.response.success) << save.response.message;
+  ASSERT_TRUE(waitFor(
+      [&] {
+        return paths["alpha"].latest() != alpha_before && paths["bravo"].latest() != bravo_before;
+      },
+      10.0))
+      << "no paths published after save_map";
+  std::vector<Eigen::Vector3d> est_saved, gt_saved;
+  std::vector<std::string> robot_of_saved;
+  readPaths(&est_saved, &gt_saved, &robot_of_saved);
+  ASSERT_EQ(est_saved.size(), ds.submaps.size());
+  const double ate_saved = test::rms(test::alignedResiduals(est_saved, gt_saved));
+  std::cout << "after save_map (landmark-refined), all robots: ATE " << ate_saved << " m\n";
+  EXPECT_LE(ate_saved, kAteTolM);
+  const Pose T_W_map_saved = test::alignPositions(est_saved, gt_saved);
+  ros::WallDuration(1.0).sleep();  // the TF timer sends the refined map's transforms (wall time:
+                                   // the bag's clock has stopped)
+  for (const auto& [robot, s] : latest) {
+    Pose T;
+    ASSERT_TRUE(waitFor([&] { return test::lookup(tf, "map", odom_frame[robot], &T); }, 5.0));
+    const Eigen::Vector3d p = T_W_map_saved * (T * s.T_O_S).translation();
+    const double e = (p - ds.T_W_S.at(s.dataset_id).translation()).norm();
+    std::cout << "map TF of " << robot << " after save_map: latest submap " << e
+              << " m from ground truth\n";
+    EXPECT_LE(e, kTfTolM) << robot;
+  }
   // map_merge.test turns the submap clouds on, so the merged cloud is written too.
   for (const char* f :
        {"merged_poses.csv", "merged_stems.csv", "pose_graph.g2o", "merged_cloud.pcd"}) {

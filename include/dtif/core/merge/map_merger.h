@@ -166,6 +166,9 @@ class MapMerger {
   ~MapMerger();
   MapMerger(MapMerger&&) noexcept;
   MapMerger& operator=(MapMerger&&) noexcept;
+  /// A deep copy: e.g. a snapshot to refine and save while the original keeps taking submaps.
+  MapMerger(const MapMerger& other);
+  MapMerger& operator=(const MapMerger& other);
 
   /// Appends a submap to its robot's chain (a new robot starts its own component). Throws
   /// std::invalid_argument on a duplicate id or a non-finite pose.
