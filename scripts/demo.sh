@@ -9,7 +9,8 @@
 #     scored by scripts/score_ros_merge.py: ATE per map frame and per robot, odometry beside).
 # Exits non-zero when a step fails or when the nodelets or dtif eval close no loop.
 # Usage: scripts/demo.sh [scene.yaml] (default: config/scenes/mixed.yaml)
-# Environment: DTIF_DEMO_RATE (bag replay rate, default 2), DTIF_DEMO_BAG_ARGS (more options of
+# Environment: DTIF_DEMO_RATE (bag replay rate, default 2), DTIF_DEMO_SEED (simulation seed,
+# default 1: another seed is another forest and routes, in demo/<scene>-seed<n>), DTIF_DEMO_BAG_ARGS (more options of
 # dtif simulate, e.g. "--bag-max-points 4000" for a smaller bag of thinned clouds; by default the
 # bag holds every return, so the nodelets assemble the dataset's submaps; "--bag-layout fastlio", or
 # a scene with bag_layout: fastlio, gives a bag per robot with stock FAST-LIO2 names, each played
@@ -19,14 +20,16 @@ source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 SCENE="${1:-${DTIF_REPO}/config/scenes/mixed.yaml}"
 RATE="${DTIF_DEMO_RATE:-2}"
 START_S="$(date +%s)"
+SEED="${DTIF_DEMO_SEED:-1}"
 NAME="$(basename "${SCENE}" .yaml)"
 OUT="${DTIF_WS}/demo/${NAME}"
+[ "${SEED}" = 1 ] || OUT="${OUT}-seed${SEED}"
 
 dtif_build_logged
 dtif_source_ws
 # The simulation is reused when this scene was already simulated by the same dtif binary with
 # the same bag options (a few minutes saved on a re-run); otherwise it is made anew.
-SIM_KEY="seed 1 ${DTIF_DEMO_BAG_ARGS:-}"
+SIM_KEY="seed ${SEED} ${DTIF_DEMO_BAG_ARGS:-}"
 if [ -f "${OUT}/simulated" ] && [ "$(cat "${OUT}/simulated")" = "${SIM_KEY}" ] \
     && [ "${OUT}/simulated" -nt "${SCENE}" ] && [ "${OUT}/simulated" -nt "${DTIF_BIN}" ]; then
   echo "dtif demo: reusing the simulation of ${SCENE} in ${OUT}"
@@ -34,7 +37,7 @@ else
   echo "dtif demo: simulating ${SCENE} -> ${OUT}/dataset and ${OUT}/${NAME}.bag"
   rm -rf "${OUT}"
   # shellcheck disable=SC2086  # DTIF_DEMO_BAG_ARGS holds options
-  "${DTIF_BIN}" simulate "${SCENE}" --out "${OUT}/dataset" --seed 1 --png "${OUT}/scene.png" \
+  "${DTIF_BIN}" simulate "${SCENE}" --out "${OUT}/dataset" --seed "${SEED}" --png "${OUT}/scene.png" \
     --bag "${OUT}/${NAME}.bag" ${DTIF_DEMO_BAG_ARGS:-}
   echo "${SIM_KEY}" > "${OUT}/simulated"
 fi
