@@ -39,7 +39,7 @@ struct MergeRunStats {
   size_t solves = 0;
   size_t iterative_solves = 0;  ///< of them, with conjugate gradients (a dense factor)
   double solve_ms_total = 0.0, solve_ms_max = 0.0;
-  double landmark_ms = 0.0;  ///< the final solve's landmark refinement (MapMerger::refine)
+  double refine_ms = 0.0;  ///< the final MapMerger::refine call (last.landmark_ms: its landmark part)
   MergeSolveStats last;
 };
 
