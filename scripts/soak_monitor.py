@@ -97,8 +97,8 @@ class Monitor:
         self.lock = threading.Lock()
         self.files = {}
         self.open('descriptors', 'robot,submap_id,stamp,data_end,valid,trunks,ros_time,wall_time')
-        self.open('loop_msgs', 'query_robot,query_id,candidate_robot,candidate_id,inliers,ros_time,'
-                  'wall_time')
+        self.open('loop_msgs', 'query_robot,query_id,candidate_robot,candidate_id,inliers,'
+                  'inter_robot_extra,ros_time,wall_time')
         self.open('procs', 'wall_time,ros_time,process,pid,rss_kb,hwm_kb,fds,threads,thread_names')
         self.subs = [rospy.Subscriber('/%s/descriptor' % r, TrunkDescriptor, self.on_descriptor,
                                       queue_size=1000) for r in args.robots.split(',')]
@@ -126,7 +126,7 @@ class Monitor:
 
     def on_loop(self, m):
         self.write('loop_msgs', (m.query_robot, m.query_id, m.candidate_robot, m.candidate_id,
-                             m.inliers) + self.now())
+                             m.inliers, int(m.inter_robot_extra)) + self.now())
 
     def sample(self):
         procs = descendants(self.args.root)

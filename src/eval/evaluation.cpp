@@ -273,6 +273,16 @@ void scoreAccepted(const Dataset& ds, const CellSets& cells, size_t i, size_t j,
   scoreAcceptedLoop(trueTcq(ds, i, j), T_c_q, cellOverlap(cells[i], cells[j]), eval, row);
 }
 
+// The position of submap `id` among the i submaps before i (file order).
+size_t submapIndex(const Dataset& ds, size_t i, int64_t id) {
+  size_t j = 0;
+  while (j < i && ds.submaps[j].id != id) ++j;
+  if (j == i) {
+    throw std::logic_error("loop detector returned an unknown candidate id " + std::to_string(id));
+  }
+  return j;
+}
+
 void checkGroundTruth(const Dataset& ds) {
   for (const auto& rec : ds.submaps) {
     if (!ds.T_W_S.count(rec.id)) {
@@ -458,6 +468,7 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
   std::vector<std::shared_ptr<const Descriptor>> descs;  // every submap's, for explainMiss
   double bytes_sum = 0.0;
   size_t bytes_max = 0;
+  size_t inter_robot_extra = 0, inter_robot_extra_true = 0;
   const size_t n = ds.submaps.size();
 
   for (size_t i = 0; i < n; ++i) {
@@ -494,20 +505,21 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
       const Loop& loop = *step.loop;
       row.inliers = loop.inliers;
       row.score = loop.score;
-      size_t j = 0;
-      while (j < i && ds.submaps[j].id != loop.candidate_id) ++j;
-      if (j == i) {
-        throw std::logic_error("loop detector returned an unknown candidate id " +
-                               std::to_string(loop.candidate_id));
-      }
-      scoreAccepted(ds, cells, i, j, loop.T_c_q, eval, &row);
+      scoreAccepted(ds, cells, i, submapIndex(ds, i, loop.candidate_id), loop.T_c_q, eval, &row);
     }
     descs.push_back(step.desc);
     if (row.has_loop && !row.true_positive) {
       result.misses.push_back(explainMiss(ds, cells, descs, i, step.query, params.loop));
     }
 
-    if (on_query) on_query(desc, step.loop);
+    if (step.inter_robot_loop) {
+      EvalRow extra;
+      scoreAccepted(ds, cells, i, submapIndex(ds, i, step.inter_robot_loop->candidate_id),
+                    step.inter_robot_loop->T_c_q, eval, &extra);
+      ++inter_robot_extra;
+      inter_robot_extra_true += extra.true_positive;
+    }
+    if (on_query) on_query(desc, step.loop, step.inter_robot_loop);
 
     // 4. Insert q.
     front_end.insert(step);
@@ -519,6 +531,8 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
   result.summary.dataset = ds.root;
   if (n > 0) result.summary.descriptor_bytes_mean = bytes_sum / static_cast<double>(n);
   result.summary.descriptor_bytes_max = bytes_max;
+  result.summary.inter_robot_extra = inter_robot_extra;
+  result.summary.inter_robot_extra_true = inter_robot_extra_true;
   return result;
 }
 

@@ -21,7 +21,7 @@ FrontEndStep SequentialFrontEnd::describeAndQuery(const SubmapRecord& rec, const
       cloud_S, s.level.R_L_S, {rec.robot, rec.id, rec.stamp}, rec.T_O_S, &acc->second,
       params_.trunk_extraction, params_.descriptor, &s.timings, &s.extraction, &s.accumulated));
   const auto t1 = std::chrono::steady_clock::now();
-  s.loop = detector_.query(*s.desc, &s.query);
+  s.loop = detector_.query(*s.desc, &s.query, &s.inter_robot_loop);
   s.loop_ms = msSince(t1);
   return s;
 }

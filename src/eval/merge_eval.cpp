@@ -44,7 +44,7 @@ void sequentialLoopsUnscored(const Dataset& ds, const DtifParams& params,
   for (size_t i = 0; i < ds.submaps.size(); ++i) {
     const SubmapRecord& rec = ds.submaps[i];
     const FrontEndStep step = front_end.describeAndQuery(rec, *loadSubmapCloud(ds, rec));
-    on_query(*step.desc, step.loop);
+    on_query(*step.desc, step.loop, step.inter_robot_loop);
     front_end.insert(step);
     if (progress) progress(i + 1, ds.submaps.size());
   }
@@ -153,14 +153,17 @@ MergeInput collectMergeInput(const Dataset& ds, const DtifParams& params, const 
   MergeInput in;
   std::map<int64_t, size_t> row_of;
   for (size_t i = 0; i < ds.submaps.size(); ++i) row_of[ds.submaps[i].id] = i;
-  const QueryObserver collect = [&](const Descriptor& desc, const std::optional<Loop>& loop) {
+  const QueryObserver collect = [&](const Descriptor& desc, const std::optional<Loop>& loop,
+                                    const std::optional<Loop>& inter_robot_loop) {
     const size_t i = in.submaps.size();
     in.submaps.push_back(toMergeSubmap(ds.submaps.at(i), desc));
     if (desc.levelled()) in.levelling[desc.robot] = desc.level_rotation.toRotationMatrix();
-    if (loop) {
-      in.loops.push_back(*loop);
+    for (const std::optional<Loop>* l : {&loop, &inter_robot_loop}) {
+      if (!*l) continue;
+      in.loops.push_back(**l);
       in.loop_after.push_back(i);
     }
+    in.inter_robot_extra += inter_robot_loop.has_value();
   };
   if (hasGroundTruth(ds)) {
     in.eval = runEvaluation(ds, params, eval, progress, collect);

@@ -197,6 +197,10 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     double t_loop_ms = 0.0;
     std::shared_ptr<const Descriptor> candidate;
     std::optional<Meta> candidate_meta;
+    /// Beside an own-robot lc: the best loop with another robot
+    /// (database/inter_robot_verifications).
+    std::optional<Loop> inter_lc;
+    std::optional<Meta> inter_meta;
   };
 
   // Worker thread: convert, query, insert, then publish what was found.
@@ -211,6 +215,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       return;
     }
     publishLoop(msg, *d, meta, q);
+    if (q.inter_lc) publishInterRobotLoop(msg, *q.inter_lc, q.inter_meta);
     if (node_.publish_tf && node_.tf_rate_hz <= 0.0) publishTf();
   }
 
@@ -246,7 +251,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     }
     const auto t0 = std::chrono::steady_clock::now();
     try {
-      q->lc = detector_->query(*d);
+      q->lc = detector_->query(*d, nullptr, &q->inter_lc);
       q->t_loop_ms = msSince(t0);
     } catch (const std::exception& e) {
       NODELET_ERROR_THROTTLE(5.0, "query of %s/%ld failed: %s", d->robot.c_str(),
@@ -259,6 +264,10 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       auto m = meta_.find(c);
       if (m != meta_.end()) q->candidate_meta = m->second;
     }
+    if (q->inter_lc) {
+      auto m = meta_.find(Key(q->inter_lc->candidate_robot, q->inter_lc->candidate_id));
+      if (m != meta_.end()) q->inter_meta = m->second;
+    }
     EntryOdometry odometry;
     odometry.odom_frame = meta.odom_frame;
     odometry.T_O_S = meta.T_O_S;
@@ -266,8 +275,11 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       index_[key] = d;
       meta_[key] = meta;
     }
-    if (q->lc) detector_->recordLoop(*q->lc);  // saved with the database (relocalisation)
+    for (const std::optional<Loop>* lc : {&q->lc, &q->inter_lc}) {
+      if (*lc) detector_->recordLoop(**lc);  // saved with the database (relocalisation)
+    }
     if (q->lc && q->candidate_meta) linkOdometryFrames(*q->lc, *q->candidate_meta, meta);
+    if (q->inter_lc && q->inter_meta) linkOdometryFrames(*q->inter_lc, *q->inter_meta, meta);
     return true;
   }
 
@@ -309,6 +321,20 @@ class LoopClosureNodelet : public nodelet::Nodelet {
           new visualization_msgs::MarkerArray(markers)));
     }
     latest_loop_markers_.add(std::move(markers));
+  }
+
+  // The inter-robot loop beside a query's own-robot loop: on ~loop_closures for the map merge
+  // (it joins the robots), not in ~loop_log, which scores each query's best loop (worker).
+  void publishInterRobotLoop(const dtif::TrunkDescriptor& msg, const Loop& lc,
+                             const std::optional<Meta>& candidate_meta) {
+    boost::shared_ptr<dtif::LoopClosure> out(new dtif::LoopClosure(ros_glue::toMsg(lc)));
+    out->inter_robot_extra = true;
+    out->header.stamp = msg.header.stamp;
+    out->header.frame_id = candidate_meta ? candidate_meta->odom_frame : std::string();
+    loop_pub_.publish(boost::shared_ptr<const dtif::LoopClosure>(out));
+    NODELET_INFO("inter-robot loop beside it %s/%ld -> %s/%ld: %d inliers, score %.2f",
+                 lc.query_robot.c_str(), static_cast<long>(lc.query_id), lc.candidate_robot.c_str(),
+                 static_cast<long>(lc.candidate_id), lc.inliers, lc.score);
   }
 
   // One row of ~loop_log (worker thread only).

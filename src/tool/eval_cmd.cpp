@@ -80,6 +80,12 @@ int runEval(const EvalArgs& a) {
   std::cout << "descriptor bytes: mean " << std::lround(res.summary.descriptor_bytes_mean)
             << ", max " << res.summary.descriptor_bytes_max << " (encoded; budget "
             << params.descriptor.max_bytes << ", descriptor/max_bytes)\n";
+  if (res.summary.inter_robot_extra > 0) {
+    std::cout << "inter-robot loops beside an own-robot best loop (for the map merge, not scored "
+                 "above): "
+              << res.summary.inter_robot_extra << ", " << res.summary.inter_robot_extra_true
+              << " true positives\n";
+  }
   printLevelling(dir, res);
   printMultiSubmap(res.rows);
   if (!res.detection.empty()) {

@@ -109,9 +109,15 @@ int runMerge(const MergeArgs& a) {
 
   std::cout << "dataset " << ds.root << ": " << sum.submaps << " submaps, " << sum.robots
             << " robots, " << sum.components << " component(s); loops: " << sum.loops_accepted
-            << " accepted by loop closure, " << sum.loops_used << " used, " << sum.loops_rejected
+            << " accepted by loop closure (" << in.inter_robot_extra
+            << " inter-robot beside an own-robot best loop), " << sum.loops_used << " used, "
+            << sum.loops_rejected
             << " rejected by the back end (inter-robot: " << sum.inter_robot_used << " used, "
             << sum.inter_robot_rejected << " rejected); " << sum.stems << " stems\n";
+  if (in.eval && in.inter_robot_extra > 0) {
+    std::cout << "inter-robot loops beside an own-robot best loop: " << in.inter_robot_extra << ", "
+              << in.eval->summary.inter_robot_extra_true << " true positives (ground truth)\n";
+  }
   for (const MergeEvent& e : events) std::cout << "  " << e.text << "\n";
   std::cout << std::fixed << std::setprecision(1) << "graph: " << sum.run.solves
             << " incremental solves, mean "

@@ -2,7 +2,9 @@
 // descriptors, on descriptors collected once from simulated datasets.
 //   dtif_query_bench collect OUT.db DATASET...  every submap's descriptor (the eval protocol's),
 //       robots renamed <scene>/<robot> so that scenes and seeds share one database file
-//   dtif_query_bench replay DB [SCENE]  the eval protocol's sequential queries, scene by scene:
+//   dtif_query_bench replay DB [SCENE] [--best-only]  the eval protocol's sequential queries
+//       (with the inter-robot loop beside an own-robot best one unless --best-only), scene by
+//       scene:
 //   each
 //       entry queried against the earlier ones of its scene, then inserted (only scenes whose tag
 //       starts with SCENE); prints every loop (diff two runs to compare the loops found) and the
@@ -78,7 +80,8 @@ int collect(const std::string& out, const std::vector<std::string>& dirs) {
     const dtif::Dataset ds = dtif::readDataset(dir);
     size_t n = 0;
     dtif::runEvaluation(ds, params, dtif::EvalParams{}, {},
-                        [&](const dtif::Descriptor& d, const std::optional<dtif::Loop>&) {
+                        [&](const dtif::Descriptor& d, const std::optional<dtif::Loop>&,
+                            const std::optional<dtif::Loop>&) {
                           auto c = std::make_shared<dtif::Descriptor>(d);
                           c->robot = tag + "_" + d.robot;
                           n += all.insert(c);
@@ -95,7 +98,19 @@ std::string sceneOf(const std::string& robot) {
   return robot.substr(0, robot.find('_', seed == std::string::npos ? 0 : seed));
 }
 
-int replay(const std::string& db, const std::string& only) {
+/// LoopDetector::query as the loop closure nodelet calls it: with the inter-robot loop beside an
+/// own-robot best one (a build without it, e.g. the commit before it: the best loop only).
+template <class D>
+auto queryAsOnline(const D& det, const dtif::Descriptor& d, std::optional<dtif::Loop>* inter,
+                   bool best_only) -> decltype(det.query(d, nullptr, inter)) {
+  return det.query(d, nullptr, best_only ? nullptr : inter);
+}
+template <class D, class... Ignored>
+std::optional<dtif::Loop> queryAsOnline(const D& det, const dtif::Descriptor& d, Ignored...) {
+  return det.query(d);
+}
+
+int replay(const std::string& db, const std::string& only, bool best_only) {
   dtif::DtifParams params;
   dtif::LoopDetector file(params.loop);
   file.load(db);
@@ -111,10 +126,11 @@ int replay(const std::string& db, const std::string& only) {
   for (const std::string& s : order) {
     dtif::LoopDetector det(params.loop);
     double sum = 0.0, worst = 0.0;
-    size_t loops = 0;
+    size_t loops = 0, inter_loops = 0;
     for (const DescPtr& d : scenes[s]) {
       const double t0 = cpuMs();
-      const std::optional<dtif::Loop> lc = det.query(*d);
+      std::optional<dtif::Loop> inter;  // asked for as the loop closure nodelet does
+      const std::optional<dtif::Loop> lc = queryAsOnline(det, *d, &inter, best_only);
       const double t = cpuMs() - t0;
       sum += t;
       worst = std::max(worst, t);
@@ -126,10 +142,18 @@ int replay(const std::string& db, const std::string& only) {
                     lc->candidate_robot.c_str(), static_cast<long long>(lc->candidate_id), tr.x(),
                     tr.y(), tr.z(), lc->inliers, lc->score);
       }
+      if (inter) {
+        ++inter_loops;
+        std::printf("inter %s %s/%lld -> %s/%lld score %.4f\n", s.c_str(), d->robot.c_str(),
+                    static_cast<long long>(d->submap_id), inter->candidate_robot.c_str(),
+                    static_cast<long long>(inter->candidate_id), inter->score);
+      }
       det.insert(d);
     }
-    std::fprintf(stderr, "%-16s %4zu queries %4zu loops  query mean %8.3f ms  max %8.3f ms\n",
-                 s.c_str(), scenes[s].size(), loops, sum / scenes[s].size(), worst);
+    std::fprintf(stderr,
+                 "%-16s %4zu queries %4zu loops (+%zu inter-robot beside)  query mean %8.3f ms  "
+                 "max %8.3f ms\n",
+                 s.c_str(), scenes[s].size(), loops, inter_loops, sum / scenes[s].size(), worst);
     std::printf("scene %s %zu %zu %.4f %.4f\n", s.c_str(), scenes[s].size(), loops,
                 sum / scenes[s].size(), worst);
   }
@@ -252,8 +276,8 @@ int scale(const std::string& db, const std::vector<size_t>& sizes) {
 
 int main(int argc, char** argv) {
   const std::string usage =
-      "usage: dtif_query_bench collect OUT.db DATASET... | replay DB [SCENE] | scale DB N... |\n"
-      "       describe EVERY REPEAT DATASET...\n";
+      "usage: dtif_query_bench collect OUT.db DATASET... | replay DB [SCENE] [--best-only] |\n"
+      "       scale DB N... | describe EVERY REPEAT DATASET...\n";
   if (argc < 3) {
     std::fputs(usage.c_str(), stderr);
     return 2;
@@ -267,7 +291,14 @@ int main(int argc, char** argv) {
       return describe(std::max<size_t>(1, std::stoul(argv[2])), std::max(1, std::stoi(argv[3])),
                       std::vector<std::string>(argv + 4, argv + argc));
     }
-    if (mode == "replay") return replay(argv[2], argc > 3 ? argv[3] : "");
+    if (mode == "replay" && argc >= 3) {
+      // --best-only: without the inter-robot loop beside an own-robot best one (its cost apart)
+      std::vector<std::string> rest(argv + 3, argv + argc);
+      const auto flag = std::find(rest.begin(), rest.end(), "--best-only");
+      const bool best_only = flag != rest.end();
+      if (best_only) rest.erase(flag);
+      return replay(argv[2], rest.empty() ? "" : rest.front(), best_only);
+    }
     if (mode == "scale") {
       std::vector<size_t> sizes;
       for (int i = 3; i < argc; ++i) sizes.push_back(std::stoul(argv[i]));

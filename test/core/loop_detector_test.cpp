@@ -298,5 +298,62 @@ TEST(LoopDetector, QueryNeverMatchesItsOwnSubmap) {
   EXPECT_EQ(st.eligible, 1u);
 }
 
+/// A place robot a saw twice and robot b once, farther off: a's revisit scores best against a's
+/// own earlier submap; the inter-robot loop beside it is b's.
+TEST(LoopDetector, ReportsTheInterRobotLoopBesideAnOwnRobotBestLoop) {
+  std::mt19937 rng(4242);
+  const Trunks world = test::randomStand(rng, 100, 100, 600);
+  const Eigen::Vector2d centre(50, 50);
+  const Pose T_w_q = poseXyYaw(50, 50, 0, 0.3), T_w_own = poseXyYaw(51, 50.5, 0, -1.0),
+             T_w_b = poseXyYaw(61, 44, 0, 2.0);
+  const Descriptor q = describe(observe(rng, world, centre, T_w_q), "a", 2, 200.0);
+  const Descriptor own = describe(observe(rng, world, {51, 50.5}, T_w_own), "a", 0, 0.0);
+  const Descriptor other = describe(observe(rng, world, {61, 44}, T_w_b), "b", 1, 100.0);
+  const auto own_alone = matchPair(q, own, LoopDetectorParams{});
+  const auto other_alone = matchPair(q, other, LoopDetectorParams{});
+  ASSERT_TRUE(own_alone && other_alone);
+  ASSERT_GT(own_alone->score, other_alone->score);  // the closer revisit scores better
+
+  for (const bool on : {true, false}) {
+    LoopDetectorParams p;
+    p.database.inter_robot_verifications = on ? 1 : 0;
+    LoopDetector db(p);
+    db.insert(std::make_shared<Descriptor>(own));
+    db.insert(std::make_shared<Descriptor>(other));
+    const auto best_only = db.query(q);
+    std::optional<Loop> inter;
+    QueryStats st;
+    const auto best = db.query(q, &st, &inter);
+    // The best loop is the same with or without the inter-robot one.
+    ASSERT_TRUE(best && best_only);
+    EXPECT_EQ(best->candidate_robot, "a");
+    EXPECT_EQ(best->candidate_id, best_only->candidate_id);
+    EXPECT_TRUE(best->T_c_q.isApprox(best_only->T_c_q, 0.0));
+    EXPECT_EQ(best->score, best_only->score);
+    if (!on) {
+      EXPECT_FALSE(inter);
+      continue;
+    }
+    ASSERT_TRUE(inter);
+    EXPECT_EQ(inter->candidate_robot, "b");
+    EXPECT_EQ(inter->candidate_id, 1);
+    EXPECT_EQ(inter->score, other_alone->score);
+    const Pose T_b_q = T_w_b.inverse() * T_w_q;
+    EXPECT_LT(test::yawError(inter->T_c_q, T_b_q), 0.3 * M_PI / 180.0);
+    EXPECT_LT((inter->T_c_q.translation() - T_b_q.translation()).head<2>().norm(), 0.15);
+    // b's hypothesis bound is below a's score: verified only to find the inter-robot loop.
+    EXPECT_EQ(st.inter_robot_verified, 1u) << own_alone->score << " " << other_alone->score;
+  }
+
+  // A best loop with another robot already joins the robots: nothing beside it.
+  LoopDetector db{LoopDetectorParams{}};
+  db.insert(std::make_shared<Descriptor>(other));
+  Descriptor q_c = q;
+  q_c.robot = "c";
+  std::optional<Loop> inter;
+  ASSERT_TRUE(db.query(q_c, nullptr, &inter));
+  EXPECT_FALSE(inter);
+}
+
 }  // namespace
 }  // namespace dtif

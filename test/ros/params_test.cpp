@@ -62,10 +62,11 @@ void flatten(const YAML::Node& n, const std::string& prefix, std::vector<std::st
 
 TEST(StrictParams, DeclaredKeysComeFromVisit) {
   const auto keys = declaredKeys<DatabaseParams>("database");
-  ASSERT_EQ(keys.size(), 3u);
+  ASSERT_EQ(keys.size(), 4u);
   EXPECT_EQ(keys[0], "database/exclude_recent_s");
   EXPECT_EQ(keys[1], "database/max_candidates");
   EXPECT_EQ(keys[2], "database/max_vote_candidates");
+  EXPECT_EQ(keys[3], "database/inter_robot_verifications");
 }
 
 TEST(StrictParams, UnknownKeyUnderTheNamespaceIsReported) {

@@ -71,6 +71,10 @@ struct EvalSummary {
   double t_desc_ms = 0, t_loop_ms = 0, t_solver_ms = 0, t_total_ms = 0;
   double descriptor_bytes_mean = 0;
   size_t descriptor_bytes_max = 0;  ///< largest encoded descriptor (DESIGN: <= 8 KB on the wire)
+  /// Loops reported beside a query's best one, with another robot (DatabaseParams::
+  /// inter_robot_verifications; not part of the protocol's scores), and how many of them are true
+  /// positives.
+  size_t inter_robot_extra = 0, inter_robot_extra_true = 0;
   bool online = false;  ///< scored from an online run's loop log: only t_loop_ms is measured
 };
 
@@ -166,9 +170,11 @@ void scoreAcceptedLoop(const Pose& T_c_q_gt, const Pose& T_c_q_est, double overl
 EvalSummary summarizeRows(const std::vector<EvalRow>& rows, const std::string& dataset,
                           double bytes_sum);
 
-/// Called by runEvaluation after each query with the submap's descriptor (its trunks) and the
-/// accepted loop, if any (what a back end such as `dtif merge` consumes).
-using QueryObserver = std::function<void(const Descriptor& desc, const std::optional<Loop>& loop)>;
+/// Called by runEvaluation after each query with the submap's descriptor (its trunks), the
+/// accepted loop and the inter-robot loop beside it, if any (what a back end such as
+/// `dtif merge` consumes).
+using QueryObserver = std::function<void(const Descriptor& desc, const std::optional<Loop>& loop,
+                                         const std::optional<Loop>& inter_robot_loop)>;
 
 /// Runs the protocol. progress(i, n) is called after each submap, on_query (optional) after each
 /// query. Throws DatasetError when ground truth is missing or a cloud cannot be read.

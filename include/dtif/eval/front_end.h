@@ -26,6 +26,9 @@ struct FrontEndStep {
   TrunkExtractionResult extraction;  ///< this submap's own trunks (in L)
   AccumulatedTrunks accumulated;
   std::optional<Loop> loop;  ///< the accepted loop, T_c_q in the submaps' own frames S
+  /// Beside an own-robot `loop`: the best loop with another robot
+  /// (database/inter_robot_verifications).
+  std::optional<Loop> inter_robot_loop;
   QueryStats query;
   double loop_ms = 0.0;  ///< the query, verification included
   /// Step 1's time: the descriptor, plus levelling when it is on.

@@ -20,6 +20,7 @@ struct MergeInput {
   /// Accepted loops; loop_after[k] = index into submaps of the query (the loop arrives then).
   std::vector<Loop> loops;
   std::vector<size_t> loop_after;
+  size_t inter_robot_extra = 0;    ///< of loops: inter-robot ones beside an own-robot best loop
   std::optional<EvalResult> eval;  ///< the protocol's scoring, when ground truth exists
   /// Each levelled robot's latest levelling R_L_S (tilted odometry frames; none: level).
   std::map<std::string, Eigen::Matrix3d> levelling;
@@ -39,7 +40,8 @@ struct MergeRunStats {
   size_t solves = 0;
   size_t iterative_solves = 0;  ///< of them, with conjugate gradients (a dense factor)
   double solve_ms_total = 0.0, solve_ms_max = 0.0;
-  double refine_ms = 0.0;  ///< the final MapMerger::refine call (last.landmark_ms: its landmark part)
+  double refine_ms =
+      0.0;  ///< the final MapMerger::refine call (last.landmark_ms: its landmark part)
   MergeSolveStats last;
 };
 

@@ -160,14 +160,28 @@ Loop makeLoop(const Descriptor& q, const Descriptor& c, const std::vector<Corres
   return lc;
 }
 
+/// Whether a hypothesis of score bound `bound` at screening rank `rank` can still beat `loop`
+/// (found at `loop_rank`): ties go to the better screened.
+bool canBeat(double bound, size_t rank, const std::optional<Loop>& loop, size_t loop_rank) {
+  return !loop || bound > loop->score || (bound == loop->score && rank < loop_rank);
+}
+
+struct BestLoops {
+  std::optional<Loop> best;
+  std::optional<Loop> inter_robot;  ///< only when `best` is with q's own robot
+};
+
 /// The loop of the best-scoring accepted hypothesis (ties: the first, i.e. best screened), as
 /// if every one were verified in screening order. Verification is the costly part (lattice
 /// searches in repetitive stands), so the hypotheses are verified in order of their score
 /// bound (inlierWeightShare: a loop scores its co-visible ratio, at most 1, times it), and
-/// those whose bound cannot beat the best loop found are not verified at all.
-std::optional<Loop> verifyBest(const Descriptor& q, const std::vector<const Descriptor*>& cands,
-                               const std::vector<Hypothesis>& hyps,
-                               const LoopDetectorParams& params, QueryStats* stats) {
+/// those whose bound cannot beat the best loop found are not verified at all. With
+/// `want_inter_robot`, while the best loop is with q's own robot, other robots' hypotheses
+/// are verified on, at most `extra_budget` of them, for the best of them as well; the best loop
+/// stays the same.
+BestLoops verifyBest(const Descriptor& q, const std::vector<const Descriptor*>& cands,
+                     const std::vector<Hypothesis>& hyps, const LoopDetectorParams& params,
+                     int extra_budget, QueryStats* stats) {
   std::vector<std::pair<double, size_t>> order;  // (bound, rank)
   for (size_t rank = 0; rank < hyps.size(); ++rank) {
     if (hyps[rank].ok())
@@ -176,24 +190,43 @@ std::optional<Loop> verifyBest(const Descriptor& q, const std::vector<const Desc
   std::sort(order.begin(), order.end(), [](const auto& a, const auto& b) {
     return a.first > b.first || (a.first == b.first && a.second < b.second);
   });
-  std::optional<Loop> best;
-  size_t best_rank = 0;
-  for (size_t k = 0; k < order.size(); ++k) {
-    const auto [bound, rank] = order[k];
-    // Sorted: no later hypothesis can beat the best either.
-    if (best && (bound < best->score || (bound == best->score && rank > best_rank))) {
-      if (stats) stats->unverified += order.size() - k;
-      break;
+  BestLoops out;
+  size_t best_rank = 0, inter_rank = 0, attempted = 0;
+  for (const auto& [bound, rank] : order) {
+    const bool other_robot = cands[rank]->robot != q.robot;
+    const bool for_best = canBeat(bound, rank, out.best, best_rank);
+    if (!for_best) {
+      // Sorted: no later hypothesis can beat the best either, nor an inter-robot loop the best
+      // inter-robot one (or the best is inter-robot already).
+      const bool own_best = out.best->candidate_robot == q.robot;
+      if (extra_budget <= 0 || !own_best || !canBeat(bound, rank, out.inter_robot, inter_rank))
+        break;
+      if (!other_robot) continue;
+      --extra_budget;
     }
+    ++attempted;
     const Verification ver = verifyHypothesis(q, *cands[rank], hyps[rank], params, stats);
     if (!ver.accepted) continue;
-    if (stats) ++stats->verified;
-    if (!best || ver.score > best->score || (ver.score == best->score && rank < best_rank)) {
-      best = makeLoop(q, *cands[rank], hyps[rank].corrs, hyps[rank].est, ver);
+    if (stats) {
+      ++stats->verified;
+      if (!for_best) ++stats->inter_robot_verified;
+    }
+    const bool better = for_best && canBeat(ver.score, rank, out.best, best_rank);
+    const bool better_inter = other_robot && canBeat(ver.score, rank, out.inter_robot, inter_rank);
+    if (!better && !better_inter) continue;
+    const Loop loop = makeLoop(q, *cands[rank], hyps[rank].corrs, hyps[rank].est, ver);
+    if (better) {
+      out.best = loop;
       best_rank = rank;
     }
+    if (better_inter) {
+      out.inter_robot = loop;
+      inter_rank = rank;
+    }
   }
-  return best;
+  if (stats) stats->unverified += order.size() - attempted;
+  if (!out.best || out.best->candidate_robot != q.robot) out.inter_robot.reset();
+  return out;
 }
 
 }  // namespace
@@ -224,6 +257,7 @@ std::string DatabaseParams::validate() const {
   if (!(exclude_recent_s >= 0.0)) err << "exclude_recent_s must be >= 0; ";
   if (max_candidates < 1) err << "max_candidates must be >= 1; ";
   if (max_vote_candidates < 0) err << "max_vote_candidates must be >= 0; ";
+  if (inter_robot_verifications < 0) err << "inter_robot_verifications must be >= 0; ";
   return err.str();
 }
 
@@ -294,7 +328,9 @@ size_t LoopDetector::memoryBytes() const {
   return bytes;
 }
 
-std::optional<Loop> LoopDetector::query(const Descriptor& q, QueryStats* stats) const {
+std::optional<Loop> LoopDetector::query(const Descriptor& q, QueryStats* stats,
+                                        std::optional<Loop>* inter_robot) const {
+  if (inter_robot) inter_robot->reset();
   QueryStats local;
   QueryStats& st = stats ? *stats : local;
   st = QueryStats{};
@@ -362,7 +398,10 @@ std::optional<Loop> LoopDetector::query(const Descriptor& q, QueryStats* stats) 
     hyps[rank] = hypothesize(q, *matched.back(), votes ? params_ : no_votes, &solver_, &st, &tq,
                              &triangles_[cd.index], &bq);
   }
-  return verifyBest(q, matched, hyps, params_, &st);
+  const int budget = inter_robot ? params_.database.inter_robot_verifications : 0;
+  BestLoops found = verifyBest(q, matched, hyps, params_, budget, &st);
+  if (inter_robot) *inter_robot = std::move(found.inter_robot);
+  return found.best;
 }
 
 std::vector<size_t> entriesInStampOrder(const LoopDetector& db) {

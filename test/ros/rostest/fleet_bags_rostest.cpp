@@ -119,7 +119,7 @@ TEST(FleetBagsRostest, StockUnitsGetQualifiedFramesAndTfBetweenRobots) {
     return false;
   };
   for (const std::string& r : robots) {
-    for (const std::string& topic : {"cloud_registered", "Odometry"}) {
+    for (const std::string topic : {"cloud_registered", "Odometry"}) {
       const std::string text = "waiting for /" + r + "/" + topic + ": no message in ";
       EXPECT_TRUE(waitFor([&] { return warned(text); }, 30.0)) << text;
     }

@@ -27,6 +27,12 @@ struct DatabaseParams {
   /// understory the histogram screening ranks true candidates down to 9th-19th (seeds 2 and 3
   /// of dense_slope: 2 loops each beyond the best 8). 0: none.
   int max_vote_candidates = 25;
+  /// When a query's best loop is with its own robot, also look for its best loop with another
+  /// robot (query's `inter_robot` output), verifying at most this many hypotheses beyond those
+  /// the best loop needed (each may be a lattice search in a plantation): the map merge needs
+  /// such loops to join robots, and a robot that walks its own earlier path beside another's
+  /// may otherwise never report one. 0: off. The evaluation protocol scores the best loop only.
+  int inter_robot_verifications = 2;
 
   std::string validate() const;
 
@@ -35,6 +41,7 @@ struct DatabaseParams {
     v("exclude_recent_s", exclude_recent_s);
     v("max_candidates", max_candidates);
     v("max_vote_candidates", max_vote_candidates);
+    v("inter_robot_verifications", inter_robot_verifications);
   }
 };
 
@@ -91,6 +98,7 @@ struct QueryStats {
   size_t verified = 0;     ///< candidates that passed verification
   /// Hypotheses query left unverified: their score bound could not beat the loop it found.
   size_t unverified = 0;
+  size_t inter_robot_verified = 0;  ///< of verified: verified only to find an inter-robot loop
   std::vector<int64_t> candidates;  ///< submap ids of the screened candidates, best first
 };
 
@@ -141,7 +149,11 @@ class LoopDetector {
   explicit LoopDetector(const LoopDetectorParams& params);
 
   /// Best verified loop of q against the database (same-robot recent entries excluded).
-  std::optional<Loop> query(const Descriptor& q, QueryStats* stats = nullptr) const;
+  /// `inter_robot` (optional): when that loop is with q's own robot, the best loop with another
+  /// robot among the hypotheses verified (DatabaseParams::inter_robot_verifications), if any
+  /// (nullopt otherwise). The best loop is the same with or without it.
+  std::optional<Loop> query(const Descriptor& q, QueryStats* stats = nullptr,
+                            std::optional<Loop>* inter_robot = nullptr) const;
 
   /// Inserts q with its odometry pose (optional); invalid descriptors are ignored (returns
   /// false), as is any once the database holds kMaxDatabaseEntries.
