@@ -512,14 +512,16 @@ GroundMap groundMapAroundTrunks(const Trunks& trunks, const float* x, const floa
                        p.ground_map_z_step_m, static_cast<uint32_t>(p.ground_map_min_points));
 }
 
-GroundMap groundMapIfFewBasesSeen(const Trunks& trunks, const LocalPoints& pts,
-                                  const TrunkExtractorParams& p) {
+bool fewBasesSeen(const Trunks& trunks, const TrunkExtractorParams& p) {
   const size_t seen = static_cast<size_t>(std::count_if(
       trunks.begin(), trunks.end(), [](const TrunkLandmark& t) { return t.base_seen; }));
-  if (!(p.ground_map_cell_m > 0.0) || trunks.empty() ||
-      !(static_cast<double>(seen) < p.ground_map_below_seen * trunks.size())) {
-    return GroundMap();
-  }
+  return p.ground_map_cell_m > 0.0 && !trunks.empty() &&
+         static_cast<double>(seen) < p.ground_map_below_seen * trunks.size();
+}
+
+GroundMap groundMapIfFewBasesSeen(const Trunks& trunks, const LocalPoints& pts,
+                                  const TrunkExtractorParams& p) {
+  if (!fewBasesSeen(trunks, p)) return GroundMap();
   return groundMapAroundTrunks(trunks, pts.x.data(), pts.y.data(), pts.z.data(), pts.size(),
                                Eigen::Vector3d(pts.ox, pts.oy, pts.oz), p);
 }
@@ -543,7 +545,8 @@ bool findTrunks(const LocalPoints& pts, const std::vector<float>& h, const Groun
 
 }  // namespace
 
-TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorParams& p) {
+TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorParams& p,
+                                    const GroundMapWanted& wanted) {
   TrunkExtractionResult result;
   TrunkExtractionStats& st = result.stats;
   st.input_points = cloud.size();
@@ -597,7 +600,9 @@ TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorPara
   result.trunks = keepDistinctTrunks(std::move(found), q, &st);
   // When too few stem bases were seen to fix a loop's elevation (steep slopes seen from a
   // helmet), the lowest surface of the whole submap has to.
-  result.ground_map = groundMapIfFewBasesSeen(result.trunks, pts, q);
+  // A map the caller would drop (its byte budget) is not built: a pass over every point.
+  if (fewBasesSeen(result.trunks, q) && (!wanted || wanted(result)))
+    result.ground_map = groundMapIfFewBasesSeen(result.trunks, pts, q);
   return result;
 }
 

@@ -341,8 +341,11 @@ GroundMap groundMapAroundTrunks(const Trunks& trunks, const float* x, const floa
                                 const float* z, size_t n, const Eigen::Vector3d& origin,
                                 const TrunkExtractorParams& p);
 
-/// groundMapAroundTrunks of the local points when fewer than ground_map_below_seen of the
-/// trunks have a seen base; else empty.
+/// Whether extraction builds a ground map for these trunks: ground_map_cell_m > 0, trunks, and
+/// fewer than ground_map_below_seen of them with a seen base.
+bool fewBasesSeen(const Trunks& trunks, const TrunkExtractorParams& p);
+
+/// groundMapAroundTrunks of the local points when fewBasesSeen; else empty.
 GroundMap groundMapIfFewBasesSeen(const Trunks& trunks, const LocalPoints& pts,
                                   const TrunkExtractorParams& p);
 
