@@ -1,9 +1,10 @@
 // The stages of trunk extraction (paper Sec. 3.B), each usable and testable on its own.
 // extractTrunks (trunk_extractor.h) runs them in this order:
-//   toLocalPoints -> estimateLocalGround -> heightsAboveGround with the slab (heightsAndSlab)
-//   -> (trunkFootprint) -> slabColumns (columnsOfSlab) -> clusterColumns -> fitCandidate per
-//   candidate (fitCircleRobust,
-//   stemLeans, stemBase) -> keepDistinctTrunks -> groundMapIfFewBasesSeen.
+//   toLocalPoints -> estimateLocalGround -> heightsAboveGround with the slab and the ground
+//   map's cells (heightsAndSlab, GroundMapCells) -> (trunkFootprint) -> slabColumns
+//   (columnsOfSlab) -> clusterColumns -> fitCandidate per candidate (fitCircleRobust,
+//   stemLeans, stemBase) -> keepDistinctTrunks -> the ground map when fewBasesSeen and the
+//   caller wants it (groundMapOfCells, else groundMapIfFewBasesSeen).
 //
 // Frames: the input cloud is gravity-aligned in the submap frame S. "Local" coordinates are S
 // minus LocalPoints' origin, so float storage keeps cm precision with UTM-sized coordinates.
