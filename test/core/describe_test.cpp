@@ -88,5 +88,71 @@ TEST(DescribeCloud, OptionalOutputsAndEmptyCloud) {
   EXPECT_TRUE(ext.trunks.empty());
 }
 
+// The ground map is decided before it is built: describeCloud, with any byte budget, gives the
+// bytes of extract -> describe -> stamp -> fitDescriptorBytes, and a map the budget drops is
+// never built (the extraction handed back has none).
+TEST(DescribeCloud, GroundMapOnlyBuiltWhenTheBudgetKeepsIt) {
+  const Cloud cloud = plot(kStems, 3);
+  TrunkExtractorParams ep;
+  ep.ground_map_below_seen = 1.01;  // a map on every submap
+  const SubmapKey key{"robot_c", 9, 77.5};
+  const TrunkExtractionResult full = extractTrunks(cloud, ep);
+  ASSERT_FALSE(full.ground_map.empty());
+  Descriptor ref = describeSubmap(full, DescriptorParams{});
+  ref.robot = key.robot, ref.submap_id = key.submap_id, ref.stamp = key.stamp;
+  const size_t total = encodeDescriptor(ref).size();
+  Descriptor rest = ref;
+  rest.ground_map = GroundMap();
+  const size_t rest_bytes = encodeDescriptor(rest).size();
+  ASSERT_LT(rest_bytes + 100, total);
+  int cases_without_map = 0;
+  for (const size_t budget : {size_t{0}, total + 10, (total + rest_bytes) / 2, rest_bytes + 1,
+                              rest_bytes, rest_bytes - 1, size_t{100}}) {
+    DescriptorParams dp;
+    dp.max_bytes = static_cast<int>(budget);
+    Descriptor expected = ref;
+    fitDescriptorBytes(&expected, dp.max_bytes);
+    TrunkExtractionResult ext;
+    const Descriptor d = describeCloud(cloud, key, ep, dp, nullptr, &ext);
+    EXPECT_EQ(encodeDescriptor(d), encodeDescriptor(expected)) << "budget " << budget;
+    // Not built only when the budget drops it whole (a map may be built and cropped to nothing).
+    const bool fits = groundMapFits(ref, dp.max_bytes);
+    if (!fits) EXPECT_TRUE(expected.ground_map.empty()) << "budget " << budget;
+    EXPECT_EQ(ext.ground_map.empty(), !fits) << "budget " << budget;
+    cases_without_map += !fits;
+  }
+  EXPECT_EQ(cases_without_map, 3);  // budgets rest_bytes, rest_bytes - 1, 100
+}
+
+// extractTrunks asks `wanted` once, with the trunks and footprint found, before the map.
+TEST(ExtractTrunks, GroundMapWantedSeesTheTrunksAndCanSkipTheMap) {
+  const Cloud cloud = plot(kStems, 4);
+  TrunkExtractorParams ep;
+  ep.ground_map_below_seen = 1.01;
+  const TrunkExtractionResult full = extractTrunks(cloud, ep);
+  ASSERT_FALSE(full.ground_map.empty());
+  for (const bool want : {false, true}) {
+    int asked = 0;
+    const TrunkExtractionResult r =
+        extractTrunks(cloud, ep, [&](const TrunkExtractionResult& without_map) {
+          ++asked;
+          EXPECT_TRUE(without_map.ground_map.empty());
+          EXPECT_EQ(without_map.trunks.size(), full.trunks.size());
+          EXPECT_EQ(without_map.footprint.bits, full.footprint.bits);
+          return want;
+        });
+    EXPECT_EQ(asked, 1);
+    EXPECT_EQ(r.ground_map.empty(), !want);
+    if (want) EXPECT_EQ(r.ground_map.z, full.ground_map.z);
+    ASSERT_EQ(r.trunks.size(), full.trunks.size());
+    for (size_t i = 0; i < r.trunks.size(); ++i) EXPECT_EQ(r.trunks[i].z, full.trunks[i].z);
+  }
+  // No map to build (ground_map_below_seen 0): never asked.
+  ep.ground_map_below_seen = 0.0;
+  int asked = 0;
+  extractTrunks(cloud, ep, [&](const TrunkExtractionResult&) { return ++asked > 0; });
+  EXPECT_EQ(asked, 0);
+}
+
 }  // namespace
 }  // namespace dtif

@@ -340,6 +340,102 @@ TEST(ExtractionStages, GroundMapOnlyWhenFewBasesSeen) {
   EXPECT_TRUE(groundMapIfFewBasesSeen(trunks, pts, none).empty());
 }
 
+bool sameMap(const GroundMap& a, const GroundMap& b) {
+  return a.cell_m == b.cell_m && a.z_step_m == b.z_step_m && a.z0_m == b.z0_m && a.x0 == b.x0 &&
+         a.y0 == b.y0 && a.width == b.width && a.height == b.height && a.z == b.z;
+}
+
+// The ground map from the cells gathered in the heights pass equals makeGroundMap's over the
+// same points, for boxes that cut cells anywhere, cover everything or nothing, with points on
+// the box's edges and on cell boundaries, at a cell size that is no power of two, and with an
+// origin that makes local coordinates round.
+TEST(ExtractionStages, GroundMapOfCellsEqualsMakeGroundMap) {
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  int compared = 0, nonempty = 0;
+  for (const double cell : {0.5, 0.3, 1.0}) {
+    for (const double ox : {0.0, -3.0, 101.0}) {
+      LocalPoints pts;
+      pts.ox = ox, pts.oy = 2.0 * ox, pts.oz = -7.0;
+      addGround(&pts, slopeZ, 14.0, 0.09, &rng);
+      addCylinder(&pts, slopeZ, 6.0, 5.0, 0.2, 0.0, 3.0, &rng);
+      for (int k = 0; k < 200; ++k)  // on cell boundaries of S (local + origin)
+        push(&pts, std::round(u(rng) * 20) * cell - ox, std::round(u(rng) * 20) * cell - 2 * ox,
+             -1.0 + u(rng));
+      push(&pts, 1e-9, 13.5, -2.0);  // rounds when the origin is added
+      TrunkExtractorParams p;
+      p.ground_map_cell_m = cell;
+      p.ground_map_min_points = 2;
+      const GroundGrid grid = estimateLocalGround(pts, p);
+      GroundMapCells mc;
+      ASSERT_TRUE(mc.init(pts, cell, 1000.0));
+      std::vector<float> h;
+      std::vector<uint32_t> slab;
+      heightsAndSlab(pts, grid, p, &h, &slab, &mc);
+      ASSERT_TRUE(mc.used);
+      const Eigen::Vector3d origin(pts.ox, pts.oy, pts.oz);
+      std::vector<std::pair<Eigen::Vector2d, Eigen::Vector2d>> boxes;
+      for (int k = 0; k < 30; ++k) {
+        const Eigen::Vector2d a(u(rng) * 18 - 2 + ox, u(rng) * 18 - 2 + 2 * ox);
+        boxes.emplace_back(a, a + Eigen::Vector2d(u(rng) * 12, u(rng) * 12));
+      }
+      boxes.emplace_back(Eigen::Vector2d(-100 + ox, -100 + 2 * ox),
+                         Eigen::Vector2d(100 + ox, 100 + 2 * ox));                   // everything
+      boxes.emplace_back(Eigen::Vector2d(50 + ox, 0), Eigen::Vector2d(60 + ox, 5));  // nothing
+      // Edges exactly on points and on cell boundaries.
+      boxes.emplace_back(Eigen::Vector2d(pts.x[5] + ox, pts.y[5] + 2 * ox),
+                         Eigen::Vector2d(pts.x[900] + ox, pts.y[900] + 2 * ox));
+      boxes.emplace_back(Eigen::Vector2d(4 * cell + ox, 3 * cell + 2 * ox),
+                         Eigen::Vector2d(9 * cell + ox, 11 * cell + 2 * ox));
+      for (const auto& [lo, hi] : boxes) {
+        const GroundMap ref = makeGroundMap(pts.x.data(), pts.y.data(), pts.z.data(), pts.size(),
+                                            origin, lo, hi, cell, p.ground_map_z_step_m, 2);
+        GroundMap m;
+        m.width = 77;  // overwritten
+        ASSERT_TRUE(groundMapOfCells(mc, grid, lo, hi, p, &m));
+        EXPECT_TRUE(sameMap(m, ref)) << "cell " << cell << " ox " << ox << " box " << lo.transpose()
+                                     << " .. " << hi.transpose();
+        ++compared;
+        nonempty += !ref.empty();
+      }
+    }
+  }
+  EXPECT_EQ(compared, 9 * 34);
+  EXPECT_GT(nonempty, 9 * 25);
+}
+
+// A map that would need a coarser z step or cell than asked is left to makeGroundMap.
+TEST(ExtractionStages, GroundMapOfCellsDeclinesWhatItCannotMake) {
+  std::mt19937 rng(19);
+  LocalPoints pts;
+  addGround(&pts, flatZ, 10.0, 0.1, &rng);
+  TrunkExtractorParams p;
+  const GroundGrid grid = estimateLocalGround(pts, p);
+  GroundMapCells mc;
+  std::vector<float> h;
+  std::vector<uint32_t> slab;
+  GroundMap m;
+  const Eigen::Vector2d lo(1, 1), hi(8, 8);
+  EXPECT_FALSE(groundMapOfCells(mc, grid, lo, hi, p, &m));  // not gathered
+  ASSERT_TRUE(mc.init(pts, p.ground_map_cell_m, 1e5));      // points might lie 1e5 m up
+  heightsAndSlab(pts, grid, p, &h, &slab, &mc);
+  EXPECT_FALSE(groundMapOfCells(mc, grid, lo, hi, p, &m));
+  EXPECT_EQ(m.width, 0);  // untouched
+  ASSERT_TRUE(mc.init(pts, p.ground_map_cell_m, 10.0));
+  heightsAndSlab(pts, grid, p, &h, &slab, &mc);
+  TrunkExtractorParams fine = p;
+  fine.ground_map_cell_m = 0.01;  // 700 cells a side: more than kMaxGroundMapSide
+  GroundMapCells mf;
+  ASSERT_TRUE(mf.init(pts, 0.01, 10.0));
+  heightsAndSlab(pts, grid, fine, &h, &slab, &mf);
+  EXPECT_FALSE(groundMapOfCells(mf, grid, lo, hi, fine, &m));
+  EXPECT_FALSE(groundMapOfCells(mc, grid, lo, hi, fine, &m));  // gathered at another cell size
+  ASSERT_TRUE(groundMapOfCells(mc, grid, lo, hi, p, &m));
+  EXPECT_TRUE(sameMap(m, makeGroundMap(pts.x.data(), pts.y.data(), pts.z.data(), pts.size(),
+                                       Eigen::Vector3d::Zero(), lo, hi, p.ground_map_cell_m,
+                                       p.ground_map_z_step_m, p.ground_map_min_points)));
+}
+
 TEST(ExtractionStages, ValidateRejectsBadTuningKnobs) {
   auto error = [](void (*set)(TrunkExtractorParams*)) {
     TrunkExtractorParams p;

@@ -228,6 +228,14 @@ void fitDescriptorBytes(Descriptor* d, int max_bytes) {
   if (rest < budget) d->ground_map = fitGroundMapBytes(std::move(map), budget - rest);
 }
 
+bool groundMapFits(const Descriptor& d, int max_bytes) {
+  if (max_bytes <= 0) return true;
+  if (d.ground_map.empty()) return encodeDescriptor(d).size() < static_cast<size_t>(max_bytes);
+  Descriptor rest = d;
+  rest.ground_map = GroundMap();
+  return encodeDescriptor(rest).size() < static_cast<size_t>(max_bytes);
+}
+
 Descriptor buildDescriptor(const Trunks& input, const DescriptorParams& params) {
   Descriptor d;
   const std::string perr = params.validate();

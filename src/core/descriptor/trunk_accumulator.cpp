@@ -152,27 +152,55 @@ GroundMap groundMapOfCloud(const Cloud& cloud_S, const Trunks& own, const TrunkE
                                p);
 }
 
-// describeCloudAccumulated before the byte budget.
+// The accumulated descriptor without a ground map, stamped (level, when not null: the
+// levelling rotation it records).
+Descriptor accumulatedDescriptor(const TrunkExtractionResult& ext, const SubmapKey& key,
+                                 const Eigen::Quaterniond* level, const Pose& T_O_S,
+                                 TrunkAccumulator* accumulator,
+                                 const DescriptorParams& descriptor_params,
+                                 AccumulatedTrunks* acc) {
+  *acc = accumulator->add(key.stamp, T_O_S, ext.trunks);
+  Descriptor d = buildDescriptor(acc->trunks, descriptor_params);
+  d.footprint = ext.footprint;
+  d.robot = key.robot;
+  d.submap_id = key.submap_id;
+  d.stamp = key.stamp;
+  if (level) d.level_rotation = level->normalized();
+  return d;
+}
+
+// describeCloudAccumulated before the byte budget. As describeCloud, the descriptor is made
+// before the ground map, and no map is built that the byte budget would drop.
 Descriptor describeAccumulatedUnfitted(const Cloud& cloud_S, const SubmapKey& key,
-                                       const Pose& T_O_S, TrunkAccumulator* accumulator,
+                                       const Eigen::Quaterniond* level, const Pose& T_O_S,
+                                       TrunkAccumulator* accumulator,
                                        const TrunkExtractorParams& extractor_params,
                                        const DescriptorParams& descriptor_params,
                                        DescribeTimings* timings, TrunkExtractionResult* extraction,
                                        AccumulatedTrunks* accumulated) {
   const auto t0 = std::chrono::steady_clock::now();
-  TrunkExtractionResult ext = extractTrunks(cloud_S, extractor_params);
-  if (timings) timings->extract_ms = msSince(t0);
-  AccumulatedTrunks acc = accumulator->add(key.stamp, T_O_S, ext.trunks);
-  Descriptor d = buildDescriptor(acc.trunks, descriptor_params);
-  d.footprint = ext.footprint;
+  Descriptor d;
+  AccumulatedTrunks acc;
+  bool described = false, fits = true;
+  double describe_ms = 0.0;
+  const GroundMapWanted wanted = [&](const TrunkExtractionResult& without_map) {
+    const auto t1 = std::chrono::steady_clock::now();
+    d = accumulatedDescriptor(without_map, key, level, T_O_S, accumulator, descriptor_params, &acc);
+    described = true;
+    fits = groundMapFits(d, descriptor_params.max_bytes);
+    describe_ms = msSince(t1);
+    return fits;
+  };
+  TrunkExtractionResult ext = extractTrunks(cloud_S, extractor_params, wanted);
+  if (timings) timings->extract_ms = msSince(t0) - describe_ms;
+  if (!described)
+    d = accumulatedDescriptor(ext, key, level, T_O_S, accumulator, descriptor_params, &acc);
   d.ground_map = ext.ground_map;
-  if (acc.submaps > 1 && d.ground_map.empty()) {
+  if (acc.submaps > 1 && d.ground_map.empty() &&
+      (described ? fits : groundMapFits(d, descriptor_params.max_bytes))) {
     d.ground_map = groundMapOfCloud(cloud_S, ext.trunks, extractor_params);
   }
   if (timings) timings->total_ms = msSince(t0);
-  d.robot = key.robot;
-  d.submap_id = key.submap_id;
-  d.stamp = key.stamp;
   if (extraction) *extraction = std::move(ext);
   if (accumulated) *accumulated = std::move(acc);
   return d;
@@ -186,8 +214,9 @@ Descriptor describeCloudAccumulated(const Cloud& cloud_S, const SubmapKey& key, 
                                     const DescriptorParams& descriptor_params,
                                     DescribeTimings* timings, TrunkExtractionResult* extraction,
                                     AccumulatedTrunks* accumulated) {
-  Descriptor d = describeAccumulatedUnfitted(cloud_S, key, T_O_S, accumulator, extractor_params,
-                                             descriptor_params, timings, extraction, accumulated);
+  Descriptor d =
+      describeAccumulatedUnfitted(cloud_S, key, nullptr, T_O_S, accumulator, extractor_params,
+                                  descriptor_params, timings, extraction, accumulated);
   fitDescriptorBytes(&d, descriptor_params.max_bytes);
   return d;
 }
@@ -206,10 +235,10 @@ Descriptor describeLevelledCloudAccumulated(
   const double rotate_ms = msSince(t0);
   Pose T_O_L = T_O_S;
   T_O_L.linear() = T_O_S.rotation() * R_L_S.normalized().conjugate().toRotationMatrix();
-  Descriptor d = describeAccumulatedUnfitted(cloud_L, key, T_O_L, accumulator, extractor_params,
-                                             descriptor_params, timings, extraction, accumulated);
+  Descriptor d =
+      describeAccumulatedUnfitted(cloud_L, key, &R_L_S, T_O_L, accumulator, extractor_params,
+                                  descriptor_params, timings, extraction, accumulated);
   if (timings) timings->total_ms += rotate_ms;
-  d.level_rotation = R_L_S.normalized();
   fitDescriptorBytes(&d, descriptor_params.max_bytes);
   return d;
 }

@@ -83,6 +83,17 @@ struct BoxCells {
   }
 };
 
+// The map's values: each cell's lowest point in z steps, unknown under min_points points.
+void quantise(const std::vector<float>& low, const std::vector<uint32_t>& hits, uint32_t min_points,
+              GroundMap* m) {
+  m->z.resize(low.size());
+  for (size_t k = 0; k < low.size(); ++k) {
+    m->z[k] = std::isfinite(low[k]) && hits[k] >= min_points
+                  ? static_cast<int16_t>(std::lround(low[k] / m->z_step_m))
+                  : GroundMap::kUnknown;
+  }
+}
+
 }  // namespace
 
 GroundMap makeGroundMap(const float* x, const float* y, const float* z, size_t n,
@@ -148,13 +159,138 @@ GroundMap makeGroundMap(const float* x, const float* y, const float* z, size_t n
       ++hits[k];
     }
   }
-  m.z.resize(low.size());
-  for (size_t k = 0; k < low.size(); ++k) {
-    m.z[k] = std::isfinite(low[k]) && hits[k] >= min_points
-                 ? static_cast<int16_t>(std::lround(low[k] / z_step_m))
-                 : GroundMap::kUnknown;
-  }
+  quantise(low, hits, min_points, &m);
   return m;
+}
+
+namespace {
+
+// The cells of the box lo..hi: its column and row index range in S, clipped to the gathered
+// cells', and which columns / rows the box's edges cut (cl, ch, rl, rh; their points are
+// tested one by one).
+struct BoxRange {
+  int64_t cl, ch, rl, rh;  // the cells of lo and hi
+  int64_t c0, c1, r0, r1;  // clipped to the gathered cells
+  bool edge(int64_t c, int64_t r) const { return c == cl || c == ch || r == rl || r == rh; }
+};
+
+// Marks the grid cells that may hold points of map columns [c_lo, c_hi] x rows [r_lo, r_hi]
+// (one grid cell of margin for the rounding of local coordinates).
+void markGridCells(const GroundGrid& grid, const GroundMapCells& mc, int64_t c_lo, int64_t c_hi,
+                   int64_t r_lo, int64_t r_hi, std::vector<char>* mark) {
+  const auto gridIndex = [&](double local, double grid_min, int n) {
+    const double g = std::floor((local - grid_min) / grid.cell_m);
+    return static_cast<int>(std::clamp(g, -1.0, static_cast<double>(n)));
+  };
+  const int gx0 = std::max(0, gridIndex(c_lo * mc.cell_m - mc.ox, grid.minx, grid.nx) - 1);
+  const int gx1 =
+      std::min(grid.nx - 1, gridIndex((c_hi + 1) * mc.cell_m - mc.ox, grid.minx, grid.nx) + 1);
+  const int gy0 = std::max(0, gridIndex(r_lo * mc.cell_m - mc.oy, grid.miny, grid.ny) - 1);
+  const int gy1 =
+      std::min(grid.ny - 1, gridIndex((r_hi + 1) * mc.cell_m - mc.oy, grid.miny, grid.ny) + 1);
+  for (int gy = gy0; gy <= gy1; ++gy)
+    for (int gx = gx0; gx <= gx1; ++gx) (*mark)[static_cast<size_t>(gy) * grid.nx + gx] = 1;
+}
+
+// The lowest point (z + oz) and the count of the box's edge cells, from the points of the grid
+// cells that hold them, each point tested against the box as makeGroundMap tests it.
+void edgeCells(const GroundMapCells& mc, const GroundGrid& grid, const BoxRange& b,
+               const Eigen::Vector2d& lo, const Eigen::Vector2d& hi, std::vector<double>* low,
+               std::vector<uint32_t>* hits) {
+  std::vector<char> mark(grid.cells(), 0);
+  for (const int64_t c : {b.cl, b.ch})
+    if (c >= b.c0 && c <= b.c1) markGridCells(grid, mc, c, c, b.r0, b.r1, &mark);
+  for (const int64_t r : {b.rl, b.rh})
+    if (r >= b.r0 && r <= b.r1) markGridCells(grid, mc, b.c0, b.c1, r, r, &mark);
+  const Divisor by_cell(mc.cell_m);
+  const int64_t w = b.c1 - b.c0 + 1;
+  for (size_t g = 0; g < mark.size(); ++g) {
+    if (!mark[g]) continue;
+    for (uint32_t k = grid.start[g]; k < grid.start[g + 1]; ++k) {
+      const GroundGrid::SortedPoint& q = grid.sorted[k];
+      const double px = q.x + mc.ox, py = q.y + mc.oy;
+      const int64_t c = floorIndex(by_cell(px)), r = floorIndex(by_cell(py));
+      if (c < b.c0 || c > b.c1 || r < b.r0 || r > b.r1 || !b.edge(c, r)) continue;
+      if (!(px >= lo.x() && py >= lo.y() && px <= hi.x() && py <= hi.y())) continue;
+      const size_t i = static_cast<size_t>((r - b.r0) * w + (c - b.c0));
+      (*low)[i] = std::min((*low)[i], q.z + mc.oz);
+      ++(*hits)[i];
+    }
+  }
+}
+
+}  // namespace
+
+bool groundMapOfCells(const GroundMapCells& mc, const GroundGrid& grid, const Eigen::Vector2d& lo,
+                      const Eigen::Vector2d& hi, const TrunkExtractorParams& p, GroundMap* map) {
+  const double z_step_m = p.ground_map_z_step_m;
+  if (!mc.used || mc.cell_m != p.ground_map_cell_m || !(z_step_m > 0.0)) return false;
+  const Divisor by_cell(mc.cell_m);
+  BoxRange b;
+  b.cl = floorIndex(by_cell(lo.x())), b.ch = floorIndex(by_cell(hi.x()));
+  b.rl = floorIndex(by_cell(lo.y())), b.rh = floorIndex(by_cell(hi.y()));
+  b.c0 = std::max(b.cl, mc.x0), b.c1 = std::min(b.ch, mc.x0 + mc.width - 1);
+  b.r0 = std::max(b.rl, mc.y0), b.r1 = std::min(b.rh, mc.y0 + mc.height - 1);
+  if (b.c0 > b.c1 || b.r0 > b.r1) {  // no point inside the box
+    *map = GroundMap();
+    return true;
+  }
+  const int64_t w = b.c1 - b.c0 + 1, h = b.r1 - b.r0 + 1;
+  // Inner cells hold only points inside the box: a point left of lo lies in lo's column or
+  // further left (floor and division are monotonic), and so on. Edge cells: point by point.
+  std::vector<double> low(static_cast<size_t>(w * h), std::numeric_limits<double>::infinity());
+  std::vector<uint32_t> hits(low.size(), 0);
+  for (int64_t r = b.r0; r <= b.r1; ++r) {
+    for (int64_t c = b.c0; c <= b.c1; ++c) {
+      if (b.edge(c, r)) continue;
+      const size_t s = static_cast<size_t>((r - mc.y0) * mc.width + (c - mc.x0));
+      const size_t i = static_cast<size_t>((r - b.r0) * w + (c - b.c0));
+      hits[i] = mc.hits[s];
+      if (hits[i] > 0) low[i] = mc.low[s] + mc.oz;
+    }
+  }
+  edgeCells(mc, grid, b, lo, hi, &low, &hits);
+  // The extent of the points inside: the first and last cells holding any (makeGroundMap's
+  // floor(min x / cell) is the cell of the lowest x).
+  int64_t cmin = b.c1 + 1, cmax = b.c0 - 1, rmin = b.r1 + 1, rmax = b.r0 - 1;
+  double minz = std::numeric_limits<double>::infinity();
+  for (int64_t r = b.r0; r <= b.r1; ++r) {
+    for (int64_t c = b.c0; c <= b.c1; ++c) {
+      const size_t i = static_cast<size_t>((r - b.r0) * w + (c - b.c0));
+      if (hits[i] == 0) continue;
+      cmin = std::min(cmin, c), cmax = std::max(cmax, c);
+      rmin = std::min(rmin, r), rmax = std::max(rmax, r);
+      minz = std::min(minz, low[i]);
+    }
+  }
+  if (cmin > cmax) {
+    *map = GroundMap();
+    return true;
+  }
+  // A coarser z step (a tall extent; the bound on all points bounds the box's) or cell (a wide
+  // one): makeGroundMap's own pass.
+  if (!((mc.max_z - minz) / z_step_m <= 60000.0)) return false;
+  if (cmax - cmin + 1 > kMaxGroundMapSide || rmax - rmin + 1 > kMaxGroundMapSide) return false;
+  GroundMap m;
+  m.x0 = static_cast<int32_t>(cmin), m.y0 = static_cast<int32_t>(rmin);
+  m.width = static_cast<int32_t>(cmax - cmin + 1), m.height = static_cast<int32_t>(rmax - rmin + 1);
+  m.cell_m = mc.cell_m;
+  m.z_step_m = z_step_m;
+  m.z0_m = std::floor(minz);
+  std::vector<float> mlow(static_cast<size_t>(m.width) * m.height,
+                          std::numeric_limits<float>::infinity());
+  std::vector<uint32_t> mhits(mlow.size(), 0);
+  for (int32_t r = 0; r < m.height; ++r) {
+    for (int32_t c = 0; c < m.width; ++c) {
+      const size_t i = static_cast<size_t>((rmin + r - b.r0) * w + (cmin + c - b.c0));
+      const size_t k = static_cast<size_t>(r) * m.width + c;
+      mhits[k] = hits[i];
+      if (mhits[k] > 0) mlow[k] = static_cast<float>(low[i] - m.z0_m);
+    }
+  }
+  quantise(mlow, mhits, static_cast<uint32_t>(p.ground_map_min_points), &m);
+  *map = std::move(m);
+  return true;
 }
 
 namespace {

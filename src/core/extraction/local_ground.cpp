@@ -344,59 +344,133 @@ std::vector<float> heightsAboveGround(const LocalPoints& pts, const GroundGrid& 
 
 namespace {
 
-// heightsAboveGround into *out, and with a slab (not null) heightsAndSlab's slab too.
-void heightsPass(const LocalPoints& pts, const GroundGrid& grid, const TrunkExtractorParams* p,
-                 std::vector<float>* out, std::vector<uint32_t>* slab) {
-  std::vector<float>& h = *out;
-  const size_t n = pts.size();
-  // Each cell's plane about its centre, once per cell instead of two divisions per point.
-  struct Centred {
-    GroundPlane pl;
-    double x0, y0;
-  };
+// Each cell's plane about its centre, once per cell instead of two divisions per point.
+struct Centred {
+  GroundPlane pl;
+  double x0, y0;
+};
+
+std::vector<Centred> centredPlanes(const GroundGrid& grid) {
   std::vector<Centred> cells(grid.cells());
   for (size_t c = 0; c < cells.size(); ++c) {
     cells[c].pl = grid.plane[c];
     grid.cellCentre(c, &cells[c].x0, &cells[c].y0);
   }
+  return cells;
+}
+
+// heightsAboveGround into *out.
+void heightsPass(const LocalPoints& pts, const GroundGrid& grid, std::vector<float>* out) {
+  std::vector<float>& h = *out;
+  const size_t n = pts.size();
+  const std::vector<Centred> cells = centredPlanes(grid);
   h.resize(n);
   const PointCell cell_of(grid);
   const float *X = pts.x.data(), *Y = pts.y.data(), *Z = pts.z.data();
   float* H = h.data();
-  if (!slab) {
-    for (size_t i = 0; i < n; ++i) {
-      prefetchAhead(X, i, n), prefetchAhead(Y, i, n), prefetchAhead(Z, i, n);
-      const Centred& cc = cells[cell_of(X[i], Y[i])];
-      H[i] = static_cast<float>(Z[i] - cc.pl.at(X[i] - cc.x0, Y[i] - cc.y0));
-    }
-    return;
+  for (size_t i = 0; i < n; ++i) {
+    prefetchAhead(X, i, n), prefetchAhead(Y, i, n), prefetchAhead(Z, i, n);
+    const Centred& cc = cells[cell_of(X[i], Y[i])];
+    H[i] = static_cast<float>(Z[i] - cc.pl.at(X[i] - cc.x0, Y[i] - cc.y0));
   }
+}
+
+// The cells' geometry without their arrays (cellOf works on it).
+GroundMapCells cellGeometry(const GroundMapCells& mc) {
+  GroundMapCells g;
+  g.copyGeometry(mc);
+  return g;
+}
+
+// heightsAndSlab, and with kMapCells each point added to *map_cells.
+template <bool kMapCells>
+void heightsSlabPass(const LocalPoints& pts, const GroundGrid& grid, const TrunkExtractorParams& p,
+                     std::vector<float>* out, std::vector<uint32_t>* slab,
+                     GroundMapCells* map_cells) {
+  std::vector<float>& h = *out;
+  const size_t n = pts.size();
+  const std::vector<Centred> cells = centredPlanes(grid);
+  h.resize(n);
+  const PointCell cell_of(grid);
+  const float *X = pts.x.data(), *Y = pts.y.data(), *Z = pts.z.data();
+  float* H = h.data();
   // Branch-free, as slabColumns selects: about a quarter of the points are in the slab, in no
   // predictable pattern.
   slab->resize(n);
   uint32_t* S = slab->data();
   size_t ns = 0;
-  const double lo = p->slab_min_h_m, hi = p->slab_max_h_m;
+  const double lo = p.slab_min_h_m, hi = p.slab_max_h_m;
+  // The map cells' lowest point and count per run of points in one cell (consecutive returns
+  // mostly are): in registers, not a read-modify-write of the cell per point. A copy of the
+  // cells' geometry in locals: through the pointer, each store to a cell would make the
+  // compiler reload it and the point arrays.
+  const GroundMapCells geometry = kMapCells ? cellGeometry(*map_cells) : GroundMapCells();
+  size_t run = GroundMapCells::npos;
+  float run_low = std::numeric_limits<float>::infinity();
+  uint32_t run_hits = 0;
   for (size_t i = 0; i < n; ++i) {
     prefetchAhead(X, i, n), prefetchAhead(Y, i, n), prefetchAhead(Z, i, n);
-    const Centred& cc = cells[cell_of(X[i], Y[i])];
-    const float hv = static_cast<float>(Z[i] - cc.pl.at(X[i] - cc.x0, Y[i] - cc.y0));
+    const float x = X[i], y = Y[i], z = Z[i];
+    const Centred& cc = cells[cell_of(x, y)];
+    const float hv = static_cast<float>(z - cc.pl.at(x - cc.x0, y - cc.y0));
     H[i] = hv;
     S[ns] = static_cast<uint32_t>(i);
     ns += static_cast<size_t>((hv >= lo) & (hv < hi));
+    if (kMapCells) {
+      const size_t k = geometry.cellOf(x, y);
+      if (k != run) {
+        map_cells->addRun(run, run_low, run_hits);
+        run = k, run_low = z, run_hits = 0;
+      }
+      run_low = std::min(run_low, z);
+      ++run_hits;
+    }
   }
+  if (kMapCells) map_cells->addRun(run, run_low, run_hits);
   slab->resize(ns);
 }
 
 }  // namespace
 
 void heightsAboveGround(const LocalPoints& pts, const GroundGrid& grid, std::vector<float>* out) {
-  heightsPass(pts, grid, nullptr, out, nullptr);
+  heightsPass(pts, grid, out);
 }
 
 void heightsAndSlab(const LocalPoints& pts, const GroundGrid& grid, const TrunkExtractorParams& p,
                     std::vector<float>* h, std::vector<uint32_t>* slab) {
-  heightsPass(pts, grid, &p, h, slab);
+  heightsSlabPass<false>(pts, grid, p, h, slab, nullptr);
+}
+
+void heightsAndSlab(const LocalPoints& pts, const GroundGrid& grid, const TrunkExtractorParams& p,
+                    std::vector<float>* h, std::vector<uint32_t>* slab, GroundMapCells* map_cells) {
+  heightsSlabPass<true>(pts, grid, p, h, slab, map_cells);
+}
+
+bool GroundMapCells::init(const LocalPoints& pts, double cell, double max_z_bound) {
+  used = false;
+  if (pts.size() == 0 || !(cell > 0.0)) return false;
+  float minx = pts.x[0], maxx = minx, miny = pts.y[0], maxy = miny;
+  if (pts.has_extent) {
+    minx = pts.minx, maxx = pts.maxx, miny = pts.miny, maxy = pts.maxy;
+  } else {
+    for (size_t i = 1; i < pts.size(); ++i) {
+      minx = std::min(minx, pts.x[i]), maxx = std::max(maxx, pts.x[i]);
+      miny = std::min(miny, pts.y[i]), maxy = std::max(maxy, pts.y[i]);
+    }
+  }
+  cell_m = cell;
+  by_cell_ = Divisor(cell);
+  ox = pts.ox, oy = pts.oy, oz = pts.oz;
+  // Floor and the division are monotonic: every point's cell lies between the extent's.
+  x0 = floorIndex(by_cell_(minx + ox)), y0 = floorIndex(by_cell_(miny + oy));
+  width = floorIndex(by_cell_(maxx + ox)) - x0 + 1;
+  height = floorIndex(by_cell_(maxy + oy)) - y0 + 1;
+  if (!(width > 0 && height > 0 && static_cast<double>(width) * height <= 4e6)) return false;
+  low.assign(static_cast<size_t>(width * height), std::numeric_limits<float>::infinity());
+  hits.assign(low.size(), 0);
+  max_z = max_z_bound;
+  used = true;
+  return true;
 }
 
 Footprint trunkFootprint(const Cloud& cloud, const TrunkExtractorParams& p) {

@@ -296,6 +296,7 @@ struct Workspace {
   GroundGrid ground;
   std::vector<float> h;
   VoxelColumns cols;
+  GroundMapCells map_cells;
 };
 
 // The footprint's marks ready for firstPass, or null when the footprint is made otherwise.
@@ -497,29 +498,56 @@ Trunks keepDistinctTrunks(std::vector<FoundTrunk> found, const TrunkExtractorPar
   return trunks;
 }
 
+namespace {
+
+// The ground map's box: the trunks' box plus ground_map_margin_m (trunks not empty). Only
+// around the trunks: loops align trunks, so only there can two maps overlap.
+void groundMapBox(const Trunks& trunks, const TrunkExtractorParams& p, Eigen::Vector2d* lo,
+                  Eigen::Vector2d* hi) {
+  *lo = Eigen::Vector2d(trunks[0].x, trunks[0].y), *hi = *lo;
+  for (const TrunkLandmark& t : trunks) {
+    *lo = lo->cwiseMin(Eigen::Vector2d(t.x, t.y));
+    *hi = hi->cwiseMax(Eigen::Vector2d(t.x, t.y));
+  }
+  const Eigen::Vector2d margin = Eigen::Vector2d::Constant(p.ground_map_margin_m);
+  *lo -= margin, *hi += margin;
+}
+
+// groundMapIfFewBasesSeen of an extraction: from the cells gathered in the heights pass when
+// there are (the same map without a pass over the points).
+GroundMap groundMapOfExtraction(const Trunks& trunks, const LocalPoints& pts,
+                                const GroundGrid& ground, const GroundMapCells& cells,
+                                const TrunkExtractorParams& p) {
+  if (!fewBasesSeen(trunks, p)) return GroundMap();
+  Eigen::Vector2d lo, hi;
+  groundMapBox(trunks, p, &lo, &hi);
+  GroundMap m;
+  if (groundMapOfCells(cells, ground, lo, hi, p, &m)) return m;
+  return groundMapIfFewBasesSeen(trunks, pts, p);
+}
+
+}  // namespace
+
 GroundMap groundMapAroundTrunks(const Trunks& trunks, const float* x, const float* y,
                                 const float* z, size_t n, const Eigen::Vector3d& origin,
                                 const TrunkExtractorParams& p) {
   if (!(p.ground_map_cell_m > 0.0) || trunks.empty()) return GroundMap();
-  // Only around the trunks: loops align trunks, so only there can two maps overlap.
-  Eigen::Vector2d lo(trunks[0].x, trunks[0].y), hi = lo;
-  for (const TrunkLandmark& t : trunks) {
-    lo = lo.cwiseMin(Eigen::Vector2d(t.x, t.y));
-    hi = hi.cwiseMax(Eigen::Vector2d(t.x, t.y));
-  }
-  const Eigen::Vector2d margin = Eigen::Vector2d::Constant(p.ground_map_margin_m);
-  return makeGroundMap(x, y, z, n, origin, lo - margin, hi + margin, p.ground_map_cell_m,
-                       p.ground_map_z_step_m, static_cast<uint32_t>(p.ground_map_min_points));
+  Eigen::Vector2d lo, hi;
+  groundMapBox(trunks, p, &lo, &hi);
+  return makeGroundMap(x, y, z, n, origin, lo, hi, p.ground_map_cell_m, p.ground_map_z_step_m,
+                       static_cast<uint32_t>(p.ground_map_min_points));
+}
+
+bool fewBasesSeen(const Trunks& trunks, const TrunkExtractorParams& p) {
+  const size_t seen = static_cast<size_t>(std::count_if(
+      trunks.begin(), trunks.end(), [](const TrunkLandmark& t) { return t.base_seen; }));
+  return p.ground_map_cell_m > 0.0 && !trunks.empty() &&
+         static_cast<double>(seen) < p.ground_map_below_seen * trunks.size();
 }
 
 GroundMap groundMapIfFewBasesSeen(const Trunks& trunks, const LocalPoints& pts,
                                   const TrunkExtractorParams& p) {
-  const size_t seen = static_cast<size_t>(std::count_if(
-      trunks.begin(), trunks.end(), [](const TrunkLandmark& t) { return t.base_seen; }));
-  if (!(p.ground_map_cell_m > 0.0) || trunks.empty() ||
-      !(static_cast<double>(seen) < p.ground_map_below_seen * trunks.size())) {
-    return GroundMap();
-  }
+  if (!fewBasesSeen(trunks, p)) return GroundMap();
   return groundMapAroundTrunks(trunks, pts.x.data(), pts.y.data(), pts.z.data(), pts.size(),
                                Eigen::Vector3d(pts.ox, pts.oy, pts.oz), p);
 }
@@ -543,7 +571,8 @@ bool findTrunks(const LocalPoints& pts, const std::vector<float>& h, const Groun
 
 }  // namespace
 
-TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorParams& p) {
+TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorParams& p,
+                                    const GroundMapWanted& wanted) {
   TrunkExtractionResult result;
   TrunkExtractionStats& st = result.stats;
   st.input_points = cloud.size();
@@ -570,7 +599,15 @@ TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorPara
   const GroundGrid& ground = ws.ground;
   estimateLocalGround(pts, p, &ws.ground);
   const std::vector<float>& h = ws.h;
-  heightsAndSlab(pts, ground, p, &ws.h, &ws.cols.slab);
+  // The ground map's cells in the same pass, when a map may be built.
+  if (p.ground_map_cell_m > 0.0 && p.ground_map_below_seen > 0.0 &&
+      ws.map_cells.init(pts, p.ground_map_cell_m,
+                        bounds.centre.z() + bounds.half_side_m + 1.0)) {  // no z above
+    heightsAndSlab(pts, ground, p, &ws.h, &ws.cols.slab, &ws.map_cells);
+  } else {
+    ws.map_cells.used = false;
+    heightsAndSlab(pts, ground, p, &ws.h, &ws.cols.slab);
+  }
   // DATASET.md's overlap cells, so verification measures an aligned pair's overlap as the
   // protocol does.
   result.footprint = all_inside && marks && finite == cloud.size() && marks->complete()
@@ -597,7 +634,9 @@ TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorPara
   result.trunks = keepDistinctTrunks(std::move(found), q, &st);
   // When too few stem bases were seen to fix a loop's elevation (steep slopes seen from a
   // helmet), the lowest surface of the whole submap has to.
-  result.ground_map = groundMapIfFewBasesSeen(result.trunks, pts, q);
+  // A map the caller would drop (its byte budget) is not built: a pass over every point.
+  if (fewBasesSeen(result.trunks, q) && (!wanted || wanted(result)))
+    result.ground_map = groundMapOfExtraction(result.trunks, pts, ground, ws.map_cells, q);
   return result;
 }
 

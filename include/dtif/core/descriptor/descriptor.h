@@ -98,6 +98,9 @@ struct TrunkExtractionResult;
 /// Crops d's ground map until encodeDescriptor(*d) takes at most max_bytes (0: no limit), or
 /// drops it when the rest alone does not fit. Called last, once identity and levelling are set.
 void fitDescriptorBytes(Descriptor* d, int max_bytes);
+/// True when fitDescriptorBytes would keep some of a ground map in d: d without its map takes
+/// fewer than max_bytes (0: no limit). Extraction asks this before it builds a map.
+bool groundMapFits(const Descriptor& d, int max_bytes);
 
 /// buildDescriptor on an extraction's trunks, with the extraction's footprint and ground map
 /// attached (the describe* functions then fit it to params.max_bytes).

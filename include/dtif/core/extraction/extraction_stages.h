@@ -1,9 +1,10 @@
 // The stages of trunk extraction (paper Sec. 3.B), each usable and testable on its own.
 // extractTrunks (trunk_extractor.h) runs them in this order:
-//   toLocalPoints -> estimateLocalGround -> heightsAboveGround with the slab (heightsAndSlab)
-//   -> (trunkFootprint) -> slabColumns (columnsOfSlab) -> clusterColumns -> fitCandidate per
-//   candidate (fitCircleRobust,
-//   stemLeans, stemBase) -> keepDistinctTrunks -> groundMapIfFewBasesSeen.
+//   toLocalPoints -> estimateLocalGround -> heightsAboveGround with the slab and the ground
+//   map's cells (heightsAndSlab, GroundMapCells) -> (trunkFootprint) -> slabColumns
+//   (columnsOfSlab) -> clusterColumns -> fitCandidate per candidate (fitCircleRobust,
+//   stemLeans, stemBase) -> keepDistinctTrunks -> the ground map when fewBasesSeen and the
+//   caller wants it (groundMapOfCells, else groundMapIfFewBasesSeen).
 //
 // Frames: the input cloud is gravity-aligned in the submap frame S. "Local" coordinates are S
 // minus LocalPoints' origin, so float storage keeps cm precision with UTM-sized coordinates.
@@ -15,6 +16,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 #include "dtif/core/cloud.h"
@@ -70,6 +72,8 @@ inline void prefetchGather(const T* a, const uint32_t* index, size_t k, size_t n
 inline double planarDist(double dx, double dy) { return std::sqrt(dx * dx + dy * dy); }
 
 // --- Points ---------------------------------------------------------------------------------
+
+struct GroundMapCells;  // below
 
 /// The finite points of a cloud, relative to a local origin.
 struct LocalPoints {
@@ -183,6 +187,54 @@ void heightsAboveGround(const LocalPoints& pts, const GroundGrid& grid, std::vec
 /// slab_max_h_m), in point order: slabColumns' slab (columnsOfSlab takes it from there).
 void heightsAndSlab(const LocalPoints& pts, const GroundGrid& grid, const TrunkExtractorParams& p,
                     std::vector<float>* h, std::vector<uint32_t>* slab);
+/// The same, and every point added to *map_cells (initialised; not null).
+void heightsAndSlab(const LocalPoints& pts, const GroundGrid& grid, const TrunkExtractorParams& p,
+                    std::vector<float>* h, std::vector<uint32_t>* slab, GroundMapCells* map_cells);
+
+/// The ground map's cells (cells of S, side cell_m) over all the local points: the lowest point
+/// and the point count of each, gathered in the heights pass, which reads every point anyway, so
+/// that the map around the trunks (groundMapOfCells) reads only the points of its box's edge.
+struct GroundMapCells {
+  bool used = false;                              ///< init succeeded, every point fell inside
+  double cell_m = 0.0;                            ///< ground_map_cell_m [m]
+  double ox = 0.0, oy = 0.0, oz = 0.0;            ///< the local points' origin in S [m]
+  int64_t x0 = 0, y0 = 0, width = 0, height = 0;  ///< first cell (index in S), cells per side
+  std::vector<float> low;      ///< lowest local z per cell (row-major); +inf: no point [m]
+  std::vector<uint32_t> hits;  ///< points per cell
+  double max_z = 0.0;          ///< no point lies higher (S) [m]
+
+  /// Sized over the points' extent, all empty; max_z_bound: a height no point exceeds (S).
+  /// false (used stays false) without points, with cell_m 0, or beyond 4e6 cells.
+  bool init(const LocalPoints& pts, double cell_m, double max_z_bound);
+  /// Index of the cell of the local point (x, y), computed as makeGroundMap computes it; npos
+  /// outside (cannot happen: the extent bounds every point). Inline: per point.
+  size_t cellOf(float x, float y) const {
+    const int64_t ix = floorIndex(by_cell_(x + ox)) - x0;
+    const int64_t iy = floorIndex(by_cell_(y + oy)) - y0;
+    if (ix < 0 || iy < 0 || ix >= width || iy >= height) return npos;
+    return static_cast<size_t>(iy * width + ix);
+  }
+  /// Adds `hits` points of cell k (cellOf) whose lowest local z is `lowest`.
+  void addRun(size_t k, float lowest, uint32_t count) {
+    if (count == 0) return;
+    if (k == npos) {
+      used = false;
+      return;
+    }
+    low[k] = std::min(low[k], lowest);
+    hits[k] += count;
+  }
+  static constexpr size_t npos = ~size_t{0};
+  /// The cell size, origin and extent of `other`, not its cells (cellOf works on those alone).
+  void copyGeometry(const GroundMapCells& other) {
+    cell_m = other.cell_m, ox = other.ox, oy = other.oy, oz = other.oz;
+    x0 = other.x0, y0 = other.y0, width = other.width, height = other.height;
+    by_cell_ = other.by_cell_;
+  }
+
+ private:
+  Divisor by_cell_{1.0};
+};
 
 /// DATASET.md's overlap cells of the cloud in S as a footprint of footprint_cell_m cells, the
 /// ground percentiles on at most footprint_max_samples points. Empty when footprint_cell_m is 0.
@@ -341,8 +393,20 @@ GroundMap groundMapAroundTrunks(const Trunks& trunks, const float* x, const floa
                                 const float* z, size_t n, const Eigen::Vector3d& origin,
                                 const TrunkExtractorParams& p);
 
-/// groundMapAroundTrunks of the local points when fewer than ground_map_below_seen of the
-/// trunks have a seen base; else empty.
+/// Whether extraction builds a ground map for these trunks: ground_map_cell_m > 0, trunks, and
+/// fewer than ground_map_below_seen of them with a seen base.
+bool fewBasesSeen(const Trunks& trunks, const TrunkExtractorParams& p);
+
+/// makeGroundMap of the local points over the box lo..hi of S (ground_map_cell_m,
+/// ground_map_z_step_m, ground_map_min_points), the same map, from the cells gathered in
+/// `cells` and, for the cells on the box's edge, the points of the grid's cells there. false
+/// (then *map is untouched: use makeGroundMap) when the cells were not gathered or the map would
+/// need a coarser cell or z step than asked.
+bool groundMapOfCells(const GroundMapCells& cells, const GroundGrid& grid,
+                      const Eigen::Vector2d& lo, const Eigen::Vector2d& hi,
+                      const TrunkExtractorParams& p, GroundMap* map);
+
+/// groundMapAroundTrunks of the local points when fewBasesSeen; else empty.
 GroundMap groundMapIfFewBasesSeen(const Trunks& trunks, const LocalPoints& pts,
                                   const TrunkExtractorParams& p);
 

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -207,9 +208,13 @@ struct TrunkExtractionStats {
 struct TrunkExtractionResult {
   Trunks trunks;
   Footprint footprint;   ///< where the submap saw anything at trunk height (verification overlap)
-  GroundMap ground_map;  ///< lowest point per cell; empty unless few bases were seen
+  GroundMap ground_map;  ///< lowest point per cell; empty unless few bases were seen (and the
+                         ///< caller wanted it: extractTrunks)
   TrunkExtractionStats stats;
 };
+
+/// Asked by extractTrunks before it builds a ground map, with the trunks and footprint found.
+using GroundMapWanted = std::function<bool(const TrunkExtractionResult&)>;
 
 /// Settings of the robust circle fit.
 struct CircleFitParams {
@@ -253,6 +258,10 @@ CircleFit fitCircleRobust(const std::vector<Eigen::Vector2d>& xy, const CircleFi
 /// keeps its largest working arrays between calls (~40 bytes per point of the largest cloud it
 /// extracted) so that the next submap needs no fresh pages. Non-finite points are ignored; an
 /// empty or degenerate cloud yields an empty result, never an exception.
-TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorParams& params);
+///
+/// `wanted` (when set) is asked once the trunks and footprint are in the result, before a
+/// ground map is built: false leaves the map empty (a caller whose byte budget would drop it).
+TrunkExtractionResult extractTrunks(const Cloud& cloud, const TrunkExtractorParams& params,
+                                    const GroundMapWanted& wanted = nullptr);
 
 }  // namespace dtif
