@@ -156,7 +156,10 @@ MergeInput collectMergeInput(const Dataset& ds, const DtifParams& params, const 
   const QueryObserver collect = [&](const Descriptor& desc, const std::optional<Loop>& loop) {
     const size_t i = in.submaps.size();
     in.submaps.push_back(toMergeSubmap(ds.submaps.at(i), desc));
-    if (desc.levelled()) in.levelling[desc.robot] = desc.level_rotation.toRotationMatrix();
+    if (desc.levelled()) {
+      in.levelling[desc.robot] =
+          levellingInOdom(desc.level_rotation.toRotationMatrix(), in.submaps.back().T_O_S);
+    }
     if (loop) {
       in.loops.push_back(*loop);
       in.loop_after.push_back(i);
@@ -234,7 +237,7 @@ MapMerger runMerger(const MergeInput& in, const MergeParams& params,
                     std::vector<MergeEvent>* events, MergeRunStats* stats) {
   MapMerger merger(params);
   if (!stem_map.empty()) merger.setStemMap(stem_map);
-  for (const auto& [robot, R_L_S] : in.levelling) merger.setLevelling(robot, R_L_S);
+  for (const auto& [robot, R_L_O] : in.levelling) merger.setLevelling(robot, R_L_O);
   MergeRunStats st;
   auto solve = [&]() {
     const auto t0 = std::chrono::steady_clock::now();

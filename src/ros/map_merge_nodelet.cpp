@@ -313,7 +313,9 @@ class MapMergeNodelet : public nodelet::Nodelet {
     }
     chain.odom_frame = msg.header.frame_id;
     // A tilted odometry frame (stock FAST-LIO2): the robot's latest levelling keeps map z up.
-    if (d.levelled()) merger_.setLevelling(msg.robot, d.level_rotation.toRotationMatrix());
+    if (d.levelled()) {
+      merger_.setLevelling(msg.robot, levellingInOdom(d.level_rotation.toRotationMatrix(), T_O_S));
+    }
     return addToMerger(msg.robot, msg.robot, d.submap_id, msg.header.stamp.toSec(), T_O_S,
                        mergeSubmapOf(d, T_O_S).trunks);
   }

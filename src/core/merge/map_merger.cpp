@@ -57,7 +57,7 @@ struct MapMerger::Impl {
   };
   struct Robot {
     std::vector<size_t> nodes;
-    Eigen::Matrix3d R_L_S = Eigen::Matrix3d::Identity();
+    Eigen::Matrix3d R_L_O = Eigen::Matrix3d::Identity();
     int component = -1;
     int64_t frame = -1;  // anchor submap id whose M the estimates are in (-1: none yet)
     size_t order = 0;    // insertion order
@@ -223,7 +223,7 @@ struct MapMerger::Impl {
     Robot& first = robots.at(members.front());
     Node& anchor = nodes[first.nodes.front()];
     Pose target = Pose::Identity();
-    target.linear() = first.R_L_S;
+    target.linear() = first.R_L_O * anchor.T_O_S.linear();
     const Pose T_fix = target * anchor.pose().inverse();
     if (first.frame != anchor.id || !T_fix.isApprox(Pose::Identity(), 1e-12)) {
       const int64_t old = first.frame;
@@ -667,7 +667,7 @@ void MapMerger::addSubmap(const MergeSubmap& s) {
   if (is_new) r.order = m.robots.size() - 1;
   if (r.nodes.empty()) {
     Pose T = Pose::Identity();
-    T.linear() = r.R_L_S;
+    T.linear() = r.R_L_O * s.T_O_S.linear();
     n.setPose(T);
   } else {
     const Impl::Node& prev = m.nodes[r.nodes.back()];
@@ -680,10 +680,10 @@ void MapMerger::addSubmap(const MergeSubmap& s) {
   m.dirty = true;
 }
 
-void MapMerger::setLevelling(const std::string& robot, const Eigen::Matrix3d& R_L_S) {
+void MapMerger::setLevelling(const std::string& robot, const Eigen::Matrix3d& R_L_O) {
   auto [it, is_new] = impl_->robots.try_emplace(robot);
   if (is_new) it->second.order = impl_->robots.size() - 1;
-  it->second.R_L_S = R_L_S;
+  it->second.R_L_O = R_L_O;
   impl_->dirty = true;
 }
 
@@ -861,6 +861,10 @@ MergeSubmap mergeSubmapOf(const Descriptor& d, const Pose& T_O_S) {
     t.x = p.x(), t.y = p.y(), t.z = p.z();
   }
   return s;
+}
+
+Eigen::Matrix3d levellingInOdom(const Eigen::Matrix3d& R_L_S, const Pose& T_O_S) {
+  return R_L_S * T_O_S.linear().transpose();
 }
 
 }  // namespace dtif

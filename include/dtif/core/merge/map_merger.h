@@ -116,6 +116,9 @@ struct MergeSubmap {
 /// levelled descriptor holds them in L: Descriptor::level_rotation, undone here).
 MergeSubmap mergeSubmapOf(const Descriptor& d, const Pose& T_O_S);
 
+/// A submap's levelling R_L_S expressed for its robot's odometry frame: R_L_O = R_L_S R_O_S^T.
+Eigen::Matrix3d levellingInOdom(const Eigen::Matrix3d& R_L_S, const Pose& T_O_S);
+
 /// A robot changed component (joined another, or a rejected loop split it off): log it.
 struct MergeEvent {
   std::string robot;
@@ -170,9 +173,12 @@ class MapMerger {
   /// Appends a submap to its robot's chain (a new robot starts its own component). Throws
   /// std::invalid_argument on a duplicate id or a non-finite pose.
   void addSubmap(const MergeSubmap& submap);
-  /// Per-robot levelling rotation R_L_S (S into a gravity-aligned frame; identity by default)
-  /// used to make M z up. Applies from the next solve.
-  void setLevelling(const std::string& robot, const Eigen::Matrix3d& R_L_S);
+  /// Per-robot levelling R_L_O: the robot's odometry frame O into a gravity-aligned frame
+  /// (identity by default), used to make M z up (its anchor submap gets R_L_O R_O_S). A tilted O
+  /// is constant per robot, a levelled submap's R_L_S is not (S turns about O's z with the yaw):
+  /// pass levellingInOdom(R_L_S, T_O_S) of the robot's latest levelled submap. Applies from the
+  /// next solve.
+  void setLevelling(const std::string& robot, const Eigen::Matrix3d& R_L_O);
   /// Adds an accepted loop (both submaps must be known). Returns false (and ignores the loop)
   /// when a submap is unknown or the pose is not finite.
   bool addLoop(const Loop& loop);
