@@ -269,6 +269,8 @@ MapMerger runMerger(const MergeInput& in, const MergeParams& params,
   const auto t0 = std::chrono::steady_clock::now();
   st.last = merger.refine();
   st.landmark_ms = msSince(t0);
+  auto ev = merger.takeEvents();  // a component joined by its inventory (refine)
+  if (events) events->insert(events->end(), ev.begin(), ev.end());
   if (stats) *stats = st;
   return merger;
 }

@@ -662,6 +662,7 @@ class MapMergeNodelet : public nodelet::Nodelet {
       const MergeSolveStats st = merger_.refine();
       NODELET_INFO("save_map: landmark refinement %.1f ms (%zu landmarks)", st.landmark_ms,
                    st.landmarks);
+      for (const MergeEvent& e : merger_.takeEvents()) NODELET_INFO("%s", e.text.c_str());
       publishOutputs();
       const std::vector<MergedPose> poses = merger_.poses();
       writeMergedPosesCsv((dir / "merged_poses.csv").string(), poses);

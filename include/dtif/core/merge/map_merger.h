@@ -68,8 +68,17 @@ struct MergeParams {
   /// survey of laps sees every tree from dozens of submaps, and each landmark couples all of
   /// its submaps in the reduced system (the soak test's 712 submaps: 111 s with all); 0: all
   int landmark_max_observations = 8;
-  StemFusionParams stems;  ///< YAML section `stems` (its own visit)
-  StemMapParams stem_map;  ///< field stem maps: fixed (fieldStemMapLoopParams)
+  /// The final map (refine()) joins a component to component 0 when its stem inventory
+  /// registers to component 0's (descriptor match of the two inventories, then planar least
+  /// squares on nearest pairs): at least this many stems paired within join_pair_radius_m,
+  /// with an RMS of at most join_max_rms_m. A robot that overlaps the others without a detected
+  /// loop. The join is a loop between the two submaps nearest each other after registration,
+  /// through PCM and the solve like any loop; 0: never.
+  int join_min_pairs = 20;
+  double join_pair_radius_m = 0.4;  ///< [m]
+  double join_max_rms_m = 0.15;     ///< [m]
+  StemFusionParams stems;           ///< YAML section `stems` (its own visit)
+  StemMapParams stem_map;           ///< field stem maps: fixed (fieldStemMapLoopParams)
   std::string validate() const;
 
   template <class V>
@@ -100,6 +109,9 @@ struct MergeParams {
     v("landmark_loss_scale", landmark_loss_scale);
     v("landmark_rounds", landmark_rounds);
     v("landmark_max_observations", landmark_max_observations);
+    v("join_min_pairs", join_min_pairs);
+    v("join_pair_radius_m", join_pair_radius_m);
+    v("join_max_rms_m", join_max_rms_m);
   }
 };
 
