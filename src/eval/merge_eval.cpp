@@ -157,7 +157,10 @@ MergeInput collectMergeInput(const Dataset& ds, const DtifParams& params, const 
                                     const std::optional<Loop>& inter_robot_loop) {
     const size_t i = in.submaps.size();
     in.submaps.push_back(toMergeSubmap(ds.submaps.at(i), desc));
-    if (desc.levelled()) in.levelling[desc.robot] = desc.level_rotation.toRotationMatrix();
+    if (desc.levelled()) {
+      in.levelling[desc.robot] =
+          levellingInOdom(desc.level_rotation.toRotationMatrix(), in.submaps.back().T_O_S);
+    }
     for (const std::optional<Loop>* l : {&loop, &inter_robot_loop}) {
       if (!*l) continue;
       in.loops.push_back(**l);
@@ -237,7 +240,7 @@ MapMerger runMerger(const MergeInput& in, const MergeParams& params,
                     std::vector<MergeEvent>* events, MergeRunStats* stats) {
   MapMerger merger(params);
   if (!stem_map.empty()) merger.setStemMap(stem_map);
-  for (const auto& [robot, R_L_S] : in.levelling) merger.setLevelling(robot, R_L_S);
+  for (const auto& [robot, R_L_O] : in.levelling) merger.setLevelling(robot, R_L_O);
   MergeRunStats st;
   auto solve = [&]() {
     const auto t0 = std::chrono::steady_clock::now();
@@ -269,6 +272,8 @@ MapMerger runMerger(const MergeInput& in, const MergeParams& params,
   const auto t0 = std::chrono::steady_clock::now();
   st.last = merger.refine();
   st.refine_ms = msSince(t0);
+  auto ev = merger.takeEvents();  // a component joined by its inventory (refine)
+  if (events) events->insert(events->end(), ev.begin(), ev.end());
   if (stats) *stats = st;
   return merger;
 }

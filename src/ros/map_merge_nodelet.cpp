@@ -314,7 +314,9 @@ class MapMergeNodelet : public nodelet::Nodelet {
     }
     chain.odom_frame = msg.header.frame_id;
     // A tilted odometry frame (stock FAST-LIO2): the robot's latest levelling keeps map z up.
-    if (d.levelled()) merger_.setLevelling(msg.robot, d.level_rotation.toRotationMatrix());
+    if (d.levelled()) {
+      merger_.setLevelling(msg.robot, levellingInOdom(d.level_rotation.toRotationMatrix(), T_O_S));
+    }
     return addToMerger(msg.robot, msg.robot, d.submap_id, msg.header.stamp.toSec(), T_O_S,
                        mergeSubmapOf(d, T_O_S).trunks);
   }
@@ -714,6 +716,9 @@ class MapMergeNodelet : public nodelet::Nodelet {
       return;
     }
     merger_ = std::move(snap->merger);
+    // A component joined by its stem inventory (refine) is logged and moves into its frame.
+    for (const MergeEvent& e : merger_.takeEvents()) NODELET_INFO("%s", e.text.c_str());
+    assignFrames();
     publishOutputs();
   }
 

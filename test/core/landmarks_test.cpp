@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <random>
 
 #include "dtif/core/merge/map_merger.h"
@@ -43,8 +44,8 @@ TEST(AssociateLandmarks, AmbiguousObservationsJoinNothing) {
 }
 
 /// Trees on a jittered 4 m grid over 60 m x 20 m.
-std::vector<Eigen::Vector4d> forest() {
-  std::mt19937 rng(3);
+std::vector<Eigen::Vector4d> forest(unsigned seed = 3) {
+  std::mt19937 rng(seed);
   std::uniform_real_distribution<double> jitter(-1.0, 1.0), radius(0.1, 0.3), ground(-0.3, 0.3);
   std::vector<Eigen::Vector4d> trees;  // x, y, base z, r
   for (int i = 0; i < 16; ++i) {
@@ -84,8 +85,9 @@ struct SideBySide {
   Loop loop;
 };
 
-SideBySide sideBySide() {
-  const auto trees = forest();
+/// b_forest: the seed of the trees robot b sees (another forest than a's when not 3).
+SideBySide sideBySide(unsigned b_forest = 3) {
+  const auto trees = forest(), b_trees = forest(b_forest);
   std::mt19937 rng(5);
   SideBySide sc;
   for (const std::string robot : {"a", "b"}) {
@@ -100,7 +102,7 @@ SideBySide sideBySide() {
       s.id = (b ? 100 : 0) + k;
       s.stamp = k;
       s.T_O_S = T_O_S;
-      s.trunks = observe(trees, T_W_S, &rng);
+      s.trunks = observe(b ? b_trees : trees, T_W_S, &rng);
       sc.gt[s.id] = T_W_S;
       sc.submaps.push_back(s);
     }
@@ -174,6 +176,42 @@ TEST(LandmarkRefinement, CappedObservationsStillTieTheRobots) {
   }
   p.landmark_max_observations = 1;  // a landmark needs two observations to tie anything
   EXPECT_NE(p.validate().find("landmark_max_observations"), std::string::npos);
+}
+
+MapMerger mergeWithoutLoop(const SideBySide& sc, int join_min_pairs) {
+  MergeParams p;
+  p.join_min_pairs = join_min_pairs;
+  MapMerger m(p);
+  for (const auto& s : sc.submaps) m.addSubmap(s);
+  m.solve();
+  EXPECT_EQ(m.componentCount(), 2);  // no loop: each robot its own map
+  m.refine();
+  return m;
+}
+
+TEST(InventoryJoin, ARobotThatOverlapsWithoutALoopJoinsByItsStemInventory) {
+  const SideBySide sc = sideBySide();
+  const MapMerger off = mergeWithoutLoop(sc, 0);
+  EXPECT_EQ(off.componentCount(), 2);
+  MapMerger m = mergeWithoutLoop(sc, MergeParams().join_min_pairs);
+  ASSERT_EQ(m.componentCount(), 1);
+  const std::vector<MergeEvent> events = m.takeEvents();
+  EXPECT_TRUE(std::any_of(events.begin(), events.end(), [](const MergeEvent& e) {
+    return e.text.find("stem inventory") != std::string::npos;
+  }));
+  // The join loop and then the landmarks place b beside a all along (its drift included).
+  for (int k = 0; k < 13; ++k) {
+    const auto [t, r] = relativeError(m, sc, k);
+    EXPECT_LT(t, 0.03) << k;
+    EXPECT_LT(r, 0.25 * M_PI / 180.0) << k;
+  }
+}
+
+TEST(InventoryJoin, ARobotInAnotherForestStaysApart) {
+  // b walks the same path through other trees (a jittered grid of the same spacing and radii):
+  // its inventory must not register to a's.
+  const MapMerger m = mergeWithoutLoop(sideBySide(11), MergeParams().join_min_pairs);
+  EXPECT_EQ(m.componentCount(), 2);
 }
 
 TEST(LandmarkRefinement, ChangesNothingWhenOff) {

@@ -248,7 +248,7 @@ TEST(MapMerger, LevellingMakesMGravityAligned) {
   const Eigen::Matrix3d R_tilt =
       test::makePose(0, 0, 0, 0.12, -0.1, 0.0).linear();  // roll, pitch of S from gravity
   MapMerger m;
-  m.setLevelling("a", R_tilt);  // S -> level
+  m.setLevelling("a", R_tilt);  // O -> level (here S keeps the tilt of O whatever its heading)
   for (const auto& s : sc.submaps) {
     if (s.robot != "a") continue;
     MergeSubmap t = s;
@@ -265,6 +265,38 @@ TEST(MapMerger, LevellingMakesMGravityAligned) {
     const double angle = std::acos(std::min(1.0, up_S_est.dot(up_S_true)));
     // The anchor exactly; the others up to the odometry's roll/pitch random walk (1 mrad/step).
     EXPECT_LT(angle, p.id == 0 ? 1e-6 : 0.02) << p.id;
+  }
+}
+
+TEST(MapMerger, LevellingOfTheLatestSubmapLevelsTheAnchorOfItsTurnedFrame) {
+  // Upstream FAST-LIO2 as the simulator models it: O is tilted from gravity and every submap
+  // frame S keeps O's z, turned about it by the heading. Gravity in S then turns with the
+  // heading: the latest submap's R_L_S does not level the first one (it did, before: M was
+  // tilted by up to twice the tilt on fastlio_stock, its inventory scattered).
+  const Scenario sc = makeScenario();
+  const Eigen::Matrix3d R_Ot_O = test::makePose(0, 0, 0, 0.15, -0.1, 0.0).linear();  // O -> O'
+  MapMerger m;
+  std::vector<MergeSubmap> tilted;
+  for (const auto& s : sc.submaps) {
+    if (s.robot != "a" || s.id > 24) continue;  // the last one heads -90 deg, the first 0 deg
+    MergeSubmap t = s;
+    t.T_O_S.translation() = R_Ot_O * s.T_O_S.translation();  // the same path, seen in O'
+    tilted.push_back(t);
+  }
+  // Up in the S frame of submap k: R_O_S^T R_Ot_O z (S keeps O's z and O' is O tilted).
+  auto upInS = [&](const MergeSubmap& s) {
+    return Eigen::Vector3d(s.T_O_S.linear().transpose() * R_Ot_O * Eigen::Vector3d::UnitZ());
+  };
+  const MergeSubmap& last = tilted.back();
+  const Eigen::Matrix3d R_L_S =
+      Eigen::Quaterniond::FromTwoVectors(upInS(last), Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  m.setLevelling("a", levellingInOdom(R_L_S, last.T_O_S));
+  for (const auto& t : tilted) m.addSubmap(t);
+  m.solve();
+  for (const MergedPose& p : m.poses()) {
+    const Eigen::Vector3d up_S_est = p.T_M_S.linear().transpose() * Eigen::Vector3d::UnitZ();
+    const Eigen::Vector3d up_S_true = upInS(tilted.at(static_cast<size_t>(p.id)));
+    EXPECT_LT(std::acos(std::min(1.0, up_S_est.dot(up_S_true))), 1e-6) << p.id;
   }
 }
 

@@ -22,7 +22,8 @@ struct MergeInput {
   std::vector<size_t> loop_after;
   size_t inter_robot_extra = 0;    ///< of loops: inter-robot ones beside an own-robot best loop
   std::optional<EvalResult> eval;  ///< the protocol's scoring, when ground truth exists
-  /// Each levelled robot's latest levelling R_L_S (tilted odometry frames; none: level).
+  /// Each levelled robot's latest levelling, for its odometry frame: R_L_O (levellingInOdom;
+  /// tilted odometry frames; none: level).
   std::map<std::string, Eigen::Matrix3d> levelling;
 };
 

@@ -57,7 +57,7 @@ struct MapMerger::Impl {
   };
   struct Robot {
     std::vector<size_t> nodes;
-    Eigen::Matrix3d R_L_S = Eigen::Matrix3d::Identity();
+    Eigen::Matrix3d R_L_O = Eigen::Matrix3d::Identity();
     int component = -1;
     int64_t frame = -1;  // anchor submap id whose M the estimates are in (-1: none yet)
     size_t order = 0;    // insertion order
@@ -223,7 +223,7 @@ struct MapMerger::Impl {
     Robot& first = robots.at(members.front());
     Node& anchor = nodes[first.nodes.front()];
     Pose target = Pose::Identity();
-    target.linear() = first.R_L_S;
+    target.linear() = first.R_L_O * anchor.T_O_S.linear();
     const Pose T_fix = target * anchor.pose().inverse();
     if (first.frame != anchor.id || !T_fix.isApprox(Pose::Identity(), 1e-12)) {
       const int64_t old = first.frame;
@@ -575,6 +575,93 @@ struct MapMerger::Impl {
     return fuseStems(obs, p.stems);
   }
 
+  // --- joining components by their inventories ---------------------------------------------
+  /// For each component c > 0 whose inventory registers to component 0's
+  /// (MergeParams::join_min_pairs): a loop from c's submap to component 0's submap nearest it
+  /// after registration, with the registration's pose (planar; the elevation from the paired
+  /// stems' bases). Appends one event per loop.
+  std::vector<Loop> inventoryJoins() {
+    std::vector<Loop> out;
+    if (p.join_min_pairs < 1 || countComponents() < 2) return out;
+    const std::vector<MergedStem> inv = fuseInventory(false);
+    std::vector<FieldStem> target;  // component 0's inventory, the map the others register to
+    std::vector<double> target_z;
+    for (const MergedStem& s : inv) {
+      if (s.component != 0) continue;
+      target.push_back({std::to_string(s.stem_id), s.x, s.y, s.dbh});
+      target_z.push_back(s.z_base);
+    }
+    for (int c = 1; c < countComponents(); ++c) {
+      Trunks stems;
+      for (const MergedStem& s : inv) {
+        if (s.component != c) continue;
+        TrunkLandmark t;
+        t.x = s.x, t.y = s.y, t.z = s.z_base, t.r = s.dbh / 2.0;
+        stems.push_back(t);
+      }
+      const StemMapRegistration reg = registerStemMap(stems, target, joinParams());
+      if (!reg.ok || reg.rms_m > p.join_max_rms_m) continue;
+      std::vector<double> dz;
+      for (const auto& [i, j] : reg.pairs) dz.push_back(target_z[j] - stems[i].z);
+      std::nth_element(dz.begin(), dz.begin() + dz.size() / 2, dz.end());
+      Pose T_0_c = reg.T_P_M;
+      T_0_c.translation().z() = dz[dz.size() / 2];
+      Loop l = joinLoop(c, T_0_c, reg);
+      // Once per submap pair: a join PCM rejected is not offered again at the next refine().
+      if (std::none_of(loops.begin(), loops.end(), [&](const LoopRec& r) {
+            return r.loop.query_id == l.query_id && r.loop.candidate_id == l.candidate_id;
+          })) {
+        logJoin(c, l, reg);
+        out.push_back(std::move(l));
+      }
+    }
+    return out;
+  }
+
+  StemMapParams joinParams() const {
+    StemMapParams s;
+    s.loop = LoopDetectorParams();  // two LiDAR inventories: the loop detector's tolerances
+    s.pair_radius_m = p.join_pair_radius_m;
+    s.min_pairs = p.join_min_pairs;
+    return s;
+  }
+
+  /// The loop that joins component c to 0: from c's submap to the one of component 0 nearest it
+  /// under T_0_c (horizontally).
+  Loop joinLoop(int c, const Pose& T_0_c, const StemMapRegistration& reg) {
+    size_t qa = 0, cb = 0;
+    double best = std::numeric_limits<double>::infinity();
+    for (size_t a = 0; a < nodes.size(); ++a) {
+      if (robots.at(nodes[a].robot).component != c) continue;
+      const Eigen::Vector3d pa = T_0_c * nodes[a].t;
+      for (size_t b = 0; b < nodes.size(); ++b) {
+        if (robots.at(nodes[b].robot).component != 0) continue;
+        const double d = (pa - nodes[b].t).head<2>().norm();
+        if (d < best) best = d, qa = a, cb = b;
+      }
+    }
+    Loop l;
+    l.query_robot = nodes[qa].robot;
+    l.query_id = nodes[qa].id;
+    l.candidate_robot = nodes[cb].robot;
+    l.candidate_id = nodes[cb].id;
+    l.T_c_q = nodes[cb].pose().inverse() * T_0_c * nodes[qa].pose();
+    Vector6d sd;
+    sd << reg.rms_m, reg.rms_m, 0.1, 0.005, 0.005, 0.005;  // z from the bases: a decimetre
+    l.covariance = sd.cwiseAbs2().asDiagonal();
+    l.inliers = static_cast<int>(reg.pairs.size());
+    return l;
+  }
+
+  void logJoin(int c, const Loop& l, const StemMapRegistration& reg) {
+    std::ostringstream e;
+    e << "component " << c << " (robot " << l.query_robot << ") registers to component 0 by its "
+      << "stem inventory: " << reg.pairs.size() << " stems paired, RMS " << reg.rms_m
+      << " m; join loop " << l.query_robot << "/" << l.query_id << " -> " << l.candidate_robot
+      << "/" << l.candidate_id;
+    events.push_back({l.query_robot, c, 0, e.str()});
+  }
+
   void registerField() {
     registration = StemMapRegistration{};
     if (field.empty()) return;
@@ -632,6 +719,10 @@ std::string MergeParams::validate() const {
   if (!(landmark_radius_tol_m >= 0.0)) e << "merge landmark_radius_tol_m must be >= 0; ";
   if (landmark_min_observations < 2) e << "merge landmark_min_observations must be >= 2; ";
   if (landmark_rounds < 1) e << "merge landmark_rounds must be >= 1; ";
+  if (join_min_pairs < 0) e << "merge join_min_pairs must be >= 0; ";
+  if (!(join_pair_radius_m > 0.0) || !(join_max_rms_m > 0.0)) {
+    e << "merge join_pair_radius_m and join_max_rms_m must be > 0; ";
+  }
   if (landmark_max_observations < 0 || landmark_max_observations == 1) {
     e << "merge landmark_max_observations must be 0 (all) or >= 2; ";
   }
@@ -672,7 +763,7 @@ void MapMerger::addSubmap(const MergeSubmap& s) {
   if (is_new) r.order = m.robots.size() - 1;
   if (r.nodes.empty()) {
     Pose T = Pose::Identity();
-    T.linear() = r.R_L_S;
+    T.linear() = r.R_L_O * s.T_O_S.linear();
     n.setPose(T);
   } else {
     const Impl::Node& prev = m.nodes[r.nodes.back()];
@@ -685,10 +776,10 @@ void MapMerger::addSubmap(const MergeSubmap& s) {
   m.dirty = true;
 }
 
-void MapMerger::setLevelling(const std::string& robot, const Eigen::Matrix3d& R_L_S) {
+void MapMerger::setLevelling(const std::string& robot, const Eigen::Matrix3d& R_L_O) {
   auto [it, is_new] = impl_->robots.try_emplace(robot);
   if (is_new) it->second.order = impl_->robots.size() - 1;
-  it->second.R_L_S = R_L_S;
+  it->second.R_L_O = R_L_O;
   impl_->dirty = true;
 }
 
@@ -750,13 +841,18 @@ MergeSolveStats MapMerger::solve() {
 MergeSolveStats MapMerger::refine() {
   Impl& m = *impl_;
   MergeSolveStats st = solve();
-  if (!m.p.landmarks || m.refined || m.nodes.empty()) return st;
-  const auto t0 = std::chrono::steady_clock::now();
-  m.refineWithLandmarks(&st);
-  m.updateLoopResiduals();
-  m.buildInventory();
+  if (m.refined || m.nodes.empty()) return st;
+  bool joined = false;
+  for (const Loop& l : m.inventoryJoins()) joined = addLoop(l) || joined;
+  if (joined) st = solve();
+  if (m.p.landmarks) {
+    const auto t0 = std::chrono::steady_clock::now();
+    m.refineWithLandmarks(&st);
+    m.updateLoopResiduals();
+    m.buildInventory();
+    st.solve_ms += msSince(t0);
+  }
   m.refined = true;
-  st.solve_ms += msSince(t0);
   return st;
 }
 
@@ -866,6 +962,10 @@ MergeSubmap mergeSubmapOf(const Descriptor& d, const Pose& T_O_S) {
     t.x = p.x(), t.y = p.y(), t.z = p.z();
   }
   return s;
+}
+
+Eigen::Matrix3d levellingInOdom(const Eigen::Matrix3d& R_L_S, const Pose& T_O_S) {
+  return R_L_S * T_O_S.linear().transpose();
 }
 
 }  // namespace dtif

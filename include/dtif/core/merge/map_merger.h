@@ -68,8 +68,17 @@ struct MergeParams {
   /// survey of laps sees every tree from dozens of submaps, and each landmark couples all of
   /// its submaps in the reduced system (the soak test's 712 submaps: 111 s with all); 0: all
   int landmark_max_observations = 8;
-  StemFusionParams stems;  ///< YAML section `stems` (its own visit)
-  StemMapParams stem_map;  ///< field stem maps: fixed (fieldStemMapLoopParams)
+  /// The final map (refine()) joins a component to component 0 when its stem inventory
+  /// registers to component 0's (descriptor match of the two inventories, then planar least
+  /// squares on nearest pairs): at least this many stems paired within join_pair_radius_m,
+  /// with an RMS of at most join_max_rms_m. A robot that overlaps the others without a detected
+  /// loop. The join is a loop between the two submaps nearest each other after registration,
+  /// through PCM and the solve like any loop; 0: never.
+  int join_min_pairs = 20;
+  double join_pair_radius_m = 0.4;  ///< [m]
+  double join_max_rms_m = 0.15;     ///< [m]
+  StemFusionParams stems;           ///< YAML section `stems` (its own visit)
+  StemMapParams stem_map;           ///< field stem maps: fixed (fieldStemMapLoopParams)
   std::string validate() const;
 
   template <class V>
@@ -100,6 +109,9 @@ struct MergeParams {
     v("landmark_loss_scale", landmark_loss_scale);
     v("landmark_rounds", landmark_rounds);
     v("landmark_max_observations", landmark_max_observations);
+    v("join_min_pairs", join_min_pairs);
+    v("join_pair_radius_m", join_pair_radius_m);
+    v("join_max_rms_m", join_max_rms_m);
   }
 };
 
@@ -115,6 +127,9 @@ struct MergeSubmap {
 /// A descriptor's submap for the merger: robot, id, stamp, T_O_S, and its trunks in S (a
 /// levelled descriptor holds them in L: Descriptor::level_rotation, undone here).
 MergeSubmap mergeSubmapOf(const Descriptor& d, const Pose& T_O_S);
+
+/// A submap's levelling R_L_S expressed for its robot's odometry frame: R_L_O = R_L_S R_O_S^T.
+Eigen::Matrix3d levellingInOdom(const Eigen::Matrix3d& R_L_S, const Pose& T_O_S);
 
 /// A robot changed component (joined another, or a rejected loop split it off): log it.
 struct MergeEvent {
@@ -173,9 +188,12 @@ class MapMerger {
   /// Appends a submap to its robot's chain (a new robot starts its own component). Throws
   /// std::invalid_argument on a duplicate id or a non-finite pose.
   void addSubmap(const MergeSubmap& submap);
-  /// Per-robot levelling rotation R_L_S (S into a gravity-aligned frame; identity by default)
-  /// used to make M z up. Applies from the next solve.
-  void setLevelling(const std::string& robot, const Eigen::Matrix3d& R_L_S);
+  /// Per-robot levelling R_L_O: the robot's odometry frame O into a gravity-aligned frame
+  /// (identity by default), used to make M z up (its anchor submap gets R_L_O R_O_S). A tilted O
+  /// is constant per robot, a levelled submap's R_L_S is not (S turns about O's z with the yaw):
+  /// pass levellingInOdom(R_L_S, T_O_S) of the robot's latest levelled submap. Applies from the
+  /// next solve.
+  void setLevelling(const std::string& robot, const Eigen::Matrix3d& R_L_O);
   /// Adds an accepted loop (both submaps must be known). Returns false (and ignores the loop)
   /// when a submap is unknown or the pose is not finite.
   bool addLoop(const Loop& loop);
