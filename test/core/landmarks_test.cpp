@@ -6,6 +6,7 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <cstdio>
 #include <random>
 
 #include "dtif/core/merge/map_merger.h"
@@ -43,10 +44,11 @@ TEST(AssociateLandmarks, AmbiguousObservationsJoinNothing) {
   EXPECT_EQ(groups[0], (std::vector<size_t>{0, 3}));
 }
 
-/// Trees on a jittered 4 m grid over 60 m x 20 m.
-std::vector<Eigen::Vector4d> forest(unsigned seed = 3) {
+/// Trees on a jittered 4 m grid over 60 m x 20 m (jitter 0 and one radius: a plantation).
+std::vector<Eigen::Vector4d> forest(unsigned seed = 3, double jitter_m = 1.0) {
   std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> jitter(-1.0, 1.0), radius(0.1, 0.3), ground(-0.3, 0.3);
+  std::uniform_real_distribution<double> jitter(-jitter_m, jitter_m),
+      radius(0.1, jitter_m > 0.0 ? 0.3 : 0.1), ground(-0.3, 0.3);
   std::vector<Eigen::Vector4d> trees;  // x, y, base z, r
   for (int i = 0; i < 16; ++i) {
     for (int j = 0; j < 6; ++j) {
@@ -86,8 +88,8 @@ struct SideBySide {
 };
 
 /// b_forest: the seed of the trees robot b sees (another forest than a's when not 3).
-SideBySide sideBySide(unsigned b_forest = 3) {
-  const auto trees = forest(), b_trees = forest(b_forest);
+SideBySide sideBySide(unsigned b_forest = 3, double jitter_m = 1.0) {
+  const auto trees = forest(3, jitter_m), b_trees = forest(b_forest, jitter_m);
   std::mt19937 rng(5);
   SideBySide sc;
   for (const std::string robot : {"a", "b"}) {
@@ -212,6 +214,20 @@ TEST(InventoryJoin, ARobotInAnotherForestStaysApart) {
   // its inventory must not register to a's.
   const MapMerger m = mergeWithoutLoop(sideBySide(11), MergeParams().join_min_pairs);
   EXPECT_EQ(m.componentCount(), 2);
+}
+
+TEST(InventoryJoin, APlantationJoinsAtItsTruePlaceOrNotAtAll) {
+  // On a perfect lattice every shift by the row spacing pairs as many stems: a join there
+  // would put b 4 m off. The inventory registration must find the true place or none.
+  const SideBySide sc = sideBySide(3, 0.0);
+  const MapMerger m = mergeWithoutLoop(sc, MergeParams().join_min_pairs);
+  std::printf("[ info ] plantation: %d component(s)\n", m.componentCount());
+  if (m.componentCount() == 2) return;
+  for (int k = 0; k < 13; ++k) {
+    const auto [t, r] = relativeError(m, sc, k);
+    EXPECT_LT(t, 0.05) << k;
+    EXPECT_LT(r, 0.25 * M_PI / 180.0) << k;
+  }
 }
 
 TEST(LandmarkRefinement, ChangesNothingWhenOff) {
