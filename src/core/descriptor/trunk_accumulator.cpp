@@ -103,7 +103,7 @@ AccumulatedTrunks TrunkAccumulator::add(double stamp, const Pose& T_O_S, const T
   // Not extended only when enough of its own trunks were seen again (and the stand is not
   // open): more sources (its successors) only add sightings, so it would stay so.
   current.extended = out.submaps > 1 || out.stable_own < params_.min_trunks || out.open_stand;
-  current.described_submaps = out.submaps;
+  current.described_own = out.submaps == 1 && !out.open_stand;
   if (out.stable_own >= 0 && !trunks_S.empty()) {
     stability_.push_back({static_cast<double>(out.stable_own) / trunks_S.size(), out.stable_own});
     while (stability_.size() > static_cast<size_t>(params_.open_stand_window)) {
@@ -167,9 +167,10 @@ void TrunkAccumulator::forwardUpdates(std::vector<ForwardUpdate>* updates) {
     ForwardUpdate u;
     u.stamp = e.stamp;
     u.trunks = accumulateBothWays(i, &u.successors);
-    // Own trunks, as it was described: nothing to replace.
-    if (u.trunks.submaps == 1 && e.described_submaps == 1) continue;
-    e.described_submaps = u.trunks.submaps;
+    // Its own trunks, as it was described: nothing to replace.
+    const bool own = u.trunks.submaps == 1 && !u.trunks.open_stand;
+    if (own && e.described_own) continue;
+    e.described_own = own;
     if (updates) updates->push_back(std::move(u));
   }
 }

@@ -139,7 +139,7 @@ class TrunkAccumulator {
     Trunks trunks;              ///< in its own S
     bool extended = false;      ///< described with predecessors' stems (or could have been)
     int successors = 0;         ///< later submaps seen so far
-    int described_submaps = 1;  ///< submaps its latest description used
+    bool described_own = true;  ///< its latest description: exactly its own trunks
     std::shared_ptr<const Descriptor> frame;  ///< setFrameOfNewest's
   };
 
