@@ -521,8 +521,14 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
     }
     if (on_query) on_query(desc, step.loop, step.inter_robot_loop);
 
-    // 4. Insert q.
+    // 4. Insert q (and replace the entries it extended forward, here too).
     front_end.insert(step);
+    for (const auto& u : step.updates) {
+      for (size_t j = 0; j < descs.size(); ++j) {
+        if (ds.submaps[j].id == u->submap_id && ds.submaps[j].robot == u->robot) descs[j] = u;
+      }
+    }
+    row.forward_updates = step.updates.size();
     result.rows.push_back(std::move(row));
     if (progress) progress(i + 1, n);
   }

@@ -17,13 +17,22 @@ FrontEndStep SequentialFrontEnd::describeAndQuery(const SubmapRecord& rec, const
     s.level_ms = msSince(t0);
   }
   auto acc = accumulators_.try_emplace(rec.robot, params_.multi_submap).first;
+  std::vector<Descriptor> updates;
   s.desc = std::make_shared<const Descriptor>(describeLevelledCloudAccumulated(
       cloud_S, s.level.R_L_S, {rec.robot, rec.id, rec.stamp}, rec.T_O_S, &acc->second,
-      params_.trunk_extraction, params_.descriptor, &s.timings, &s.extraction, &s.accumulated));
+      params_.trunk_extraction, params_.descriptor, &s.timings, &s.extraction, &s.accumulated,
+      &updates));
+  for (Descriptor& u : updates)
+    s.updates.push_back(std::make_shared<const Descriptor>(std::move(u)));
   const auto t1 = std::chrono::steady_clock::now();
   s.loop = detector_.query(*s.desc, &s.query, &s.inter_robot_loop);
   s.loop_ms = msSince(t1);
   return s;
+}
+
+void SequentialFrontEnd::insert(const FrontEndStep& step) {
+  detector_.insert(step.desc);
+  for (const auto& u : step.updates) detector_.replace(u);
 }
 
 }  // namespace dtif

@@ -82,6 +82,12 @@ class LoopClosureNodelet : public nodelet::Nodelet {
           boost::bind(&LoopClosureNodelet::onDescriptor, this, boost::placeholders::_1, robot,
                       nh.resolveName(topic))));
       NODELET_INFO("subscribed to %s", nh.resolveName(topic).c_str());
+      if (node_.descriptor_update_topic.empty()) continue;
+      const std::string updates = robot + "/" + node_.descriptor_update_topic;
+      subs_.push_back(
+          nh.subscribe<dtif::TrunkDescriptor>(updates, 50,
+                                              boost::bind(&LoopClosureNodelet::onDescriptorUpdate,
+                                                          this, boost::placeholders::_1, robot)));
     }
     watchInputs(nh);
     save_srv_ = pnh.advertiseService("save_database", &LoopClosureNodelet::onSave, this);
@@ -165,29 +171,48 @@ class LoopClosureNodelet : public nodelet::Nodelet {
                             msg->robot.c_str(), robot.c_str());
       return;
     }
+    enqueue(msg, false);
+  }
+
+  // An earlier submap described again (forward accumulation): queued behind the descriptors
+  // already waiting, so that it finds its entry.
+  void onDescriptorUpdate(const dtif::TrunkDescriptor::ConstPtr& msg, const std::string& robot) {
+    if (msg->robot != robot) {
+      NODELET_WARN_THROTTLE(5.0, "descriptor update of robot '%s' on the topic of '%s': dropped",
+                            msg->robot.c_str(), robot.c_str());
+      return;
+    }
+    enqueue(msg, true);
+  }
+
+  void enqueue(const dtif::TrunkDescriptor::ConstPtr& msg, bool update) {
     {
       std::lock_guard<std::mutex> lock(queue_mutex_);
       if (queue_.size() >= static_cast<size_t>(node_.queue_size)) {
         NODELET_WARN_THROTTLE(5.0, "loop detection is behind: dropping a descriptor of '%s'",
-                              queue_.front()->robot.c_str());
+                              queue_.front().msg->robot.c_str());
         queue_.pop_front();
       }
-      queue_.push_back(msg);
+      queue_.push_back({msg, update});
     }
     cv_.notify_one();
   }
 
   void work() {
     while (true) {
-      dtif::TrunkDescriptor::ConstPtr msg;
+      Queued q;
       {
         std::unique_lock<std::mutex> lock(queue_mutex_);
         cv_.wait(lock, [this] { return stop_ || !queue_.empty(); });
         if (stop_) return;
-        msg = queue_.front();
+        q = queue_.front();
         queue_.pop_front();
       }
-      process(*msg);
+      if (q.update) {
+        processUpdate(*q.msg);
+      } else {
+        process(*q.msg);
+      }
     }
   }
 
@@ -217,6 +242,21 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     publishLoop(msg, *d, meta, q);
     if (q.inter_lc) publishInterRobotLoop(msg, *q.inter_lc, q.inter_meta);
     if (node_.publish_tf && node_.tf_rate_hz <= 0.0) publishTf();
+  }
+
+  // Replaces the entry of an updated descriptor (not queried: its submap was, when it came).
+  void processUpdate(const dtif::TrunkDescriptor& msg) {
+    auto d = std::make_shared<Descriptor>();
+    Meta meta;
+    if (!convert(msg, d.get(), &meta)) return;
+    std::lock_guard<std::mutex> lock(db_mutex_);
+    const Key key(d->robot, d->submap_id);
+    if (!index_.count(key) || !detector_->replace(d)) {
+      NODELET_DEBUG("update of %s/%ld: no such entry (dropped or not valid): ignored",
+                    d->robot.c_str(), static_cast<long>(d->submap_id));
+      return;
+    }
+    index_[key] = d;
   }
 
   // The message as a retrievable descriptor, or false (logged) when it is malformed or invalid.
@@ -470,7 +510,11 @@ class LoopClosureNodelet : public nodelet::Nodelet {
 
   std::mutex queue_mutex_;  // queue_, stop_
   std::condition_variable cv_;
-  std::deque<dtif::TrunkDescriptor::ConstPtr> queue_;
+  struct Queued {
+    dtif::TrunkDescriptor::ConstPtr msg;
+    bool update = false;  ///< a forward update of a stored entry
+  };
+  std::deque<Queued> queue_;
   bool stop_ = false;
   std::thread worker_;
 

@@ -13,6 +13,7 @@
 #include <tf2_ros/transform_listener.h>
 #include <visualization_msgs/MarkerArray.h>
 
+#include <algorithm>
 #include <chrono>
 #include <condition_variable>
 #include <deque>
@@ -107,6 +108,9 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
     recent_markers_ =
         std::make_unique<ros_glue::RecentMarkers>(static_cast<size_t>(node_.marker_history));
     descriptor_pub_ = nh.advertise<dtif::TrunkDescriptor>("descriptor", 10);
+    // Earlier submaps described again with their successors' stems (multi_submap/
+    // forward_submaps): the loop-closure nodelet replaces their database entries.
+    update_pub_ = nh.advertise<dtif::TrunkDescriptor>("descriptor_updates", 10);
     trunks_pub_ = nh.advertise<visualization_msgs::MarkerArray>("trunks", 2);
     if (node_.publish_submap_cloud) {
       cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("submap_cloud", 2);
@@ -381,9 +385,10 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
     logLevelling(lev.estimate);
     TrunkExtractionResult ext;
     AccumulatedTrunks acc;
+    std::vector<Descriptor> updates;
     const Descriptor d = describeLevelledCloudAccumulated(
         *s.cloud, lev.R_L_S, {node_.robot, s.id, s.stamp}, s.T_O_S, accumulator_.get(),
-        extractor_params_, descriptor_params_, nullptr, &ext, &acc);
+        extractor_params_, descriptor_params_, nullptr, &ext, &acc, &updates);
     const std::string bounds = boundsWarning(ext.stats, extractor_params_);
     if (!bounds.empty()) NODELET_WARN("submap %ld: %s", static_cast<long>(s.id), bounds.c_str());
     Pose T_O_L = s.T_O_S;  // trunks are in the levelled frame
@@ -396,6 +401,9 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
         new dtif::TrunkDescriptor(ros_glue::toMsg(d, s.T_O_S, frame)));
     msg->data_end.fromSec(s.end_stamp);
     descriptor_pub_.publish(boost::shared_ptr<const dtif::TrunkDescriptor>(msg));
+    publishUpdates(updates, frame);
+    recent_poses_.push_back({s.id, s.T_O_S, s.end_stamp});
+    if (recent_poses_.size() > kRecentPoses) recent_poses_.pop_front();
     // Markers and the cloud are in the odometry frame, where they do not move: stamp 0 lets
     // rviz use the latest transform to another robot's frame, which exists only after the first
     // loop between the two, i.e. after most submaps' stamps.
@@ -416,6 +424,19 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
       cloud->header.frame_id = frame;
       cloud->header.stamp.fromSec(s.stamp);
       cloud_pub_.publish(boost::shared_ptr<const sensor_msgs::PointCloud2>(cloud));
+    }
+  }
+
+  // The forward updates of earlier submaps, each with its own T_O_S (worker thread).
+  void publishUpdates(const std::vector<Descriptor>& updates, const std::string& frame) {
+    for (const Descriptor& u : updates) {
+      auto it = std::find_if(recent_poses_.begin(), recent_poses_.end(),
+                             [&](const RecentPose& r) { return r.id == u.submap_id; });
+      if (it == recent_poses_.end()) continue;  // older than any update reaches
+      boost::shared_ptr<dtif::TrunkDescriptor> msg(
+          new dtif::TrunkDescriptor(ros_glue::toMsg(u, it->T_O_S, frame)));
+      msg->data_end.fromSec(it->end_stamp);
+      update_pub_.publish(boost::shared_ptr<const dtif::TrunkDescriptor>(msg));
     }
   }
 
@@ -465,6 +486,15 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
   std::thread worker_;
   std::unique_ptr<VoxelCentroidGrid> voxel_grid_;  // worker thread only; null: no voxel filter
   std::unique_ptr<TrunkAccumulator> accumulator_;  // worker thread only (after onInit)
+  // The recent submaps' poses, for their forward updates' messages (worker thread only): more
+  // than multi_submap/max_submaps + forward_submaps can reach (at most 100 + 100).
+  struct RecentPose {
+    int64_t id = -1;
+    Pose T_O_S = Pose::Identity();
+    double end_stamp = 0.0;
+  };
+  static constexpr size_t kRecentPoses = 256;
+  std::deque<RecentPose> recent_poses_;
 
   std::unique_ptr<ros_glue::RecentMarkers> recent_markers_;
   ros::WallTimer marker_timer_;
@@ -474,7 +504,7 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
   std::unique_ptr<tf2_ros::TransformBroadcaster> tf_broadcaster_;  // Odometry callback only
   std::unique_ptr<ros_glue::InputWatch> input_watch_;
   ros::WallTimer input_timer_;
-  ros::Publisher descriptor_pub_, trunks_pub_, cloud_pub_;
+  ros::Publisher descriptor_pub_, update_pub_, trunks_pub_, cloud_pub_;
   ros::Subscriber odom_sub_, cloud_sub_, submap_sub_, imu_sub_;
   ImuGravityWindow imu_window_;  // under mutex_
 };

@@ -43,8 +43,9 @@ void printLevelling(const std::filesystem::path& dir, const EvalResult& res) {
 
 // How many submaps multi_submap described with their predecessors' stems (very sparse stands).
 void printMultiSubmap(const std::vector<EvalRow>& rows) {
-  size_t n = 0, trunks = 0, submaps = 0;
+  size_t n = 0, trunks = 0, submaps = 0, updates = 0;
   for (const EvalRow& r : rows) {
+    updates += r.forward_updates;
     if (r.described_submaps <= 1) continue;
     ++n, trunks += r.described_trunks, submaps += static_cast<size_t>(r.described_submaps);
   }
@@ -52,7 +53,9 @@ void printMultiSubmap(const std::vector<EvalRow>& rows) {
   const double k = 1.0 / static_cast<double>(n);
   std::cout << std::fixed << std::setprecision(1) << "multi_submap: " << n << " of " << rows.size()
             << " submaps described with earlier submaps' stems, " << static_cast<double>(trunks) * k
-            << " trunks from " << static_cast<double>(submaps) * k << " submaps on average\n";
+            << " trunks from " << static_cast<double>(submaps) * k << " submaps on average";
+  if (updates > 0) std::cout << "; " << updates << " database entries described again forward";
+  std::cout << "\n";
 }
 
 int runEval(const EvalArgs& a) {

@@ -146,6 +146,45 @@ TEST(LoopDetector, DatabaseQueryFindsTheOverlappingSubmap) {
   EXPECT_GE(found, 17);
 }
 
+TEST(LoopDetector, ReplaceSwapsAnEntryInPlace) {
+  // Entry "a"/0 first holds stand 0, then (forward accumulation) stand 1's trunks: queries of
+  // stand 1 find it, queries of stand 0 no longer do; its odometry and position stay.
+  const std::vector<PairCase> cases = overlappingPairs(2, 77);
+  LoopDetector db{LoopDetectorParams{}};
+  EntryOdometry odom;
+  odom.odom_frame = "a/odom";
+  odom.T_O_S = poseXyYaw(1, 2, 0, 0.3);
+  ASSERT_TRUE(db.insert(std::make_shared<Descriptor>(cases[0].c), odom));
+  Descriptor other = cases[1].c;
+  other.robot = "c";
+  ASSERT_TRUE(db.insert(std::make_shared<Descriptor>(other)));
+  ASSERT_TRUE(db.query(cases[0].q).has_value());
+  const size_t triangles_before = db.matchTrianglesOf(0).size();
+
+  Descriptor updated = cases[1].c;  // stand 1's trunks under entry 0's identity
+  updated.robot = cases[0].c.robot;
+  updated.submap_id = cases[0].c.submap_id;
+  EXPECT_TRUE(db.replace(std::make_shared<Descriptor>(updated)));
+  EXPECT_EQ(db.size(), 2u);
+  EXPECT_EQ(db.entries()[0]->trunks.size(), updated.trunks.size());
+  EXPECT_EQ(db.odometry(0).odom_frame, "a/odom");
+  EXPECT_NE(db.matchTrianglesOf(0).size(), triangles_before);
+  EXPECT_EQ(db.matchTrianglesOf(0).size(),
+            matchTriangles(updated, MatcherParams{}.neighbour_triangles).size());
+  const auto lc = db.query(cases[1].q);
+  ASSERT_TRUE(lc.has_value());
+  EXPECT_LT(test::yawError(lc->T_c_q, cases[1].T_c_q), 0.3 * M_PI / 180.0);
+  const auto old = db.query(cases[0].q);
+  EXPECT_FALSE(old.has_value() && old->candidate_robot == "a");
+
+  Descriptor unknown = updated;
+  unknown.submap_id = 999;  // no such entry
+  EXPECT_FALSE(db.replace(std::make_shared<Descriptor>(unknown)));
+  EXPECT_FALSE(db.replace(std::make_shared<Descriptor>()));  // invalid
+  EXPECT_FALSE(db.replace(nullptr));
+  EXPECT_EQ(db.entries()[0]->trunks.size(), updated.trunks.size());
+}
+
 TEST(LoopDetector, ExcludesRecentSubmapsOfTheSameRobot) {
   const std::vector<PairCase> cases = overlappingPairs(1, 31);
   LoopDetectorParams p;

@@ -197,10 +197,17 @@ TEST(TrunkAccumulator, StopsAtTheTargetAndRespectsSpanLimits) {
   p.max_span_m = 100.0;
   p.max_span_s = 100.0;
   p.max_submaps = 1;
+  p.forward_submaps = 0;
   TrunkAccumulator one(p);
   for (int k = 0; k < 6; ++k) out = one.add(10.0 * k, pose(5.0 * k, 0, 0, 0), seen);
   EXPECT_EQ(out.submaps, 2);
   EXPECT_EQ(one.history(), 1u);
+  // Forward updates keep the predecessors of the oldest submap they reach as well.
+  p.forward_submaps = 2;
+  TrunkAccumulator forward(p);
+  for (int k = 0; k < 6; ++k) out = forward.add(10.0 * k, pose(5.0 * k, 0, 0, 0), seen);
+  EXPECT_EQ(out.submaps, 2);
+  EXPECT_EQ(forward.history(), 4u);  // 1 + 2 successors + the newest
 }
 
 TEST(TrunkAccumulator, OnlyTheSubmapsOwnBasesCountAsSeen) {
@@ -233,6 +240,147 @@ TEST(TrunkAccumulator, FirstSubmapAndDisabledKeepOwnTrunks) {
   const AccumulatedTrunks out = off.add(10.0, Pose::Identity(), own);
   EXPECT_EQ(out.submaps, 1);
   EXPECT_EQ(out.trunks.size(), 2u);
+}
+
+}  // namespace
+}  // namespace dtif
+
+namespace dtif {
+namespace {
+
+// Stems every 5 m along x (y alternating +-3 m), in O.
+std::vector<Eigen::Vector4d> rowOfStems() {
+  std::vector<Eigen::Vector4d> stems;
+  for (int i = -4; i <= 16; ++i) stems.emplace_back(5.0 * i, i % 2 ? 3.0 : -3.0, 0.0, 0.2);
+  return stems;
+}
+
+// The stems within `range` of the submap origin (horizontally), in its frame.
+Trunks seenWithin(const Pose& T_O_S, const std::vector<Eigen::Vector4d>& stems_O, double range) {
+  std::vector<Eigen::Vector4d> near;
+  for (const auto& s : stems_O) {
+    if (std::hypot(s.x() - T_O_S.translation().x(), s.y() - T_O_S.translation().y()) <= range) {
+      near.push_back(s);
+    }
+  }
+  return seenFrom(T_O_S, near);
+}
+
+TEST(TrunkAccumulator, ForwardUpdatesExtendStoredSubmapsWithTheirSuccessors) {
+  MultiSubmapParams p;
+  p.min_trunks = 100;     // every submap is extended
+  p.target_trunks = 100;  // with every submap in reach
+  p.forward_submaps = 2;
+  p.open_stand_share = 0.0;
+  const std::vector<Eigen::Vector4d> stems = rowOfStems();
+  // The robot walks along x, 10 m per submap, turning slightly; each submap sees 12 m around.
+  auto T = [](int k) { return pose(10.0 * k, 0.5 * k, 0.1 * k, 0.05 * k); };
+  TrunkAccumulator acc(p);
+  std::vector<ForwardUpdate> u;
+  acc.add(0.0, T(0), seenWithin(T(0), stems, 12.0), &u);
+  EXPECT_TRUE(u.empty());
+  acc.add(10.0, T(1), seenWithin(T(1), stems, 12.0), &u);
+  ASSERT_EQ(u.size(), 1u);
+  EXPECT_EQ(u[0].stamp, 0.0);
+  EXPECT_EQ(u[0].successors, 1);
+  u.clear();
+  const AccumulatedTrunks q2 = acc.add(20.0, T(2), seenWithin(T(2), stems, 12.0), &u);
+  ASSERT_EQ(u.size(), 2u);  // submap 0 (2nd successor) and submap 1
+  EXPECT_EQ(u[0].stamp, 0.0);
+  EXPECT_EQ(u[1].stamp, 10.0);
+  // The stem at x = 20 m: seen by submaps 1 and 2, not by 0 (20 m away); now in 0's entry, in
+  // 0's frame. The query itself holds only its past.
+  const Eigen::Vector3d p20 = T(0).inverse() * Eigen::Vector3d(20.0, -3.0, 0.0);
+  EXPECT_TRUE(contains(u[0].trunks.trunks, p20, 1e-6));
+  EXPECT_EQ(u[0].successors, 2);
+  const Eigen::Vector3d p25 = T(2).inverse() * Eigen::Vector3d(25.0, 3.0, 0.0);
+  EXPECT_FALSE(contains(q2.trunks, p25, 0.1)) << "seen by submap 2 only";
+  // Submap 0 has had its forward_submaps successors: not described again.
+  u.clear();
+  acc.add(30.0, T(3), seenWithin(T(3), stems, 12.0), &u);
+  ASSERT_EQ(u.size(), 2u);
+  EXPECT_EQ(u[0].stamp, 10.0);
+  EXPECT_EQ(u[1].stamp, 20.0);
+
+  p.forward_submaps = 0;
+  TrunkAccumulator none(p);
+  u.clear();
+  for (int k = 0; k < 4; ++k) none.add(10.0 * k, T(k), seenWithin(T(k), stems, 12.0), &u);
+  EXPECT_TRUE(u.empty());
+}
+
+TEST(TrunkAccumulator, SubmapsWithEnoughStableTrunksAreNotDescribedAgain) {
+  MultiSubmapParams p;
+  p.min_trunks = 2;  // every submap but the first has >= 2 stems seen again
+  p.forward_submaps = 3;
+  p.open_stand_share = 0.0;
+  const std::vector<Eigen::Vector4d> stems = rowOfStems();
+  auto T = [](int k) { return pose(5.0 * k, 0, 0, 0); };
+  TrunkAccumulator acc(p);
+  std::vector<ForwardUpdate> u;
+  for (int k = 0; k < 5; ++k) acc.add(10.0 * k, T(k), seenWithin(T(k), stems, 12.0), &u);
+  EXPECT_TRUE(u.empty());
+  EXPECT_FALSE(acc.openStand());
+}
+
+// A submap of `real` stems near x0 (seen by every submap) and `one_off` fits nowhere else.
+Trunks standSubmap(double x0, int real, int one_off, int k) {
+  Trunks t;
+  for (int i = 0; i < real; ++i) t.push_back(trunk(3.0 * i - x0, i % 2 ? 2.0 : -2.0, 0.0, 0.2));
+  for (int i = 0; i < one_off; ++i) {
+    t.push_back(trunk(1.1 * i - x0, 6.0 + 1.3 * k, 0.0, 0.1));  // 1.3 m apart: never merged
+  }
+  return t;
+}
+
+TEST(TrunkAccumulator, OpenStandsAreDescribedWithStableStemsOnly) {
+  MultiSubmapParams p;
+  p.min_trunks = 2;  // alone, it would keep every submap's own trunks
+  p.open_stand_share = 0.4;
+  p.open_stand_trunks = 13;
+  p.open_stand_min_submaps = 3;
+  p.forward_submaps = 0;
+  // Open: 4 stems seen again among 16 one-off fits (share 0.2).
+  TrunkAccumulator open(p);
+  std::vector<AccumulatedTrunks> out;
+  for (int k = 0; k < 5; ++k)
+    out.push_back(open.add(10.0 * k, pose(k, 0, 0, 0), standSubmap(k, 4, 16, k)));
+  EXPECT_EQ(out[1].trunks.size(), 20u);  // one submap counted: own trunks
+  EXPECT_EQ(out[2].trunks.size(), 20u);
+  EXPECT_FALSE(out[2].open_stand);
+  for (int k = 3; k < 5; ++k) {
+    EXPECT_TRUE(out[k].open_stand) << k;
+    EXPECT_EQ(out[k].trunks.size(), 4u) << k;
+  }
+  EXPECT_TRUE(open.openStand());
+  // Closed: 16 stems seen again among 4 one-offs (share 0.8): own trunks throughout.
+  TrunkAccumulator closed(p);
+  for (int k = 0; k < 5; ++k) {
+    const AccumulatedTrunks a = closed.add(10.0 * k, pose(k, 0, 0, 0), standSubmap(k, 16, 4, k));
+    EXPECT_EQ(a.trunks.size(), 20u) << k;
+    EXPECT_FALSE(a.open_stand);
+  }
+  // Few stable stems but a high share (a small submap of a closed stand): not open either.
+  TrunkAccumulator small(p);
+  for (int k = 0; k < 5; ++k) {
+    EXPECT_FALSE(small.add(10.0 * k, pose(k, 0, 0, 0), standSubmap(k, 4, 1, k)).open_stand);
+  }
+  // Many stable stems at a low share (a dense stand with clutter): not open.
+  TrunkAccumulator dense(p);
+  for (int k = 0; k < 5; ++k) {
+    EXPECT_FALSE(dense.add(10.0 * k, pose(k, 0, 0, 0), standSubmap(k, 14, 40, k)).open_stand);
+  }
+}
+
+TEST(MultiSubmapParams, ForwardAndOpenStandLimitsAreNamed) {
+  MultiSubmapParams p;
+  p.forward_submaps = -1;
+  p.open_stand_share = 1.5;
+  p.open_stand_min_submaps = 20;  // more than the window
+  const std::string err = p.validate();
+  EXPECT_NE(err.find("forward_submaps"), std::string::npos);
+  EXPECT_NE(err.find("open_stand_share"), std::string::npos);
+  EXPECT_NE(err.find("open_stand_min_submaps"), std::string::npos);
 }
 
 }  // namespace

@@ -59,7 +59,9 @@ struct EvalRow {
   size_t trunks = 0;            ///< trunks extracted (extra, not in results.csv)
   size_t described_trunks = 0;  ///< trunks in the descriptor (extra; multi_submap may add)
   int described_submaps = 1;    ///< submaps whose trunks it holds (extra; 1: its own only)
-  std::string invalid_reason;   ///< why the descriptor was excluded (extra)
+  /// Earlier entries of its robot it described again (extra; multi_submap/forward_submaps).
+  size_t forward_updates = 0;
+  std::string invalid_reason;  ///< why the descriptor was excluded (extra)
 };
 
 struct EvalSummary {

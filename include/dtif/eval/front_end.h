@@ -8,6 +8,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "dtif/core/database/loop_detector.h"
 #include "dtif/core/descriptor/trunk_accumulator.h"
@@ -25,6 +26,9 @@ struct FrontEndStep {
   DescribeTimings timings;
   TrunkExtractionResult extraction;  ///< this submap's own trunks (in L)
   AccumulatedTrunks accumulated;
+  /// The robot's earlier submaps described again with this one's stems (forward
+  /// accumulation, multi_submap/forward_submaps): they replace their entries at insert.
+  std::vector<std::shared_ptr<const Descriptor>> updates;
   std::optional<Loop> loop;  ///< the accepted loop, T_c_q in the submaps' own frames S
   /// Beside an own-robot `loop`: the best loop with another robot
   /// (database/inter_robot_verifications).
@@ -43,8 +47,9 @@ class SequentialFrontEnd {
   /// with the robot's estimate after it, as online), describe through the robot's accumulator,
   /// query.
   FrontEndStep describeAndQuery(const SubmapRecord& rec, const Cloud& cloud_S);
-  /// Step 4: the described submap joins the database.
-  void insert(const FrontEndStep& step) { detector_.insert(step.desc); }
+  /// Step 4: the described submap joins the database; the entries it extended forward are
+  /// replaced (after its query: they are the same robot's recent submaps, not its candidates).
+  void insert(const FrontEndStep& step);
   bool levelling() const { return leveller_.enabled(); }
 
  private:

@@ -50,18 +50,22 @@ struct TrunkExtractionNodeParams {
 struct LoopClosureNodeParams {
   std::vector<std::string> robots;              ///< robots whose descriptors are subscribed
   std::string descriptor_topic = "descriptor";  ///< subscribes `<robot>/<descriptor_topic>`
-  std::string database_file;                    ///< loaded at startup when it exists
-  bool publish_tf = true;                       ///< TF between odometry frames of linked robots
-  double tf_rate_hz = 10.0;                     ///< TF re-publication rate [Hz]
-  int queue_size = 100;                         ///< descriptors waiting; the oldest is dropped
-  std::string loop_log;                         ///< CSV of every query's result; empty: none
-  double marker_period_s = 2.0;                 ///< latest loop's markers again (wall); 0: once [s]
+  /// Subscribes `<robot>/<descriptor_update_topic>`: stored entries described again with their
+  /// successors' stems (multi_submap/forward_submaps) replace their entries; empty: none.
+  std::string descriptor_update_topic = "descriptor_updates";
+  std::string database_file;      ///< loaded at startup when it exists
+  bool publish_tf = true;         ///< TF between odometry frames of linked robots
+  double tf_rate_hz = 10.0;       ///< TF re-publication rate [Hz]
+  int queue_size = 100;           ///< descriptors waiting; the oldest is dropped
+  std::string loop_log;           ///< CSV of every query's result; empty: none
+  double marker_period_s = 2.0;   ///< latest loop's markers again (wall); 0: once [s]
   double input_timeout_s = 30.0;  ///< warn while a robot's descriptor topic is silent; 0: never [s]
 
   template <class V>
   void visit(V& v) {
     v("robots", robots);
     v("descriptor_topic", descriptor_topic);
+    v("descriptor_update_topic", descriptor_update_topic);
     v("database_file", database_file);
     v("publish_tf", publish_tf);
     v("tf_rate_hz", tf_rate_hz);

@@ -286,6 +286,32 @@ bool LoopDetector::insert(std::shared_ptr<const Descriptor> d, const EntryOdomet
   return true;
 }
 
+bool LoopDetector::replace(std::shared_ptr<const Descriptor> d) {
+  if (!d || !d->valid) return false;
+  // Newest first: the entries described again are the robot's recent ones.
+  size_t i = entries_.size();
+  while (i-- > 0) {
+    if (entries_[i]->submap_id == d->submap_id && entries_[i]->robot == d->robot) break;
+  }
+  if (i == static_cast<size_t>(-1)) return false;
+  ScreenRow& row = screen_[i];
+  const size_t n = d->edge_hist.size() + d->radius_hist.size();
+  if (n != row.edge_n + row.radius_n) {
+    row.offset = hists_.size();  // the old histograms stay behind, unread
+    hists_.resize(hists_.size() + n);
+  }
+  std::copy(d->edge_hist.begin(), d->edge_hist.end(), hists_.begin() + row.offset);
+  std::copy(d->radius_hist.begin(), d->radius_hist.end(),
+            hists_.begin() + row.offset + d->edge_hist.size());
+  row.edge_n = static_cast<uint32_t>(d->edge_hist.size());
+  row.radius_n = static_cast<uint32_t>(d->radius_hist.size());
+  row.stamp = d->stamp;
+  triangles_[i] = matchTriangles(*d, params_.matcher.neighbour_triangles);
+  triangles_[i].shrink_to_fit();
+  entries_[i] = std::move(d);
+  return true;
+}
+
 void LoopDetector::indexEntry(const Descriptor& d, std::vector<MatchTriangle>* triangles) {
   ScreenRow row;
   const auto it = robot_ids_.emplace(d.robot, static_cast<uint32_t>(robots_.size())).first;

@@ -25,6 +25,17 @@ std::string MultiSubmapParams::validate() const {
   }
   if (min_observations < 1) err << "min_observations must be >= 1; ";
   if (!(min_radius_m >= 0.0 && min_radius_m < 1.0)) err << "min_radius_m must be in [0, 1); ";
+  if (forward_submaps < 0 || forward_submaps > 100) err << "forward_submaps must be in [0, 100]; ";
+  if (!(open_stand_share >= 0.0 && open_stand_share <= 1.0)) {
+    err << "open_stand_share must be in [0, 1]; ";
+  }
+  if (open_stand_trunks < 0) err << "open_stand_trunks must be >= 0; ";
+  if (open_stand_window < 1 || open_stand_window > 1000) {
+    err << "open_stand_window must be in [1, 1000]; ";
+  }
+  if (open_stand_min_submaps < 1 || open_stand_min_submaps > open_stand_window) {
+    err << "open_stand_min_submaps must be in [1, open_stand_window]; ";
+  }
   return err.str();
 }
 
@@ -69,41 +80,145 @@ Trunks StemMerger::stable(int min_observations, int max_source) const {
   return out;
 }
 
-AccumulatedTrunks TrunkAccumulator::add(double stamp, const Pose& T_O_S, const Trunks& trunks_S) {
-  Entry current{stamp, T_O_S, trunks_S};
+namespace {
+
+double median(std::vector<double>* v) {
+  std::sort(v->begin(), v->end());
+  const size_t n = v->size();
+  return n % 2 ? (*v)[n / 2] : 0.5 * ((*v)[n / 2 - 1] + (*v)[n / 2]);
+}
+
+}  // namespace
+
+AccumulatedTrunks TrunkAccumulator::add(double stamp, const Pose& T_O_S, const Trunks& trunks_S,
+                                        std::vector<ForwardUpdate>* updates) {
+  Entry current;
+  current.stamp = stamp, current.T_O_S = T_O_S, current.trunks = trunks_S;
   AccumulatedTrunks out;
   if (params_.min_trunks > 0) {
     out = accumulate(current);
   } else {
     out.trunks = trunks_S;
   }
-  // Predecessors older than the span can never be used again.
+  // Not extended only when enough of its own trunks were seen again (and the stand is not
+  // open): more sources (its successors) only add sightings, so it would stay so.
+  current.extended = out.submaps > 1 || out.stable_own < params_.min_trunks || out.open_stand;
+  current.described_own = out.submaps == 1 && !out.open_stand;
+  if (out.stable_own >= 0 && !trunks_S.empty()) {
+    stability_.push_back({static_cast<double>(out.stable_own) / trunks_S.size(), out.stable_own});
+    while (stability_.size() > static_cast<size_t>(params_.open_stand_window)) {
+      stability_.pop_front();
+    }
+  }
+  open_ = openStandWith(nullptr);
+  // Submaps older than the span can never be used again, nor be updated.
   history_.push_back(std::move(current));
-  while (!history_.empty() && (stamp - history_.front().stamp > params_.max_span_s ||
-                               history_.size() > static_cast<size_t>(params_.max_submaps))) {
+  // The predecessors of the next submap, and those of the oldest one forward updates reach.
+  const size_t keep = static_cast<size_t>(params_.max_submaps) +
+                      (params_.forward_submaps > 0 ? params_.forward_submaps + 1 : 0);
+  while (!history_.empty() &&
+         (stamp - history_.front().stamp > params_.max_span_s || history_.size() > keep)) {
     history_.pop_front();
   }
+  if (params_.min_trunks > 0 && params_.forward_submaps > 0) forwardUpdates(updates);
   return out;
 }
+
+bool TrunkAccumulator::newestMayBeUpdated() const {
+  return params_.min_trunks > 0 && params_.forward_submaps > 0 && !history_.empty() &&
+         history_.back().extended;
+}
+
+bool TrunkAccumulator::openStandWith(const Stability* extra) const {
+  if (!(params_.open_stand_share > 0.0)) return false;
+  std::vector<Stability> v(stability_.begin(), stability_.end());
+  if (extra) {
+    v.push_back(*extra);
+    if (v.size() > static_cast<size_t>(params_.open_stand_window)) v.erase(v.begin());
+  }
+  if (v.empty() || v.size() < static_cast<size_t>(params_.open_stand_min_submaps)) return false;
+  std::vector<double> share, stable;
+  for (const Stability& s : v) share.push_back(s.share), stable.push_back(s.stable);
+  return median(&share) < params_.open_stand_share &&
+         median(&stable) < static_cast<double>(params_.open_stand_trunks);
+}
+
+void TrunkAccumulator::setFrameOfNewest(std::shared_ptr<const Descriptor> frame) {
+  if (!history_.empty()) history_.back().frame = std::move(frame);
+}
+
+std::shared_ptr<const Descriptor> TrunkAccumulator::frameOf(double stamp) const {
+  for (auto it = history_.rbegin(); it != history_.rend(); ++it) {
+    if (it->stamp == stamp) return it->frame;
+  }
+  return nullptr;
+}
+
+void TrunkAccumulator::forwardUpdates(std::vector<ForwardUpdate>* updates) {
+  const Entry& newest = history_.back();
+  const Pose T_S_O = newest.T_O_S.inverse();
+  for (size_t i = 0; i + 1 < history_.size(); ++i) {
+    Entry& e = history_[i];
+    if (newest.stamp - e.stamp > params_.max_span_s ||
+        (T_S_O * e.T_O_S).translation().norm() > params_.max_span_m) {
+      continue;
+    }
+    if (++e.successors > params_.forward_submaps || (!e.extended && !open_)) continue;
+    ForwardUpdate u;
+    u.stamp = e.stamp;
+    u.trunks = accumulateBothWays(i, &u.successors);
+    // Its own trunks, as it was described: nothing to replace.
+    const bool own = u.trunks.submaps == 1 && !u.trunks.open_stand;
+    if (own && e.described_own) continue;
+    e.described_own = own;
+    if (updates) updates->push_back(std::move(u));
+  }
+}
+
+namespace {
+
+// Adds a submap's sightings, brought into S by T_S_k, to the merger as `source`.
+void addSightings(const Trunks& trunks, const Pose& T_S_k, int source, double min_radius_m,
+                  StemMerger* merger) {
+  for (const TrunkLandmark& t : trunks) {
+    if (t.r < min_radius_m) continue;
+    const Eigen::Vector3d p = T_S_k * Eigen::Vector3d(t.x, t.y, t.z);
+    TrunkLandmark s = t;
+    s.x = p.x(), s.y = p.y(), s.z = p.z();
+    // The odometry's vertical drift over a few submaps (0.1-0.3 m in 30 m) is as large as
+    // the elevation a seen base measures: only the submap's own bases fix t_z and the tilt;
+    // without them t_z comes from the submaps' own ground maps.
+    if (source > 0) s.base_seen = false;
+    merger->add(s, source);
+  }
+}
+
+// The stable stems of sources [0, m] for the smallest m that gives target stems (or all of
+// them); `out` holds the own trunks on entry and keeps them when enough of those are stable.
+// With `open` (an open stand) the stable stems are taken however many own trunks are stable.
+void chooseStable(const StemMerger& merger, const std::vector<double>& span,
+                  const MultiSubmapParams& params, bool open, AccumulatedTrunks* out) {
+  if (out->stable_own >= params.min_trunks && !open) return;
+  out->open_stand = open;
+  const int n = static_cast<int>(span.size());
+  for (int m = 0; m <= n; ++m) {
+    Trunks stable = merger.stable(params.min_observations, m);
+    if (static_cast<int>(stable.size()) >= params.target_trunks || m == n) {
+      out->trunks = std::move(stable);
+      out->submaps = m + 1;
+      for (int k = 0; k < m; ++k) out->span_m = std::max(out->span_m, span[k]);
+      return;
+    }
+  }
+}
+
+}  // namespace
 
 AccumulatedTrunks TrunkAccumulator::accumulate(const Entry& current) const {
   AccumulatedTrunks out;
   out.trunks = current.trunks;
   StemMerger merger(params_.merge_radius_m);
-  auto addSightings = [&](const Trunks& trunks, const Pose& T_S_k, int source) {
-    for (const TrunkLandmark& t : trunks) {
-      if (t.r < params_.min_radius_m) continue;
-      const Eigen::Vector3d p = T_S_k * Eigen::Vector3d(t.x, t.y, t.z);
-      TrunkLandmark s = t;
-      s.x = p.x(), s.y = p.y(), s.z = p.z();
-      // The odometry's vertical drift over a few submaps (0.1-0.3 m in 30 m) is as large as
-      // the elevation a seen base measures: only the submap's own bases fix t_z and the tilt;
-      // without them t_z comes from the submaps' own ground maps.
-      if (source > 0) s.base_seen = false;
-      merger.add(s, source);
-    }
-  };
-  addSightings(current.trunks, Pose::Identity(), 0);
+  addSightings(current.trunks, Pose::Identity(), 0, params_.min_radius_m, &merger);
   // Predecessors newest first: the odometry between S and a recent one has drifted least.
   const Pose T_S_O = current.T_O_S.inverse();
   std::vector<double> span;  // origin distance of source k (k >= 1) at span[k - 1]
@@ -114,24 +229,61 @@ AccumulatedTrunks TrunkAccumulator::accumulate(const Entry& current) const {
     const double d = T_S_k.translation().norm();
     if (d > params_.max_span_m) continue;
     span.push_back(d);
-    addSightings(it->trunks, T_S_k, static_cast<int>(span.size()));
+    addSightings(it->trunks, T_S_k, static_cast<int>(span.size()), params_.min_radius_m, &merger);
   }
   // No predecessor in reach (a robot's first submap), or enough of the submap's own trunks
   // seen again by a predecessor (a stand dense enough for one submap): its own trunks, as
   // without accumulation.
   if (span.empty()) return out;
   out.stable_own = static_cast<int>(merger.stable(params_.min_observations, 0).size());
-  if (out.stable_own >= params_.min_trunks) return out;
-  // As few predecessors as give target_trunks stable stems; stability is judged on all of them.
-  const int n = static_cast<int>(span.size());
-  for (int m = 0; m <= n; ++m) {
-    Trunks stable = merger.stable(params_.min_observations, m);
-    if (static_cast<int>(stable.size()) >= params_.target_trunks || m == n) {
-      out.trunks = std::move(stable);
-      out.submaps = m + 1;
-      for (int k = 0; k < m; ++k) out.span_m = std::max(out.span_m, span[k]);
-      break;
-    }
+  const Stability own{static_cast<double>(out.stable_own) / current.trunks.size(), out.stable_own};
+  const bool open = !current.trunks.empty() && openStandWith(&own);
+  chooseStable(merger, span, params_, open, &out);
+  return out;
+}
+
+AccumulatedTrunks TrunkAccumulator::accumulateBothWays(size_t i, int* successors) const {
+  const Entry& e = history_[i];
+  AccumulatedTrunks out;
+  out.trunks = e.trunks;
+  // The other submaps in reach, nearest in time first (the odometry between them and S has
+  // drifted least), at most max_submaps before and forward_submaps after.
+  struct Source {
+    double dt;
+    size_t index;
+    Pose T_S_k;
+    double d;
+  };
+  std::vector<Source> sources;
+  const Pose T_S_O = e.T_O_S.inverse();
+  int before = 0, after = 0;
+  for (size_t k = history_.size(); k-- > 0;) {
+    if (k == i) continue;
+    const double dt = std::fabs(history_[k].stamp - e.stamp);
+    const Pose T_S_k = T_S_O * history_[k].T_O_S;
+    const double d = T_S_k.translation().norm();
+    if (dt > params_.max_span_s || d > params_.max_span_m) continue;
+    int& count = k < i ? before : after;
+    if (count >= (k < i ? params_.max_submaps : params_.forward_submaps)) continue;
+    ++count;
+    sources.push_back({dt, k, T_S_k, d});
+  }
+  if (sources.empty()) return out;
+  std::stable_sort(sources.begin(), sources.end(),
+                   [](const Source& a, const Source& b) { return a.dt < b.dt; });
+  StemMerger merger(params_.merge_radius_m);
+  addSightings(e.trunks, Pose::Identity(), 0, params_.min_radius_m, &merger);
+  std::vector<double> span;
+  for (const Source& s : sources) {
+    span.push_back(s.d);
+    addSightings(history_[s.index].trunks, s.T_S_k, static_cast<int>(span.size()),
+                 params_.min_radius_m, &merger);
+  }
+  out.stable_own = static_cast<int>(merger.stable(params_.min_observations, 0).size());
+  chooseStable(merger, span, params_, open_, &out);
+  if (successors) {
+    *successors = 0;
+    for (int m = 0; m + 1 < out.submaps; ++m) *successors += sources[m].index > i ? 1 : 0;
   }
   return out;
 }
@@ -152,14 +304,39 @@ GroundMap groundMapOfCloud(const Cloud& cloud_S, const Trunks& own, const TrunkE
                                p);
 }
 
+// What a forward update needs of the newest submap besides trunks: d without trunks and faces,
+// with the ground map an extended description carries (from its own cloud).
+std::shared_ptr<const Descriptor> forwardFrame(const Descriptor& d, const Cloud& cloud_S,
+                                               const Trunks& own,
+                                               const TrunkExtractorParams& extractor_params) {
+  auto frame = std::make_shared<Descriptor>();
+  frame->robot = d.robot, frame->submap_id = d.submap_id, frame->stamp = d.stamp;
+  frame->footprint = d.footprint;
+  frame->ground_map = d.ground_map;
+  if (frame->ground_map.empty()) {
+    frame->ground_map = groundMapOfCloud(cloud_S, own, extractor_params);
+  }
+  frame->level_rotation = d.level_rotation;
+  return frame;
+}
+
+// The forward updates of add() as descriptors, from the frames attached to their submaps.
+void describeUpdates(const TrunkAccumulator& accumulator, const std::vector<ForwardUpdate>& u,
+                     const DescriptorParams& descriptor_params, std::vector<Descriptor>* out) {
+  for (const ForwardUpdate& f : u) {
+    const std::shared_ptr<const Descriptor> frame = accumulator.frameOf(f.stamp);
+    if (frame) out->push_back(describeForwardUpdate(*frame, f.trunks.trunks, descriptor_params));
+  }
+}
+
 // The accumulated descriptor without a ground map, stamped (level, when not null: the
-// levelling rotation it records).
+// levelling rotation it records); the forward updates the new submap makes due go to *forward.
 Descriptor accumulatedDescriptor(const TrunkExtractionResult& ext, const SubmapKey& key,
                                  const Eigen::Quaterniond* level, const Pose& T_O_S,
                                  TrunkAccumulator* accumulator,
-                                 const DescriptorParams& descriptor_params,
-                                 AccumulatedTrunks* acc) {
-  *acc = accumulator->add(key.stamp, T_O_S, ext.trunks);
+                                 const DescriptorParams& descriptor_params, AccumulatedTrunks* acc,
+                                 std::vector<ForwardUpdate>* forward) {
+  *acc = accumulator->add(key.stamp, T_O_S, ext.trunks, forward);
   Descriptor d = buildDescriptor(acc->trunks, descriptor_params);
   d.footprint = ext.footprint;
   d.robot = key.robot;
@@ -177,15 +354,18 @@ Descriptor describeAccumulatedUnfitted(const Cloud& cloud_S, const SubmapKey& ke
                                        const TrunkExtractorParams& extractor_params,
                                        const DescriptorParams& descriptor_params,
                                        DescribeTimings* timings, TrunkExtractionResult* extraction,
-                                       AccumulatedTrunks* accumulated) {
+                                       AccumulatedTrunks* accumulated,
+                                       std::vector<Descriptor>* updates) {
   const auto t0 = std::chrono::steady_clock::now();
   Descriptor d;
   AccumulatedTrunks acc;
+  std::vector<ForwardUpdate> forward;
   bool described = false, fits = true;
   double describe_ms = 0.0;
   const GroundMapWanted wanted = [&](const TrunkExtractionResult& without_map) {
     const auto t1 = std::chrono::steady_clock::now();
-    d = accumulatedDescriptor(without_map, key, level, T_O_S, accumulator, descriptor_params, &acc);
+    d = accumulatedDescriptor(without_map, key, level, T_O_S, accumulator, descriptor_params, &acc,
+                              &forward);
     described = true;
     fits = groundMapFits(d, descriptor_params.max_bytes);
     describe_ms = msSince(t1);
@@ -193,13 +373,19 @@ Descriptor describeAccumulatedUnfitted(const Cloud& cloud_S, const SubmapKey& ke
   };
   TrunkExtractionResult ext = extractTrunks(cloud_S, extractor_params, wanted);
   if (timings) timings->extract_ms = msSince(t0) - describe_ms;
-  if (!described)
-    d = accumulatedDescriptor(ext, key, level, T_O_S, accumulator, descriptor_params, &acc);
+  if (!described) {
+    d = accumulatedDescriptor(ext, key, level, T_O_S, accumulator, descriptor_params, &acc,
+                              &forward);
+  }
   d.ground_map = ext.ground_map;
   if (acc.submaps > 1 && d.ground_map.empty() &&
       (described ? fits : groundMapFits(d, descriptor_params.max_bytes))) {
     d.ground_map = groundMapOfCloud(cloud_S, ext.trunks, extractor_params);
   }
+  // A submap that may be described again later keeps what that takes.
+  if (accumulator->newestMayBeUpdated())
+    accumulator->setFrameOfNewest(forwardFrame(d, cloud_S, ext.trunks, extractor_params));
+  if (updates) describeUpdates(*accumulator, forward, descriptor_params, updates);
   if (timings) timings->total_ms = msSince(t0);
   if (extraction) *extraction = std::move(ext);
   if (accumulated) *accumulated = std::move(acc);
@@ -208,15 +394,27 @@ Descriptor describeAccumulatedUnfitted(const Cloud& cloud_S, const SubmapKey& ke
 
 }  // namespace
 
+Descriptor describeForwardUpdate(const Descriptor& frame, const Trunks& trunks,
+                                 const DescriptorParams& descriptor_params) {
+  Descriptor d = buildDescriptor(trunks, descriptor_params);
+  d.robot = frame.robot, d.submap_id = frame.submap_id, d.stamp = frame.stamp;
+  d.footprint = frame.footprint;
+  d.ground_map = frame.ground_map;
+  d.level_rotation = frame.level_rotation;
+  fitDescriptorBytes(&d, descriptor_params.max_bytes);
+  return d;
+}
+
 Descriptor describeCloudAccumulated(const Cloud& cloud_S, const SubmapKey& key, const Pose& T_O_S,
                                     TrunkAccumulator* accumulator,
                                     const TrunkExtractorParams& extractor_params,
                                     const DescriptorParams& descriptor_params,
                                     DescribeTimings* timings, TrunkExtractionResult* extraction,
-                                    AccumulatedTrunks* accumulated) {
+                                    AccumulatedTrunks* accumulated,
+                                    std::vector<Descriptor>* updates) {
   Descriptor d =
       describeAccumulatedUnfitted(cloud_S, key, nullptr, T_O_S, accumulator, extractor_params,
-                                  descriptor_params, timings, extraction, accumulated);
+                                  descriptor_params, timings, extraction, accumulated, updates);
   fitDescriptorBytes(&d, descriptor_params.max_bytes);
   return d;
 }
@@ -225,10 +423,11 @@ Descriptor describeLevelledCloudAccumulated(
     const Cloud& cloud_S, const Eigen::Quaterniond& R_L_S, const SubmapKey& key, const Pose& T_O_S,
     TrunkAccumulator* accumulator, const TrunkExtractorParams& extractor_params,
     const DescriptorParams& descriptor_params, DescribeTimings* timings,
-    TrunkExtractionResult* extraction, AccumulatedTrunks* accumulated) {
+    TrunkExtractionResult* extraction, AccumulatedTrunks* accumulated,
+    std::vector<Descriptor>* updates) {
   if (R_L_S.coeffs() == Eigen::Quaterniond::Identity().coeffs()) {
     return describeCloudAccumulated(cloud_S, key, T_O_S, accumulator, extractor_params,
-                                    descriptor_params, timings, extraction, accumulated);
+                                    descriptor_params, timings, extraction, accumulated, updates);
   }
   const auto t0 = std::chrono::steady_clock::now();
   const Cloud cloud_L = rotateCloud(cloud_S, R_L_S);
@@ -237,7 +436,7 @@ Descriptor describeLevelledCloudAccumulated(
   T_O_L.linear() = T_O_S.rotation() * R_L_S.normalized().conjugate().toRotationMatrix();
   Descriptor d =
       describeAccumulatedUnfitted(cloud_L, key, &R_L_S, T_O_L, accumulator, extractor_params,
-                                  descriptor_params, timings, extraction, accumulated);
+                                  descriptor_params, timings, extraction, accumulated, updates);
   if (timings) timings->total_ms += rotate_ms;
   fitDescriptorBytes(&d, descriptor_params.max_bytes);
   return d;

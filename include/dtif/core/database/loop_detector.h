@@ -159,6 +159,11 @@ class LoopDetector {
   /// false), as is any once the database holds kMaxDatabaseEntries.
   bool insert(std::shared_ptr<const Descriptor> d, const EntryOdometry& odometry = {});
 
+  /// Replaces the entry of d's (robot, submap id) by d, its odometry kept (forward
+  /// accumulation describes a stored submap again once its successors exist). False, nothing
+  /// changed, when d is invalid or no such entry exists.
+  bool replace(std::shared_ptr<const Descriptor> d);
+
   size_t size() const { return entries_.size(); }
   /// Bytes the database holds: the screening index, the entries' descriptors (trunks,
   /// triangles, histograms) and their match triangles; the same built live or loaded.
