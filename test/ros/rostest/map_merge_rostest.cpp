@@ -197,7 +197,8 @@ TEST(MapMergeRostest, EveryRobotsMapTfMatchesGroundTruth) {
                                    // the bag's clock has stopped)
   for (const auto& [robot, s] : latest) {
     Pose T;
-    ASSERT_TRUE(waitFor([&] { return test::lookup(tf, "map", odom_frame[robot], &T); }, 5.0));
+    const std::string frame = odom_frame[robot];  // clang's C++17 captures no structured binding
+    ASSERT_TRUE(waitFor([&] { return test::lookup(tf, "map", frame, &T); }, 5.0));
     const Eigen::Vector3d p = T_W_map_saved * (T * s.T_O_S).translation();
     const double e = (p - ds.T_W_S.at(s.dataset_id).translation()).norm();
     std::cout << "map TF of " << robot << " after save_map: latest submap " << e
