@@ -240,7 +240,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       return;
     }
     publishLoop(msg, *d, meta, q);
-    if (q.inter_lc) publishInterRobotLoop(msg, *q.inter_lc, q.inter_meta);
+    if (q.inter_lc) sendLoop(msg, *q.inter_lc, q.inter_meta, true);
     if (node_.publish_tf && node_.tf_rate_hz <= 0.0) publishTf();
   }
 
@@ -344,14 +344,8 @@ class LoopClosureNodelet : public nodelet::Nodelet {
   void publishLoop(const dtif::TrunkDescriptor& msg, const Descriptor& d, const Meta& meta,
                    const QueryResult& q) {
     const Loop& lc = *q.lc;
-    boost::shared_ptr<dtif::LoopClosure> out(new dtif::LoopClosure(ros_glue::toMsg(lc)));
-    out->header.stamp = msg.header.stamp;
-    out->header.frame_id = q.candidate_meta ? q.candidate_meta->odom_frame : std::string();
-    loop_pub_.publish(boost::shared_ptr<const dtif::LoopClosure>(out));
+    sendLoop(msg, lc, q.candidate_meta, false);
     logQuery(msg, d, lc, q.candidate.get(), q.t_loop_ms);
-    NODELET_INFO("loop %s/%ld -> %s/%ld: %d inliers, score %.2f", lc.query_robot.c_str(),
-                 static_cast<long>(lc.query_id), lc.candidate_robot.c_str(),
-                 static_cast<long>(lc.candidate_id), lc.inliers, lc.score);
     if (!q.candidate) return;
     // Stamp 0: rviz uses the latest transform between odometry frames (as for trunks).
     visualization_msgs::MarkerArray markers =
@@ -363,17 +357,19 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     latest_loop_markers_.add(std::move(markers));
   }
 
-  // The inter-robot loop beside a query's own-robot loop: on ~loop_closures for the map merge
-  // (it joins the robots), not in ~loop_log, which scores each query's best loop (worker).
-  void publishInterRobotLoop(const dtif::TrunkDescriptor& msg, const Loop& lc,
-                             const std::optional<Meta>& candidate_meta) {
+  // A loop on ~loop_closures, logged (worker). inter_robot_extra: the inter-robot loop beside a
+  // query's own-robot best loop, for the map merge (it joins the robots); ~loop_log, which
+  // scores each query's best loop, does not get it.
+  void sendLoop(const dtif::TrunkDescriptor& msg, const Loop& lc,
+                const std::optional<Meta>& candidate_meta, bool inter_robot_extra) {
     boost::shared_ptr<dtif::LoopClosure> out(new dtif::LoopClosure(ros_glue::toMsg(lc)));
-    out->inter_robot_extra = true;
+    out->inter_robot_extra = inter_robot_extra;
     out->header.stamp = msg.header.stamp;
     out->header.frame_id = candidate_meta ? candidate_meta->odom_frame : std::string();
     loop_pub_.publish(boost::shared_ptr<const dtif::LoopClosure>(out));
-    NODELET_INFO("inter-robot loop beside it %s/%ld -> %s/%ld: %d inliers, score %.2f",
-                 lc.query_robot.c_str(), static_cast<long>(lc.query_id), lc.candidate_robot.c_str(),
+    NODELET_INFO("%s %s/%ld -> %s/%ld: %d inliers, score %.2f",
+                 inter_robot_extra ? "inter-robot loop beside it" : "loop", lc.query_robot.c_str(),
+                 static_cast<long>(lc.query_id), lc.candidate_robot.c_str(),
                  static_cast<long>(lc.candidate_id), lc.inliers, lc.score);
   }
 

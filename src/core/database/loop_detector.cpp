@@ -175,10 +175,10 @@ struct BestLoops {
 /// if every one were verified in screening order. Verification is the costly part (lattice
 /// searches in repetitive stands), so the hypotheses are verified in order of their score
 /// bound (inlierWeightShare: a loop scores its co-visible ratio, at most 1, times it), and
-/// those whose bound cannot beat the best loop found are not verified at all. With
-/// `want_inter_robot`, while the best loop is with q's own robot, other robots' hypotheses
-/// are verified on, at most `extra_budget` of them, for the best of them as well; the best loop
-/// stays the same.
+/// those whose bound cannot beat the best loop found are not verified at all. While the best
+/// loop is with q's own robot, other robots' hypotheses past that point are verified on, at
+/// most `extra_budget` of them, for the best inter-robot loop as well; the best loop stays the
+/// same.
 BestLoops verifyBest(const Descriptor& q, const std::vector<const Descriptor*>& cands,
                      const std::vector<Hypothesis>& hyps, const LoopDetectorParams& params,
                      int extra_budget, QueryStats* stats) {
