@@ -523,11 +523,7 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
 
     // 4. Insert q (and replace the entries it extended forward, here too).
     front_end.insert(step);
-    for (const auto& u : step.updates) {
-      for (size_t j = 0; j < descs.size(); ++j) {
-        if (ds.submaps[j].id == u->submap_id && ds.submaps[j].robot == u->robot) descs[j] = u;
-      }
-    }
+    for (const auto& u : step.updates) descs[submapIndex(ds, i, u->submap_id)] = u;
     row.forward_updates = step.updates.size();
     result.rows.push_back(std::move(row));
     if (progress) progress(i + 1, n);
