@@ -372,6 +372,44 @@ TEST(TrunkAccumulator, OpenStandsAreDescribedWithStableStemsOnly) {
   }
 }
 
+TEST(TrunkAccumulator, SubmapsBeforeAnOpenStandIsKnownAreDescribedAgainWithStableStems) {
+  MultiSubmapParams p;
+  p.min_trunks = 2;  // alone, it would keep every submap's own trunks
+  p.open_stand_share = 0.4;
+  p.open_stand_trunks = 13;
+  p.open_stand_min_submaps = 3;
+  p.forward_submaps = 4;
+  // 4 stems seen again among 16 one-off fits: submaps 1 and 2 keep their own 20 trunks (the
+  // medians need 3 submaps), yet each looks open on its own, so each keeps what a later
+  // description takes (its frame).
+  TrunkAccumulator open(p);
+  std::vector<ForwardUpdate> u;
+  for (int k = 0; k < 3; ++k) {
+    const AccumulatedTrunks a = open.add(10.0 * k, pose(k, 0, 0, 0), standSubmap(k, 4, 16, k), &u);
+    EXPECT_FALSE(a.open_stand) << k;
+    EXPECT_EQ(a.trunks.size(), 20u) << k;
+    EXPECT_TRUE(open.newestMayBeUpdated()) << k;
+  }
+  // The fourth submap makes the stand open: the three before it are described again with the
+  // 4 stable stems.
+  u.clear();
+  const AccumulatedTrunks a3 = open.add(30.0, pose(3, 0, 0, 0), standSubmap(3, 4, 16, 3), &u);
+  EXPECT_TRUE(a3.open_stand);
+  ASSERT_EQ(u.size(), 3u);
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_EQ(u[k].stamp, 10.0 * k);
+    EXPECT_TRUE(u[k].trunks.open_stand) << k;
+    EXPECT_EQ(u[k].trunks.trunks.size(), 4u) << k;
+  }
+  // A closed stand's submaps with enough stable trunks keep no frame: nothing to describe again.
+  TrunkAccumulator closed(p);
+  closed.add(0.0, pose(0, 0, 0, 0), standSubmap(0, 16, 4, 0), &u);
+  for (int k = 1; k < 5; ++k) {
+    closed.add(10.0 * k, pose(k, 0, 0, 0), standSubmap(k, 16, 4, k), &u);
+    EXPECT_FALSE(closed.newestMayBeUpdated()) << k;
+  }
+}
+
 TEST(MultiSubmapParams, ForwardAndOpenStandLimitsAreNamed) {
   MultiSubmapParams p;
   p.forward_submaps = -1;

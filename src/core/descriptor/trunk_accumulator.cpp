@@ -103,6 +103,11 @@ AccumulatedTrunks TrunkAccumulator::add(double stamp, const Pose& T_O_S, const T
   // Not extended only when enough of its own trunks were seen again (and the stand is not
   // open): more sources (its successors) only add sightings, so it would stay so.
   current.extended = out.submaps > 1 || out.stable_own < params_.min_trunks || out.open_stand;
+  // A submap described with its own trunks keeps what a later description takes too when it
+  // looks like an open stand's on its own: if the robot's stand turns out open once the medians
+  // have enough submaps, it is described again with stable stems like the rest (else a robot's
+  // first submaps, on which the medians are still being gathered, kept their one-off fits).
+  current.updatable = current.extended || looksOpen(out.stable_own, trunks_S.size());
   current.described_own = out.submaps == 1 && !out.open_stand;
   if (out.stable_own >= 0 && !trunks_S.empty()) {
     stability_.push_back({static_cast<double>(out.stable_own) / trunks_S.size(), out.stable_own});
@@ -126,7 +131,7 @@ AccumulatedTrunks TrunkAccumulator::add(double stamp, const Pose& T_O_S, const T
 
 bool TrunkAccumulator::newestMayBeUpdated() const {
   return params_.min_trunks > 0 && params_.forward_submaps > 0 && !history_.empty() &&
-         history_.back().extended;
+         history_.back().updatable;
 }
 
 bool TrunkAccumulator::openStandWith(const Stability* extra) const {
@@ -141,6 +146,12 @@ bool TrunkAccumulator::openStandWith(const Stability* extra) const {
   for (const Stability& s : v) share.push_back(s.share), stable.push_back(s.stable);
   return median(&share) < params_.open_stand_share &&
          median(&stable) < static_cast<double>(params_.open_stand_trunks);
+}
+
+bool TrunkAccumulator::looksOpen(int stable_own, size_t own) const {
+  return stable_own >= 0 && own > 0 && params_.open_stand_share > 0.0 &&
+         static_cast<double>(stable_own) / static_cast<double>(own) < params_.open_stand_share &&
+         stable_own < params_.open_stand_trunks;
 }
 
 void TrunkAccumulator::setFrameOfNewest(std::shared_ptr<const Descriptor> frame) {
@@ -163,7 +174,9 @@ void TrunkAccumulator::forwardUpdates(std::vector<ForwardUpdate>* updates) {
         (T_S_O * e.T_O_S).translation().norm() > params_.max_span_m) {
       continue;
     }
-    if (++e.successors > params_.forward_submaps || (!e.extended && !open_)) continue;
+    if (++e.successors > params_.forward_submaps || !e.updatable || (!e.extended && !open_)) {
+      continue;
+    }
     ForwardUpdate u;
     u.stamp = e.stamp;
     u.trunks = accumulateBothWays(i, &u.successors);

@@ -58,7 +58,9 @@ struct MultiSubmapParams {
   /// successors (within the span), and its database entry replaced. Two robots walking a leg in
   /// opposite directions each hold their own past; the stored entry then spans both sides. Only
   /// submaps that arrived before a query are used, so a query still sees only its past and
-  /// earlier entries (DATASET.md's protocol). 0: entries keep their first description.
+  /// earlier entries (DATASET.md's protocol). A submap that kept its own trunks but looks open
+  /// on its own (stable share and count below open_stand_share / open_stand_trunks) is described
+  /// again too once the robot's stand turns out open. 0: entries keep their first description.
   int forward_submaps = 4;
 
   std::string validate() const;
@@ -138,6 +140,7 @@ class TrunkAccumulator {
     Pose T_O_S = Pose::Identity();
     Trunks trunks;              ///< in its own S
     bool extended = false;      ///< described with predecessors' stems (or could have been)
+    bool updatable = false;     ///< extended, or its own trunks look like an open stand's
     int successors = 0;         ///< later submaps seen so far
     bool described_own = true;  ///< its latest description: exactly its own trunks
     std::shared_ptr<const Descriptor> frame;  ///< setFrameOfNewest's
@@ -156,6 +159,9 @@ class TrunkAccumulator {
   };
   /// Whether the medians of stability_ and `extra` (when given) make an open stand.
   bool openStandWith(const Stability* extra) const;
+  /// Whether one submap's stable share and count (stable_own of own trunks) are below the open
+  /// stand's thresholds.
+  bool looksOpen(int stable_own, size_t own) const;
 
   std::deque<Entry> history_;        ///< oldest first
   std::deque<Stability> stability_;  ///< of the recent submaps' own trunks, oldest first
