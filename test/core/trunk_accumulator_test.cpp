@@ -333,13 +333,20 @@ Trunks standSubmap(double x0, int real, int one_off, int k) {
   return t;
 }
 
-TEST(TrunkAccumulator, OpenStandsAreDescribedWithStableStemsOnly) {
+// Open-stand thresholds as the defaults, medians from the third submap; min_trunks so low that
+// alone it would keep every submap's own trunks.
+MultiSubmapParams openStandParams(int forward_submaps) {
   MultiSubmapParams p;
-  p.min_trunks = 2;  // alone, it would keep every submap's own trunks
+  p.min_trunks = 2;
   p.open_stand_share = 0.4;
   p.open_stand_trunks = 13;
   p.open_stand_min_submaps = 3;
-  p.forward_submaps = 0;
+  p.forward_submaps = forward_submaps;
+  return p;
+}
+
+TEST(TrunkAccumulator, OpenStandsAreDescribedWithStableStemsOnly) {
+  const MultiSubmapParams p = openStandParams(0);
   // Open: 4 stems seen again among 16 one-off fits (share 0.2).
   TrunkAccumulator open(p);
   std::vector<AccumulatedTrunks> out;
@@ -373,12 +380,7 @@ TEST(TrunkAccumulator, OpenStandsAreDescribedWithStableStemsOnly) {
 }
 
 TEST(TrunkAccumulator, SubmapsBeforeAnOpenStandIsKnownAreDescribedAgainWithStableStems) {
-  MultiSubmapParams p;
-  p.min_trunks = 2;  // alone, it would keep every submap's own trunks
-  p.open_stand_share = 0.4;
-  p.open_stand_trunks = 13;
-  p.open_stand_min_submaps = 3;
-  p.forward_submaps = 4;
+  const MultiSubmapParams p = openStandParams(4);
   // 4 stems seen again among 16 one-off fits: submaps 1 and 2 keep their own 20 trunks (the
   // medians need 3 submaps), yet each looks open on its own, so each keeps what a later
   // description takes (its frame).
