@@ -34,8 +34,12 @@ Pose onSquare(double s, double z) {
 }
 
 Pose gtPose(const std::string& robot, int k) {
+  if (robot == "c") return onSquare(5.0 * k + 80.0, 1.0);
   return robot == "a" ? onSquare(5.0 * k, 0.0) : onSquare(5.0 * k + 40.0, 0.5);
 }
+
+/// Robot of a submap id: a from 0, b from 100, c from 200.
+std::string robotOf(int64_t id) { return id >= 200 ? "c" : id >= 100 ? "b" : "a"; }
 
 /// Odometry: the true increments with a yaw bias and noise (fixed seed), so that it drifts by
 /// decimetres to metres over 200 m.
@@ -68,8 +72,8 @@ Loop makeLoop(const Scenario& sc, int64_t q, int64_t c, const Pose& noise) {
   Loop l;
   l.query_id = q;
   l.candidate_id = c;
-  l.query_robot = q >= 100 ? "b" : "a";
-  l.candidate_robot = c >= 100 ? "b" : "a";
+  l.query_robot = robotOf(q);
+  l.candidate_robot = robotOf(c);
   l.T_c_q = sc.gt.at(c).inverse() * sc.gt.at(q) * noise;
   l.covariance = Matrix6d::Identity() * 1e-4;
   l.inliers = 10;
@@ -193,6 +197,44 @@ TEST(MapMerger, PcmRejectsAFalseLoopAndTheMapDoesNotMove) {
     EXPECT_LT((m.pose(p.id)->translation() - p.T_M_S.translation()).norm(), 0.02) << p.id;
   }
   EXPECT_LT(std::fabs(mergedAte(m, sc) - mergedAte(clean, sc)), 0.02);
+}
+
+TEST(MapMerger, TheOnlyLoopOfTwoRobotsIsRejectedWhenPathsThroughAThirdContradictIt) {
+  // c walks the circuit too; its first loop, with a, is false (turned 166 deg) and the only
+  // a-c loop. It joins c to the map; then b-c loops arrive, and a-b are joined by many loops.
+  Scenario sc = makeScenario();
+  std::mt19937 rng(11);
+  const auto c = drift("c", 24, 0.001, &rng, &sc.gt, 200);
+  sc.submaps.insert(sc.submaps.end(), c.begin(), c.end());
+  Loop wrong = makeLoop(sc, 202, 10, Pose::Identity());  // c at (10, 40), a at (50, 0)
+  wrong.T_c_q = test::makePose(2.0, 1.0, 0.0, 0.0, 0.0, 2.9);
+  std::vector<Loop> bc;
+  for (int k = 0; k <= 8; k += 4)
+    bc.push_back(makeLoop(sc, 200 + k, 100 + k + 8, Pose::Identity()));
+  const MapMerger clean = merge(sc, bc);
+  MapMerger m;
+  for (const auto& s : sc.submaps) m.addSubmap(s);
+  for (const auto& l : sc.loops) ASSERT_TRUE(m.addLoop(l));
+  ASSERT_TRUE(m.addLoop(wrong));
+  m.solve();
+  EXPECT_EQ(m.component("c"), 0);  // joined by the false loop: nothing contradicts it yet
+  for (const auto& l : bc) ASSERT_TRUE(m.addLoop(l));
+  m.solve();
+  EXPECT_EQ(m.component("c"), 0);
+  for (const LoopVerdict& v : m.loops()) {
+    EXPECT_EQ(v.used, !(v.query_id == 202 && v.candidate_id == 10)) << v.query_id;
+  }
+  for (const MergedPose& p : clean.poses()) {
+    EXPECT_LT((m.pose(p.id)->translation() - p.T_M_S.translation()).norm(), 0.02) << p.id;
+  }
+  // One true a-c loop besides the b-c paths: it agrees with them and stays.
+  MapMerger ok;
+  for (const auto& s : sc.submaps) ok.addSubmap(s);
+  for (const auto& l : sc.loops) ASSERT_TRUE(ok.addLoop(l));
+  for (const auto& l : bc) ASSERT_TRUE(ok.addLoop(l));
+  ASSERT_TRUE(ok.addLoop(makeLoop(sc, 202, 18, Pose::Identity())));  // c at (10, 40) = a's 18
+  ok.solve();
+  for (const LoopVerdict& v : ok.loops()) EXPECT_TRUE(v.used) << v.query_id;
 }
 
 TEST(MapMerger, RobustLossAloneLimitsAFalseLoop) {
