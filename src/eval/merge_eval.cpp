@@ -11,6 +11,7 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <sstream>
+#include <tuple>
 
 #include "dtif/core/timing.h"
 #include "dtif/eval/front_end.h"
@@ -176,11 +177,54 @@ MergeInput collectMergeInput(const Dataset& ds, const DtifParams& params, const 
   return in;
 }
 
-std::optional<Loop> makeFalseLoop(const Dataset& ds, const MergeInput& in) {
+namespace {
+
+/// The two robots (in submap order) with the fewest inter-robot loops between them; ties: the
+/// first pair in that order. Empty with fewer than two robots.
+std::pair<std::string, std::string> weakestPair(const MergeInput& in) {
+  std::vector<std::string> robots;
+  for (const MergeSubmap& s : in.submaps) {
+    if (std::find(robots.begin(), robots.end(), s.robot) == robots.end()) robots.push_back(s.robot);
+  }
+  std::pair<std::string, std::string> best;
+  size_t fewest = std::numeric_limits<size_t>::max();
+  for (size_t i = 0; i < robots.size(); ++i) {
+    for (size_t j = i + 1; j < robots.size(); ++j) {
+      const size_t n =
+          static_cast<size_t>(std::count_if(in.loops.begin(), in.loops.end(), [&](const Loop& l) {
+            return (l.query_robot == robots[i] && l.candidate_robot == robots[j]) ||
+                   (l.query_robot == robots[j] && l.candidate_robot == robots[i]);
+          }));
+      if (n < fewest) fewest = n, best = {robots[i], robots[j]};
+    }
+  }
+  return best;
+}
+
+}  // namespace
+
+void dropLoopsBetween(MergeInput* in, const std::string& a, const std::string& b) {
+  MergeInput out;
+  for (size_t k = 0; k < in->loops.size(); ++k) {
+    const Loop& l = in->loops[k];
+    if ((l.query_robot == a && l.candidate_robot == b) ||
+        (l.query_robot == b && l.candidate_robot == a)) {
+      continue;
+    }
+    out.loops.push_back(l);
+    out.loop_after.push_back(in->loop_after[k]);
+  }
+  in->loops = std::move(out.loops);
+  in->loop_after = std::move(out.loop_after);
+}
+
+std::optional<Loop> makeFalseLoop(const Dataset& ds, const MergeInput& in, FalseLoopPair pair) {
   // Between the robots of the first inter-robot loop (so that PCM has loops to compare it with),
-  // else the first two robots.
+  // else the first two robots; or between the weakest-linked pair.
   std::string ra, rb;
+  if (pair == FalseLoopPair::kWeakest) std::tie(ra, rb) = weakestPair(in);
   for (const Loop& l : in.loops) {
+    if (!ra.empty()) break;
     if (l.query_robot != l.candidate_robot) {
       ra = l.candidate_robot;
       rb = l.query_robot;
@@ -237,7 +281,7 @@ std::optional<Loop> makeFalseLoop(const Dataset& ds, const MergeInput& in) {
 
 MapMerger runMerger(const MergeInput& in, const MergeParams& params,
                     const std::optional<Loop>& false_loop, const std::vector<FieldStem>& stem_map,
-                    std::vector<MergeEvent>* events, MergeRunStats* stats) {
+                    std::vector<MergeEvent>* events, MergeRunStats* stats, bool false_loop_first) {
   MapMerger merger(params);
   if (!stem_map.empty()) merger.setStemMap(stem_map);
   for (const auto& [robot, R_L_O] : in.levelling) merger.setLevelling(robot, R_L_O);
@@ -253,20 +297,23 @@ MapMerger runMerger(const MergeInput& in, const MergeParams& params,
     auto ev = merger.takeEvents();
     if (events) events->insert(events->end(), ev.begin(), ev.end());
   };
-  // The false loop arrives half way through the loops: early enough to bend the map if the
-  // back end let it.
-  const size_t false_at = in.loops.size() / 2;
+  // The false loop arrives half way through the loops (or with the first): early enough to
+  // bend the map if the back end let it; later when one of its submaps has not arrived yet.
+  const size_t false_at = false_loop_first ? 0 : in.loops.size() / 2;
+  bool false_pending = false_loop.has_value();
   size_t k = 0;
   for (size_t i = 0; i < in.submaps.size(); ++i) {
     merger.addSubmap(in.submaps[i]);
     bool any = false;
     for (; k < in.loops.size() && in.loop_after[k] == i; ++k) {
       any = merger.addLoop(in.loops[k]) || any;
-      if (false_loop && k == false_at) merger.addLoop(*false_loop);
+    }
+    if (false_pending && (k > false_at || in.loops.empty()) && merger.addLoop(*false_loop)) {
+      false_pending = false;
+      any = true;
     }
     if (any) solve();
   }
-  if (false_loop && in.loops.empty()) merger.addLoop(*false_loop);
   solve();
   // The final map: refined with the trunks as landmarks (not part of the re-solve times).
   const auto t0 = std::chrono::steady_clock::now();
@@ -382,7 +429,10 @@ void writeMergeSummaryJson(const std::string& path, const MergeSummary& s) {
   j["landmarks"] = s.run.last.landmarks;
   j["landmark_observations"] = s.run.last.landmark_observations;
   j["false_loop_injected"] = s.false_loop_injected;
-  if (s.false_loop_injected) j["false_loop_used"] = s.false_loop_used;
+  if (s.false_loop_injected) {
+    j["false_loop_used"] = s.false_loop_used;
+    j["false_loop_added"] = s.false_loop_added;
+  }
   j["score"] = s.score ? scoreJson(*s.score) : nlohmann::json(nullptr);
   if (s.score_clean) j["score_without_false_loop"] = scoreJson(*s.score_clean);
   if (s.stem_map) {

@@ -53,21 +53,27 @@ int runMerge(const MergeArgs& a) {
   if (!a.stem_map.empty()) field = readStemMapCsv(a.stem_map, a.stem_map_plot);
 
   const bool quiet = a.quiet;
-  const MergeInput in = collectMergeInput(ds, params, EvalParams{}, [&](size_t i, size_t n) {
+  MergeInput in = collectMergeInput(ds, params, EvalParams{}, [&](size_t i, size_t n) {
     if (!quiet && (i % 10 == 0 || i == n)) {
       std::cerr << "\rdtif merge: loop closure " << i << "/" << n << " submaps" << std::flush;
       if (i == n) std::cerr << "\n";
     }
   });
 
+  std::optional<Loop> false_loop;
+  if (a.inject_false_loop) {
+    false_loop = makeFalseLoop(
+        ds, in, a.false_loop_weakest ? FalseLoopPair::kWeakest : FalseLoopPair::kFirstLinked);
+    if (!false_loop) throw DatasetError(ds.root + ": a false loop needs at least two robots");
+    // Two robots that share no true loop: the false one is their only loop.
+    if (a.false_loop_weakest)
+      dropLoopsBetween(&in, false_loop->query_robot, false_loop->candidate_robot);
+  }
   MergeSummary sum;
   sum.dataset = ds.root;
   sum.submaps = in.submaps.size();
   sum.loops_accepted = in.loops.size();
-  std::optional<Loop> false_loop;
-  if (a.inject_false_loop) {
-    false_loop = makeFalseLoop(ds, in);
-    if (!false_loop) throw DatasetError(ds.root + ": a false loop needs at least two robots");
+  if (false_loop) {
     sum.false_loop_injected = true;
     if (in.eval) {
       const MapMerger clean = runMerger(in, mp, std::nullopt, field);
@@ -75,12 +81,14 @@ int runMerge(const MergeArgs& a) {
     }
   }
   std::vector<MergeEvent> events;
-  const MapMerger merger = runMerger(in, mp, false_loop, field, &events, &sum.run);
+  const MapMerger merger =
+      runMerger(in, mp, false_loop, field, &events, &sum.run, a.false_loop_weakest);
   countLoops(merger, &sum);
   if (false_loop) {
     for (const LoopVerdict& v : merger.loops()) {
       if (v.query_id == false_loop->query_id && v.candidate_id == false_loop->candidate_id) {
         sum.false_loop_used = v.used;
+        sum.false_loop_added = true;
       }
     }
   }
@@ -128,7 +136,9 @@ int runMerge(const MergeArgs& a) {
   if (false_loop) {
     std::cout << "false loop " << false_loop->query_robot << "/" << false_loop->query_id << " -> "
               << false_loop->candidate_robot << "/" << false_loop->candidate_id << ": "
-              << (sum.false_loop_used ? "USED" : "rejected");
+              << (!sum.false_loop_added ? "NOT ADDED"
+                  : sum.false_loop_used ? "USED"
+                                        : "rejected");
     if (sum.score && sum.score_clean && sum.score->component.count(0) &&
         sum.score_clean->component.count(0)) {
       const double d = sum.score->component.at(0).ate_m - sum.score_clean->component.at(0).ate_m;

@@ -162,6 +162,12 @@ void addMerge(CLI::App* dtif, MergeArgs* a) {
   addConfig(cmd, &a->configs);
   cmd->add_flag("--inject-false-loop", a->inject_false_loop,
                 "add one deliberately false inter-robot loop and report how much it moves the map");
+  cmd->add_flag("--false-loop-weakest", a->false_loop_weakest,
+                "with --inject-false-loop: put it between the two robots with the fewest "
+                "inter-robot loops, with the first loop, and leave out their true loops: two "
+                "robots that never met, joined by one false loop, which PCM cannot compare with "
+                "another")
+      ->needs("--inject-false-loop");
   cmd->add_flag("--no-pcm", a->no_pcm,
                 "keep every loop (no pairwise consistency check; the robust loss only)");
   cmd->add_option("--stem-map", a->stem_map,

@@ -59,6 +59,7 @@ struct MergeArgs {
   std::string out;                   ///< output folder (created when missing)
   std::vector<std::string> configs;  ///< parameter files, applied in order
   bool inject_false_loop = false;    ///< add one false loop (robustness check)
+  bool false_loop_weakest = false;   ///< ... between the weakest-linked robots, first
   bool no_pcm = false;               ///< keep every loop (ablation: robust loss only)
   std::string stem_map;              ///< field stem map CSV x,y[,dbh] ("": none)
   std::string stem_map_plot;         ///< its plot_id to use ("": all rows)

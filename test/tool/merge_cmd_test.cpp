@@ -69,6 +69,7 @@ TEST(MergeCmd, WritesTheMergedMapAndScoresIt) {
   EXPECT_GT(j.at("loops_used").get<int>(), 0);
   EXPECT_TRUE(j.contains("loops_rejected"));
   EXPECT_TRUE(j.at("false_loop_injected").get<bool>());
+  EXPECT_TRUE(j.at("false_loop_added").get<bool>()) << "the merger never saw it: nothing tested";
   EXPECT_FALSE(j.at("false_loop_used").get<bool>());
   const auto& score = j.at("score");
   const double ate = score.at("component").at("0").at("ate_m").get<double>();

@@ -32,10 +32,22 @@ struct MergeInput {
 MergeInput collectMergeInput(const Dataset& ds, const DtifParams& params, const EvalParams& eval,
                              const std::function<void(size_t, size_t)>& progress = {});
 
-/// A deliberately false loop for the robustness check: between the two submaps of different
+/// Where the robustness check's false loop goes.
+enum class FalseLoopPair {
+  kFirstLinked,  ///< the robots of the first inter-robot loop, half way through the loops
+  kWeakest,      ///< the robots with the fewest inter-robot loops, with the first loop (with
+                 ///< dropLoopsBetween: the only loop of its pair, which PCM cannot compare
+                 ///< with another)
+};
+
+/// Removes the loops between robots a and b (either way) from `in`.
+void dropLoopsBetween(MergeInput* in, const std::string& a, const std::string& b);
+
+/// A deliberately false loop for the robustness check: between the two submaps of the pair's
 /// robots that are farthest apart (ground truth when present, else odometry), with the pose and
 /// covariance of a typical accepted loop and many inliers. nullopt with fewer than two robots.
-std::optional<Loop> makeFalseLoop(const Dataset& ds, const MergeInput& in);
+std::optional<Loop> makeFalseLoop(const Dataset& ds, const MergeInput& in,
+                                  FalseLoopPair pair = FalseLoopPair::kFirstLinked);
 
 struct MergeRunStats {
   size_t solves = 0;
@@ -48,12 +60,14 @@ struct MergeRunStats {
 
 /// Feeds the submaps and loops into a merger in acquisition order, solving after each submap
 /// that brings a loop (incremental, as online), and once at the end with the landmark
-/// refinement (MapMerger::refine). `false_loop` (optional) is
-/// added with the last loop. Events are appended to *events when given.
+/// refinement (MapMerger::refine). `false_loop` (optional) is added half way through the
+/// loops, or with the first one when `false_loop_first`. Events are appended to *events when
+/// given.
 MapMerger runMerger(const MergeInput& in, const MergeParams& params,
                     const std::optional<Loop>& false_loop = std::nullopt,
                     const std::vector<FieldStem>& stem_map = {},
-                    std::vector<MergeEvent>* events = nullptr, MergeRunStats* stats = nullptr);
+                    std::vector<MergeEvent>* events = nullptr, MergeRunStats* stats = nullptr,
+                    bool false_loop_first = false);
 
 struct TrajectoryScore {
   size_t submaps = 0;
@@ -101,6 +115,7 @@ struct MergeSummary {
   size_t stems = 0;
   MergeRunStats run;
   bool false_loop_injected = false, false_loop_used = false;
+  bool false_loop_added = false;          ///< the merger took it (both submaps known)
   std::optional<MergeScore> score;        ///< with ground truth
   std::optional<MergeScore> score_clean;  ///< with a false loop: the same merge without it
   std::optional<StemMapRegistration> stem_map;

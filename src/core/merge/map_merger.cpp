@@ -190,7 +190,7 @@ struct MapMerger::Impl {
       }
       for (size_t k = 0; k < g.loops.size(); ++k) loops[g.loops[k]].used = keep[k];
     }
-    if (p.pcm) rejectContradictedSingleLoops();
+    if (p.pcm && p.pcm_single_loop_paths) rejectContradictedSingleLoops();
   }
 
   /// The used loops of the robot pair (either order), most recent last.

@@ -44,6 +44,9 @@ struct MergeParams {
   // odometry chains is within pcm_sigmas standard deviations (translation and rotation).
   bool pcm = true;
   double pcm_sigmas = 3.0;
+  /// The only loop of a robot pair must agree with a path through a third robot whose two pairs
+  /// PCM checked (docs/merge.md), else it is rejected. With pcm only.
+  bool pcm_single_loop_paths = true;
   int max_iterations = 30;  ///< Ceres iterations per solve
   /// The linear solver: sparse Cholesky while its factorisation costs at most this many
   /// multiply-subtracts per submap-level pattern (AMD's estimate; x 6^3 flops), conjugate
@@ -97,6 +100,7 @@ struct MergeParams {
     v("robust_loss_scale", robust_loss_scale);
     v("pcm", pcm);
     v("pcm_sigmas", pcm_sigmas);
+    v("pcm_single_loop_paths", pcm_single_loop_paths);
     v("max_iterations", max_iterations);
     v("direct_solver_max_work", direct_solver_max_work);
     v("landmarks", landmarks);
