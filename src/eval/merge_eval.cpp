@@ -179,6 +179,11 @@ MergeInput collectMergeInput(const Dataset& ds, const DtifParams& params, const 
 
 namespace {
 
+bool between(const Loop& l, const std::string& a, const std::string& b) {
+  return (l.query_robot == a && l.candidate_robot == b) ||
+         (l.query_robot == b && l.candidate_robot == a);
+}
+
 /// The two robots (in submap order) with the fewest inter-robot loops between them; ties: the
 /// first pair in that order. Empty with fewer than two robots.
 std::pair<std::string, std::string> weakestPair(const MergeInput& in) {
@@ -192,8 +197,7 @@ std::pair<std::string, std::string> weakestPair(const MergeInput& in) {
     for (size_t j = i + 1; j < robots.size(); ++j) {
       const size_t n =
           static_cast<size_t>(std::count_if(in.loops.begin(), in.loops.end(), [&](const Loop& l) {
-            return (l.query_robot == robots[i] && l.candidate_robot == robots[j]) ||
-                   (l.query_robot == robots[j] && l.candidate_robot == robots[i]);
+            return between(l, robots[i], robots[j]);
           }));
       if (n < fewest) fewest = n, best = {robots[i], robots[j]};
     }
@@ -204,18 +208,15 @@ std::pair<std::string, std::string> weakestPair(const MergeInput& in) {
 }  // namespace
 
 void dropLoopsBetween(MergeInput* in, const std::string& a, const std::string& b) {
-  MergeInput out;
+  std::vector<Loop> loops;
+  std::vector<size_t> after;
   for (size_t k = 0; k < in->loops.size(); ++k) {
-    const Loop& l = in->loops[k];
-    if ((l.query_robot == a && l.candidate_robot == b) ||
-        (l.query_robot == b && l.candidate_robot == a)) {
-      continue;
-    }
-    out.loops.push_back(l);
-    out.loop_after.push_back(in->loop_after[k]);
+    if (between(in->loops[k], a, b)) continue;
+    loops.push_back(in->loops[k]);
+    after.push_back(in->loop_after[k]);
   }
-  in->loops = std::move(out.loops);
-  in->loop_after = std::move(out.loop_after);
+  in->loops = std::move(loops);
+  in->loop_after = std::move(after);
 }
 
 std::optional<Loop> makeFalseLoop(const Dataset& ds, const MergeInput& in, FalseLoopPair pair) {
