@@ -134,6 +134,11 @@ bool TrunkAccumulator::newestMayBeUpdated() const {
          history_.back().updatable;
 }
 
+bool TrunkAccumulator::belowOpenStand(double share, double stable) const {
+  return params_.open_stand_share > 0.0 && share < params_.open_stand_share &&
+         stable < static_cast<double>(params_.open_stand_trunks);
+}
+
 bool TrunkAccumulator::openStandWith(const Stability* extra) const {
   if (!(params_.open_stand_share > 0.0)) return false;
   std::vector<Stability> v(stability_.begin(), stability_.end());
@@ -144,14 +149,12 @@ bool TrunkAccumulator::openStandWith(const Stability* extra) const {
   if (v.empty() || v.size() < static_cast<size_t>(params_.open_stand_min_submaps)) return false;
   std::vector<double> share, stable;
   for (const Stability& s : v) share.push_back(s.share), stable.push_back(s.stable);
-  return median(&share) < params_.open_stand_share &&
-         median(&stable) < static_cast<double>(params_.open_stand_trunks);
+  return belowOpenStand(median(&share), median(&stable));
 }
 
 bool TrunkAccumulator::looksOpen(int stable_own, size_t own) const {
-  return stable_own >= 0 && own > 0 && params_.open_stand_share > 0.0 &&
-         static_cast<double>(stable_own) / static_cast<double>(own) < params_.open_stand_share &&
-         stable_own < params_.open_stand_trunks;
+  return stable_own >= 0 && own > 0 &&
+         belowOpenStand(static_cast<double>(stable_own) / static_cast<double>(own), stable_own);
 }
 
 void TrunkAccumulator::setFrameOfNewest(std::shared_ptr<const Descriptor> frame) {

@@ -159,6 +159,9 @@ class TrunkAccumulator {
   };
   /// Whether the medians of stability_ and `extra` (when given) make an open stand.
   bool openStandWith(const Stability* extra) const;
+  /// Whether a stable share and count are below open_stand_share and open_stand_trunks (and
+  /// the open-stand test is on).
+  bool belowOpenStand(double share, double stable) const;
   /// Whether one submap's stable share and count (stable_own of own trunks) are below the open
   /// stand's thresholds.
   bool looksOpen(int stable_own, size_t own) const;
