@@ -196,9 +196,11 @@ struct MapMerger::Impl {
   /// The used loops of the robot pair (either order), most recent last.
   std::vector<size_t> usedLoops(const std::string& a, const std::string& b) const {
     const auto it = groups.find(a < b ? std::make_pair(a, b) : std::make_pair(b, a));
+    return it == groups.end() ? std::vector<size_t>() : usedLoops(it->second);
+  }
+  std::vector<size_t> usedLoops(const Group& g) const {
     std::vector<size_t> out;
-    if (it == groups.end()) return out;
-    for (size_t k : it->second.loops) {
+    for (size_t k : g.loops) {
       if (loops[k].used) out.push_back(k);
     }
     return out;
@@ -217,7 +219,7 @@ struct MapMerger::Impl {
     std::vector<size_t> rejected;
     for (const auto& [key, g] : groups) {
       if (key.first == key.second) continue;
-      const std::vector<size_t> single = usedLoops(key.first, key.second);
+      const std::vector<size_t> single = usedLoops(g);
       if (single.size() != 1) continue;
       const LoopRec& s = loops[single[0]];
       const std::string& A = nodes[s.a].robot;
