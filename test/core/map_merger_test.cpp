@@ -1,5 +1,5 @@
 // The map merger (core/merge): pose graph on drifting odometry and loops, PCM against a false
-// loop, components and their events, levelling of M.
+// loop, the trunks around a robot pair's only loop, components and their events, levelling of M.
 #include "dtif/core/merge/map_merger.h"
 
 #include <gtest/gtest.h>
@@ -7,6 +7,7 @@
 #include <Eigen/Geometry>
 #include <random>
 
+#include "dtif/core/merge/join_check.h"
 #include "dtif/core/merge/pcm.h"
 #include "test_utils.h"
 
@@ -235,6 +236,95 @@ TEST(MapMerger, TheOnlyLoopOfTwoRobotsIsRejectedWhenPathsThroughAThirdContradict
   ASSERT_TRUE(ok.addLoop(makeLoop(sc, 202, 18, Pose::Identity())));  // c at (10, 40) = a's 18
   ok.solve();
   for (const LoopVerdict& v : ok.loops()) EXPECT_TRUE(v.used) << v.query_id;
+}
+
+/// A stand of trunks around the circuits (one every ~20 m^2, fixed seed) and each submap's
+/// trunks within 12 m of it, in its own frame S; and only the robots' own loops (a and b never
+/// meet in the loops).
+Scenario withTrunksApart(Scenario sc) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-15.0, 55.0), radius(0.1, 0.3);
+  std::vector<Eigen::Vector3d> stand;  // x, y, r in W
+  for (int i = 0; i < 245; ++i) {
+    const double x = u(rng), y = u(rng);
+    stand.emplace_back(x, y, radius(rng));
+  }
+  for (MergeSubmap& s : sc.submaps) {
+    const Pose T_S_W = sc.gt.at(s.id).inverse();
+    for (const Eigen::Vector3d& t : stand) {
+      const Eigen::Vector3d p = T_S_W * Eigen::Vector3d(t.x(), t.y(), 0.0);
+      if (p.head<2>().norm() > 12.0) continue;
+      TrunkLandmark l;
+      l.x = p.x(), l.y = p.y(), l.z = p.z(), l.r = t.z();
+      s.trunks.push_back(l);
+    }
+  }
+  std::vector<Loop> own;
+  for (const Loop& l : sc.loops) {
+    if (l.query_robot == l.candidate_robot) own.push_back(l);
+  }
+  sc.loops = own;
+  return sc;
+}
+
+bool usedLoop(const MapMerger& m, int64_t q, int64_t c) {
+  for (const LoopVerdict& v : m.loops()) {
+    if (v.query_id == q && v.candidate_id == c) return v.used;
+  }
+  ADD_FAILURE() << "no verdict for " << q << " -> " << c;
+  return false;
+}
+
+TEST(JoinCheck, TrunksAgreeOnlyWhereTheyLieOnEachOtherAndWhereBothSidesSaw) {
+  JoinSide a, b;
+  a.origins = {{0.0, 0.0}};
+  b.origins = {{2.0, 0.0}};
+  a.trunks = {{1.0, 1.0}, {-3.0, 2.0}, {30.0, 0.0}};  // the last: beyond b's zone
+  b.trunks = {{1.2, 1.1}, {-3.0, 4.0}};               // the second: 2 m from a's
+  const TrunkAgreement ag = trunkAgreement(a, b, 8.0, 0.5);
+  EXPECT_EQ(ag.compared, 4);  // a's first two, b's two
+  EXPECT_EQ(ag.matched, 2);   // (1, 1) and (1.2, 1.1), each way
+  EXPECT_DOUBLE_EQ(ag.fraction(), 0.5);
+  EXPECT_EQ(trunkAgreement(a, JoinSide{}, 8.0, 0.5).compared, 0);
+}
+
+TEST(MapMerger, TheOnlyLoopOfTwoRobotsIsRejectedWhenTheirTrunksAroundItDisagree) {
+  // a and b, no third robot: PCM cannot compare their one loop with anything.
+  const Scenario sc = withTrunksApart(makeScenario());
+  Loop wrong = makeLoop(sc, 104, 4, Pose::Identity());  // b at (40, 20), a at (20, 0)
+  wrong.T_c_q = test::makePose(3.0, -2.0, 0.0, 0.0, 0.0, 0.4);
+  const Loop right = makeLoop(sc, 110, 18, Pose::Identity());  // both at (30, 40)
+  MapMerger m = merge(sc, {wrong});
+  EXPECT_FALSE(usedLoop(m, 104, 4));
+  EXPECT_NE(m.component("b"), m.component("a"));
+  ASSERT_TRUE(m.addLoop(right));  // a true loop joins them, the false one stays out
+  m.solve();
+  EXPECT_TRUE(usedLoop(m, 110, 18));
+  EXPECT_FALSE(usedLoop(m, 104, 4));
+  EXPECT_EQ(m.component("b"), m.component("a"));
+  EXPECT_LT(mergedAte(m, sc), 0.1);
+
+  // An aliased pattern: b's submap holds a's trunks as the false pose would lay them, so the
+  // two submaps agree; their neighbours do not.
+  Scenario aliased = sc;
+  for (MergeSubmap& s : aliased.submaps) {
+    if (s.id != 104) continue;
+    s.trunks.clear();
+    for (const TrunkLandmark& t : aliased.submaps[4].trunks) {
+      const Eigen::Vector3d p = wrong.T_c_q.inverse() * Eigen::Vector3d(t.x, t.y, t.z);
+      s.trunks.push_back({p.x(), p.y(), p.z(), t.r, true});
+    }
+  }
+  EXPECT_FALSE(usedLoop(merge(aliased, {wrong}), 104, 4));
+
+  // Without the check, or without trunks to compare, the false loop joins b to a.
+  MergeParams off;
+  off.pcm_single_loop_trunks = false;
+  EXPECT_TRUE(usedLoop(merge(sc, {wrong}, off), 104, 4));
+  EXPECT_TRUE(usedLoop(merge(withTrunksApart(makeScenario()), {right}), 110, 18));
+  Scenario bare = sc;
+  for (MergeSubmap& s : bare.submaps) s.trunks.clear();
+  EXPECT_TRUE(usedLoop(merge(bare, {wrong}), 104, 4));
 }
 
 TEST(MapMerger, RobustLossAloneLimitsAFalseLoop) {

@@ -47,6 +47,18 @@ struct MergeParams {
   /// The only loop of a robot pair must agree with a path through a third robot whose two pairs
   /// PCM checked (docs/merge.md), else it is rejected. With pcm only.
   bool pcm_single_loop_paths = true;
+  /// A robot pair's only loop is also rejected when the two robots' trunks around it disagree:
+  /// those of their submaps within single_loop_reach_m (travelled) of the loop's two (which the
+  /// front end matched already, so they are left out), placed by
+  /// odometry and the loop, each within single_loop_zone_m of the other robot's submap origins
+  /// (ground both saw), compared at least single_loop_min_trunks times, of which fewer than
+  /// single_loop_min_agreement had a trunk of the other robot within single_loop_gate_m.
+  bool pcm_single_loop_trunks = true;
+  double single_loop_reach_m = 30.0;  ///< [m]
+  double single_loop_zone_m = 8.0;    ///< [m]
+  double single_loop_gate_m = 0.5;    ///< [m]
+  int single_loop_min_trunks = 40;
+  double single_loop_min_agreement = 0.25;
   int max_iterations = 30;  ///< Ceres iterations per solve
   /// The linear solver: sparse Cholesky while its factorisation costs at most this many
   /// multiply-subtracts per submap-level pattern (AMD's estimate; x 6^3 flops), conjugate
@@ -101,6 +113,12 @@ struct MergeParams {
     v("pcm", pcm);
     v("pcm_sigmas", pcm_sigmas);
     v("pcm_single_loop_paths", pcm_single_loop_paths);
+    v("pcm_single_loop_trunks", pcm_single_loop_trunks);
+    v("single_loop_reach_m", single_loop_reach_m);
+    v("single_loop_zone_m", single_loop_zone_m);
+    v("single_loop_gate_m", single_loop_gate_m);
+    v("single_loop_min_trunks", single_loop_min_trunks);
+    v("single_loop_min_agreement", single_loop_min_agreement);
     v("max_iterations", max_iterations);
     v("direct_solver_max_work", direct_solver_max_work);
     v("landmarks", landmarks);
