@@ -189,7 +189,7 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
 /// kLowInlierWeight (no hypothesis, see isNoHypothesis), else kNone.
 Rejection hypothesisRejection(const PoseEstimate& est, const VerifierParams& params);
 
-/// Whether verifyLoop of this hypothesis searches the lattice (resolveByFit, 10-20 ms in a
+/// Whether verifyLoop of this hypothesis searches the lattice (resolveByFit, 5-20 ms in a
 /// plantation): it passes hypothesisRejection, but its yaw or translation runner-up exceeds
 /// max_ambiguity, and max_fit_ambiguity allows the search.
 bool needsLatticeSearch(const PoseEstimate& est, const VerifierParams& params);
