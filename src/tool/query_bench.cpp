@@ -11,7 +11,7 @@
 //       query times
 //   dtif_query_bench scale DB N...  query time against N entries: all of DB's entries, then
 //       perturbed copies of them (as other surveys of the same places); bytes per entry, save
-//       and load time, resident memory
+//       and load time, resident memory; each query's time on stderr
 //   dtif_query_bench describe EVERY REPEAT DATASET...  descriptor time (extraction + topology +
 //       histograms, describeCloud) of every EVERY-th submap: min and median of REPEAT describes
 //       after one unmeasured describe (which sizes the thread's workspace)
@@ -241,8 +241,12 @@ int scale(const std::string& db, const std::vector<size_t>& sizes) {
     for (const DescPtr& q : queries) {
       dtif::QueryStats qs;
       const double t0 = cpuMs();
-      loops += det.query(*q, &qs).has_value();
+      const bool found = det.query(*q, &qs).has_value();
+      loops += found;
       t.push_back(cpuMs() - t0);
+      std::fprintf(stderr, "query %zu %s/%lld %.3f ms matched %zu loop %d\n", size,
+                   q->robot.c_str(), static_cast<long long>(q->submap_id), t.back(), qs.matched,
+                   static_cast<int>(found));
       screen += qs.screen_ms, match += qs.match_ms, solver += qs.solver_ms;
       verify += qs.verify_ms, matched += static_cast<double>(qs.matched);
     }

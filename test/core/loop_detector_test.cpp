@@ -269,6 +269,11 @@ TEST(LoopDetector, ParamsValidate) {
   p = LoopDetectorParams{};
   p.pose.gnc_factor = 1.0;
   EXPECT_NE(p.validate(), "");
+  p = LoopDetectorParams{};
+  p.database.max_lattice_searches = -1;
+  EXPECT_NE(p.validate().find("max_lattice_searches"), std::string::npos);
+  p.database.max_lattice_searches = 0;  // no limit
+  EXPECT_EQ(p.validate(), "");
 }
 
 /// Two correspondences at most: the triangles give no hypothesis ("few correspondences"). With

@@ -470,7 +470,8 @@ TEST(QueryIndex, QueryKeepsTheBestScoringLoopOfItsCandidates) {
       standViews(test::randomStand(rng, 100, 70, 600), 3),
       standViews(test::plantation(rng, 100, 70, 3.0, 0.15), 4)};
   LoopDetectorParams p;
-  p.database.max_vote_candidates = 3;  // candidates past it are matched without the votes
+  p.database.max_vote_candidates = 3;   // candidates past it are matched without the votes
+  p.database.max_lattice_searches = 0;  // no limit: every candidate as if verified
   size_t loops = 0, several = 0, unverified = 0;
   for (const auto& views : stands) {
     LoopDetector det(p);
@@ -498,6 +499,82 @@ TEST(QueryIndex, QueryKeepsTheBestScoringLoopOfItsCandidates) {
   EXPECT_GE(loops, 12u);
   EXPECT_GT(several, 0u);
   EXPECT_GT(unverified, 0u);
+}
+
+TEST(QueryIndex, LatticeSearchIsNeededExactlyWhenVerificationSearches) {
+  // needsLatticeSearch, which query's search budget counts by, against what verification did:
+  // it reports a fit ambiguity only when it searched the lattice.
+  std::mt19937 rng(41);
+  const std::vector<std::vector<std::shared_ptr<const Descriptor>>> stands{
+      standViews(test::randomStand(rng, 100, 70, 600), 7),
+      standViews(test::plantation(rng, 100, 70, 3.0, 0.15), 8)};
+  size_t searched = 0, not_searched = 0;
+  for (const bool fit : {true, false}) {
+    LoopDetectorParams p;
+    if (!fit) p.verification.max_fit_ambiguity = 0.0;  // ambiguous: rejected, no search
+    for (const auto& views : stands) {
+      for (size_t i = 0; i + 1 < views.size(); ++i) {
+        for (size_t j = i + 1; j < views.size(); j += 3) {
+          PoseEstimate est;
+          Verification ver;
+          matchPair(*views[i], *views[j], p, &est, &ver);
+          const bool needs = needsLatticeSearch(est, p.verification);
+          EXPECT_EQ(needs, ver.fit_ambiguity >= 0.0) << i << " " << j << " " << ver.reason();
+          (needs ? searched : not_searched) += 1;
+        }
+      }
+    }
+  }
+  EXPECT_GT(searched, 5u);  // both cases happened
+  EXPECT_GT(not_searched, 5u);
+}
+
+TEST(QueryIndex, LatticeSearchesStopAtTheBudget) {
+  // A jittered plantation seen from 12 places: with a budget of one lattice search, a query
+  // searches at most once; when it skipped none its loop is the unlimited query's, else the
+  // loop it returns (if any) is a verified loop of that candidate, scoring no higher.
+  std::mt19937 rng(43);
+  const auto views = standViews(test::plantation(rng, 100, 70, 3.0, 0.15), 4);
+  LoopDetectorParams one, free;
+  one.database.max_lattice_searches = 1;
+  free.database.max_lattice_searches = 0;
+  LoopDetector det_one(one), det_free(free);
+  size_t skipped = 0, several = 0, differs = 0;
+  for (const auto& d : views) {
+    QueryStats st, st_free;
+    const std::optional<Loop> got = det_one.query(*d, &st);
+    const std::optional<Loop> all = det_free.query(*d, &st_free);
+    EXPECT_LE(st.lattice_searches, 1u);
+    EXPECT_EQ(st_free.lattice_skipped, 0u);
+    skipped += st.lattice_skipped;
+    several += st_free.lattice_searches > 1;
+    if (st.lattice_skipped == 0) {
+      ASSERT_EQ(got.has_value(), all.has_value()) << d->submap_id;
+      if (got) {
+        EXPECT_EQ(got->candidate_id, all->candidate_id);
+        EXPECT_EQ(got->score, all->score);
+      }
+    } else if (got) {
+      ASSERT_TRUE(all.has_value()) << d->submap_id;
+      EXPECT_LE(got->score, all->score);
+      const auto it =
+          std::find_if(det_one.entries().begin(), det_one.entries().end(),
+                       [&](const auto& e) { return e->submap_id == got->candidate_id; });
+      ASSERT_NE(it, det_one.entries().end());
+      const std::optional<Loop> alone = matchPair(*d, **it, one);
+      ASSERT_TRUE(alone.has_value());
+      EXPECT_EQ(alone->score, got->score);
+    }
+    differs += got.has_value() != all.has_value() ||
+               (got && all && got->candidate_id != all->candidate_id);
+    det_one.insert(d);
+    det_free.insert(d);
+  }
+  // The cases under test happened: queries that searched more than once without a limit,
+  // and searches the budget skipped.
+  EXPECT_GT(several, 0u);
+  EXPECT_GT(skipped, 0u);
+  RecordProperty("queries_with_another_loop", static_cast<int>(differs));
 }
 
 }  // namespace

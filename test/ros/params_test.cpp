@@ -62,11 +62,12 @@ void flatten(const YAML::Node& n, const std::string& prefix, std::vector<std::st
 
 TEST(StrictParams, DeclaredKeysComeFromVisit) {
   const auto keys = declaredKeys<DatabaseParams>("database");
-  ASSERT_EQ(keys.size(), 4u);
+  ASSERT_EQ(keys.size(), 5u);
   EXPECT_EQ(keys[0], "database/exclude_recent_s");
   EXPECT_EQ(keys[1], "database/max_candidates");
   EXPECT_EQ(keys[2], "database/max_vote_candidates");
   EXPECT_EQ(keys[3], "database/inter_robot_verifications");
+  EXPECT_EQ(keys[4], "database/max_lattice_searches");
 }
 
 TEST(StrictParams, UnknownKeyUnderTheNamespaceIsReported) {

@@ -178,7 +178,8 @@ struct BestLoops {
 /// those whose bound cannot beat the best loop found are not verified at all. While the best
 /// loop is with q's own robot, other robots' hypotheses past that point are verified on, at
 /// most `extra_budget` of them, for the best inter-robot loop as well; the best loop stays the
-/// same.
+/// same. At most database.max_lattice_searches verifications search the lattice; hypotheses
+/// that would search it beyond that are skipped like rejected ones.
 BestLoops verifyBest(const Descriptor& q, const std::vector<const Descriptor*>& cands,
                      const std::vector<Hypothesis>& hyps, const LoopDetectorParams& params,
                      int extra_budget, QueryStats* stats) {
@@ -191,7 +192,9 @@ BestLoops verifyBest(const Descriptor& q, const std::vector<const Descriptor*>& 
     return a.first > b.first || (a.first == b.first && a.second < b.second);
   });
   BestLoops out;
-  size_t best_rank = 0, inter_rank = 0, attempted = 0;
+  size_t best_rank = 0, inter_rank = 0, attempted = 0, skipped = 0;
+  const int max_searches = params.database.max_lattice_searches;
+  int64_t lattice_budget = max_searches > 0 ? max_searches : -1;
   for (const auto& [bound, rank] : order) {
     const bool other_robot = cands[rank]->robot != q.robot;
     const bool for_best = canBeat(bound, rank, out.best, best_rank);
@@ -203,6 +206,14 @@ BestLoops verifyBest(const Descriptor& q, const std::vector<const Descriptor*>& 
         break;
       if (!other_robot) continue;
       --extra_budget;
+    }
+    if (needsLatticeSearch(hyps[rank].est, params.verification)) {
+      if (lattice_budget == 0) {
+        ++skipped;
+        continue;
+      }
+      --lattice_budget;  // a negative budget (no limit) never reaches 0
+      if (stats) ++stats->lattice_searches;
     }
     ++attempted;
     const Verification ver = verifyHypothesis(q, *cands[rank], hyps[rank], params, stats);
@@ -224,7 +235,10 @@ BestLoops verifyBest(const Descriptor& q, const std::vector<const Descriptor*>& 
       inter_rank = rank;
     }
   }
-  if (stats) stats->unverified += order.size() - attempted;
+  if (stats) {
+    stats->unverified += order.size() - attempted - skipped;
+    stats->lattice_skipped += skipped;
+  }
   if (!out.best || out.best->candidate_robot != q.robot) out.inter_robot.reset();
   return out;
 }
@@ -258,6 +272,7 @@ std::string DatabaseParams::validate() const {
   if (max_candidates < 1) err << "max_candidates must be >= 1; ";
   if (max_vote_candidates < 0) err << "max_vote_candidates must be >= 0; ";
   if (inter_robot_verifications < 0) err << "inter_robot_verifications must be >= 0; ";
+  if (max_lattice_searches < 0) err << "max_lattice_searches must be >= 0 (0: no limit); ";
   return err.str();
 }
 

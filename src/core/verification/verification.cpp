@@ -110,6 +110,15 @@ std::vector<std::pair<int, int>> mutualPairs(const std::vector<P2>& pq, const st
   return out;
 }
 
+/// Repetitive stands (plantation grids) support several poses almost equally; a loop is only
+/// trusted when the chosen hypothesis clearly dominates the runner-up in yaw and translation.
+double hypothesisAmbiguity(const PoseEstimate& est) {
+  const double amb_yaw = est.yaw_consensus > 0 ? est.yaw_runner_up / est.yaw_consensus : 1.0;
+  const double amb_t =
+      est.translation_consensus > 0 ? est.translation_runner_up / est.translation_consensus : 1.0;
+  return std::max(amb_yaw, amb_t);
+}
+
 /// Rejects on the solver's hypothesis alone (pose, inliers, weight, and ambiguity the lattice
 /// fit cannot resolve). Otherwise sets v->ambiguity (and fit_ambiguity) and T_hyp, the pose to
 /// refine: the solver's, or the lattice fit's when the stand is repetitive.
@@ -118,12 +127,7 @@ Rejection checkHypothesis(const Descriptor& q, const Descriptor& c, const PoseEs
   const Rejection none = hypothesisRejection(est, params);
   if (none != Rejection::kNone) return none;
 
-  // Repetitive stands (plantation grids) support several poses almost equally; a loop is only
-  // trusted when the chosen hypothesis clearly dominates the runner-up in yaw and translation.
-  const double amb_yaw = est.yaw_consensus > 0 ? est.yaw_runner_up / est.yaw_consensus : 1.0;
-  const double amb_t =
-      est.translation_consensus > 0 ? est.translation_runner_up / est.translation_consensus : 1.0;
-  v->ambiguity = std::max(amb_yaw, amb_t);
+  v->ambiguity = hypothesisAmbiguity(est);
   *T_hyp = est.T_c_q;
   if (v->ambiguity > params.max_ambiguity) {
     // The correspondences alone cannot tell the lattice sites apart; the fit of all trunks can
@@ -286,6 +290,11 @@ Rejection hypothesisRejection(const PoseEstimate& est, const VerifierParams& par
   }
   if (est.inlier_weight < params.min_inlier_weight) return Rejection::kLowInlierWeight;
   return Rejection::kNone;
+}
+
+bool needsLatticeSearch(const PoseEstimate& est, const VerifierParams& params) {
+  return hypothesisRejection(est, params) == Rejection::kNone &&
+         hypothesisAmbiguity(est) > params.max_ambiguity && params.max_fit_ambiguity > 0.0;
 }
 
 double inlierWeightShare(const std::vector<Correspondence>& corrs, const PoseEstimate& est) {

@@ -33,6 +33,12 @@ struct DatabaseParams {
   /// such loops to join robots, and a robot that walks its own earlier path beside another's
   /// may otherwise never report one. 0: off. The evaluation protocol scores the best loop only.
   int inter_robot_verifications = 2;
+  /// At most this many of a query's verifications may search the lattice (an ambiguous
+  /// hypothesis in a repetitive stand, VerifierParams::max_fit_ambiguity; 5-20 ms each); a
+  /// further hypothesis that would need one is left unverified. A plantation query whose best
+  /// loop scores low otherwise searches for every candidate (25 searches, ~0.2 s); the replayed
+  /// protocol's best loops needed at most 7 (plantation, seeds 1-3). 0: no limit.
+  int max_lattice_searches = 8;
 
   std::string validate() const;
 
@@ -42,6 +48,7 @@ struct DatabaseParams {
     v("max_candidates", max_candidates);
     v("max_vote_candidates", max_vote_candidates);
     v("inter_robot_verifications", inter_robot_verifications);
+    v("max_lattice_searches", max_lattice_searches);
   }
 };
 
@@ -99,6 +106,9 @@ struct QueryStats {
   /// Hypotheses query left unverified: their score bound could not beat the loop it found.
   size_t unverified = 0;
   size_t inter_robot_verified = 0;  ///< of verified: verified only to find an inter-robot loop
+  size_t lattice_searches = 0;      ///< verifications that searched the lattice
+  /// Hypotheses left unverified as they would search the lattice beyond max_lattice_searches.
+  size_t lattice_skipped = 0;
   std::vector<int64_t> candidates;  ///< submap ids of the screened candidates, best first
 };
 

@@ -189,6 +189,11 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
 /// kLowInlierWeight (no hypothesis, see isNoHypothesis), else kNone.
 Rejection hypothesisRejection(const PoseEstimate& est, const VerifierParams& params);
 
+/// Whether verifyLoop of this hypothesis searches the lattice (resolveByFit, 5-20 ms in a
+/// plantation): it passes hypothesisRejection, but its yaw or translation runner-up exceeds
+/// max_ambiguity, and max_fit_ambiguity allows the search.
+bool needsLatticeSearch(const PoseEstimate& est, const VerifierParams& params);
+
 /// The inlier weight share of a hypothesis, sum of omega_k over I_T / over all corrs (0 for
 /// none). An accepted loop scores covisible_ratio (at most 1) times it, so it bounds the score
 /// before verification: LoopDetector::query verifies no candidate that cannot beat its best.
