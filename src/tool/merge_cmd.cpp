@@ -145,9 +145,9 @@ int runMerge(const MergeArgs& a) {
     const StemSliceStats& q = *sum.stem_slices;
     std::cout << std::setprecision(0) << "stem DBH from the points: " << q.refitted << " of "
               << q.stems << " stems refitted (kept the median: " << q.too_few << " too few points, "
-              << q.one_sided << " one-sided, " << q.no_fit << " no fit), " << q.points
-              << " slice points from " << q.submap_views << " stem views, " << sum.stem_slices_ms
-              << " ms\n";
+              << q.one_sided << " one-sided, " << q.shrunk << " well inside it, " << q.no_fit
+              << " no fit), " << q.points << " slice points from " << q.submap_views
+              << " stem views, " << sum.stem_slices_ms << " ms\n";
   }
   if (sum.score) std::cout << formatMergeTable(*sum.score);
   if (false_loop) {

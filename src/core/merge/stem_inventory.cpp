@@ -381,6 +381,8 @@ std::string StemFusionParams::validate() const {
   if (slice_min_submaps < 1) e << "stems.slice_min_submaps must be >= 1; ";
   if (!(slice_min_arc_deg >= 0 && slice_min_arc_deg <= 360))
     e << "stems.slice_min_arc_deg must be in [0, 360]; ";
+  if (!(slice_max_shrink >= 0 && slice_max_shrink <= 1))
+    e << "stems.slice_max_shrink must be in [0, 1]; ";
   if (!(slice_inlier_m > 0 && slice_inlier_m <= 0.5))
     e << "stems.slice_inlier_m must be in (0, 0.5]; ";
   return e.str();

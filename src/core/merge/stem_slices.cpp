@@ -32,7 +32,8 @@ SliceFit fitStemSlice(const std::vector<Eigen::Vector2d>& xy, double x0, double 
   if (!f.ok || std::hypot(f.cx - x0, f.cy - y0) > params.slice_margin_m) return out;
   out.cx = f.cx, out.cy = f.cy, out.r = f.r, out.arc_deg = f.arc_deg;
   out.one_sided = f.arc_deg < params.slice_min_arc_deg;
-  out.ok = !out.one_sided;
+  out.shrunk = !out.one_sided && f.r < (1.0 - params.slice_max_shrink) * r0;
+  out.ok = !out.one_sided && !out.shrunk;
   return out;
 }
 
@@ -97,7 +98,7 @@ std::vector<MergedStem> StemSlices::refit(StemSliceStats* stats) const {
     for (const Eigen::Vector2f& q : sl.xy) xy.push_back(q.cast<double>());
     const SliceFit f = fitStemSlice(xy, 0.0, 0.0, seedRadius(stems_[k]), p_);
     if (!f.ok) {
-      ++(f.one_sided ? st.one_sided : st.no_fit);
+      ++(f.one_sided ? st.one_sided : f.shrunk ? st.shrunk : st.no_fit);
       continue;
     }
     out[k].dbh = 2.0 * f.r;

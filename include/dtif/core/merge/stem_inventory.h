@@ -48,6 +48,11 @@ struct StemFusionParams {
   int slice_min_submaps = 2;              ///< fewer contributing submaps: the median stays
   double slice_min_arc_deg = 240.0;       ///< narrower pooled inlier arc: the median stays [deg]
   double slice_inlier_m = 0.04;           ///< circle inlier distance (Tukey: twice this) [m]
+  /// A pooled circle smaller than the observations' median radius by more than this fraction
+  /// of it: the median stays. Each submap's own fit is biased small by the range noise, not
+  /// large, so a pooled circle well inside them means the submaps' arcs do not line up (poses
+  /// centimetres off: the fit takes the inner envelope of the offset arcs) [0..1]
+  double slice_max_shrink = 0.1;
   std::string validate() const;
 
   template <class V>
@@ -70,6 +75,7 @@ struct StemFusionParams {
     v("slice_min_submaps", slice_min_submaps);
     v("slice_min_arc_deg", slice_min_arc_deg);
     v("slice_inlier_m", slice_inlier_m);
+    v("slice_max_shrink", slice_max_shrink);
   }
 };
 
