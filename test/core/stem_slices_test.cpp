@@ -176,6 +176,34 @@ TEST(StemSlices, TooFewSubmapsOrAnotherComponentKeepTheMedian) {
   for (const Eigen::Vector2f& q : slices.slice(0)) EXPECT_LT(q.norm(), 0.5 * 0.18 + 0.15 + 1e-6);
 }
 
+TEST(StemSlices, SubmapsOffByTheirPosesKeepTheMedian) {
+  // Each submap placed 6 cm towards the stem (poses off, as on very_sparse): their arcs overlap
+  // inside the stem, and the pooled fit takes that inner envelope, too small.
+  const Stem s;
+  std::mt19937 rng(8);
+  std::vector<View> views;
+  std::vector<double> radii;
+  for (double b : allRound(6)) {
+    views.push_back(scan(s, b, 5.0, &rng));
+    radii.push_back(oneSidedRadius(views.back()));
+    views.back().T_M_S.pretranslate(-0.06 * Eigen::Vector3d(std::cos(b), std::sin(b), 0.0));
+  }
+  const double r_median = median(radii);
+  StemFusionParams off;
+  off.slice_max_shrink = 1.0;
+  StemSlices unchecked({inventoryEntry(s, 2.0 * r_median)}, off);
+  StemSlices checked({inventoryEntry(s, 2.0 * r_median)}, StemFusionParams{});
+  for (const View& v : views) {
+    unchecked.addSubmap(0, v.T_M_S, v.cloud);
+    checked.addSubmap(0, v.T_M_S, v.cloud);
+  }
+  StemSliceStats st;
+  EXPECT_LT(0.5 * unchecked.refit(&st).at(0).dbh, 0.9 * r_median);
+  EXPECT_EQ(st.refitted, 1u);
+  EXPECT_DOUBLE_EQ(checked.refit(&st).at(0).dbh, 2.0 * r_median);
+  EXPECT_EQ(st.shrunk, 1u);
+}
+
 TEST(StemSlices, PlotCoordinatesKeepMillimetres) {
   // A map registered to a field stem map can sit 500 km from its origin (UTM): floats there
   // would round to 3 cm.
@@ -208,6 +236,9 @@ TEST(StemSlices, ParamsValidated) {
   p = StemFusionParams{};
   p.slice_min_arc_deg = 400;
   EXPECT_NE(p.validate().find("slice_min_arc_deg"), std::string::npos);
+  p = StemFusionParams{};
+  p.slice_max_shrink = -0.1;
+  EXPECT_NE(p.validate().find("slice_max_shrink"), std::string::npos);
   p = StemFusionParams{};
   p.slice_inlier_m = 0.0;
   EXPECT_NE(p.validate().find("slice_inlier_m"), std::string::npos);
