@@ -149,6 +149,20 @@ StemScore scoreStems(const Dataset& ds, const std::vector<MergedStem>& stems,
 
 }  // namespace
 
+std::vector<MergedStem> refitStemDbh(const Dataset& ds, const std::vector<MergedPose>& poses,
+                                     const std::vector<MergedStem>& stems,
+                                     const StemFusionParams& params, StemSliceStats* stats) {
+  std::map<int64_t, const MergedPose*> pose_of;
+  for (const MergedPose& p : poses) pose_of[p.id] = &p;
+  StemSlices slices(stems, params);
+  for (const SubmapRecord& rec : ds.submaps) {  // one cloud in memory at a time
+    auto it = pose_of.find(rec.id);
+    if (it == pose_of.end()) continue;
+    slices.addSubmap(it->second->component, it->second->T_M_S, *loadSubmapCloud(ds, rec));
+  }
+  return slices.refit(stats);
+}
+
 MergeInput collectMergeInput(const Dataset& ds, const DtifParams& params, const EvalParams& eval,
                              const std::function<void(size_t, size_t)>& progress) {
   MergeInput in;
@@ -429,6 +443,14 @@ void writeMergeSummaryJson(const std::string& path, const MergeSummary& s) {
   j["landmark_refinement_ms"] = s.run.refine_ms;
   j["landmarks"] = s.run.last.landmarks;
   j["landmark_observations"] = s.run.last.landmark_observations;
+  if (s.stem_slices) {
+    const StemSliceStats& q = *s.stem_slices;
+    j["stem_dbh_from_points"] = {{"stems", q.stems},      {"refitted", q.refitted},
+                                 {"too_few", q.too_few},  {"one_sided", q.one_sided},
+                                 {"no_fit", q.no_fit},    {"shrunk", q.shrunk},
+                                 {"points", q.points},    {"submap_views", q.submap_views},
+                                 {"ms", s.stem_slices_ms}};
+  }
   j["false_loop_injected"] = s.false_loop_injected;
   if (s.false_loop_injected) {
     j["false_loop_used"] = s.false_loop_used;

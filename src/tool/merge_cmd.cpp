@@ -3,6 +3,7 @@
 // Eval's sequential loop closure, then the map merger (core/merge): DATASET.md's "Merged map"
 // (merged_poses.csv, merged_stems.csv, summary.json) plus the pose graph (pose_graph.g2o) and
 // the component events (events.txt); scored against the ground truth when it exists.
+#include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
@@ -96,7 +97,15 @@ int runMerge(const MergeArgs& a) {
   for (const std::string& r : merger.robots()) sum.robot_component[r] = merger.component(r);
   sum.robots = sum.robot_component.size();
   const std::vector<MergedPose> poses = merger.poses();
-  const std::vector<MergedStem> stems = merger.stems();
+  std::vector<MergedStem> stems = merger.stems();
+  if (mp.stems.dbh_from_points) {
+    const auto t0 = std::chrono::steady_clock::now();
+    StemSliceStats st;
+    stems = refitStemDbh(ds, poses, stems, mp.stems, &st);
+    sum.stem_slices = st;
+    sum.stem_slices_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  }
   sum.stems = stems.size();
   if (!field.empty()) {
     sum.stem_map = merger.stemMapRegistration();
@@ -132,6 +141,14 @@ int runMerge(const MergeArgs& a) {
             << (sum.run.solves ? sum.run.solve_ms_total / sum.run.solves : 0.0) << " ms, max "
             << sum.run.solve_ms_max << " ms (" << sum.run.iterative_solves
             << " with conjugate gradients: the factor would be dense)\n";
+  if (sum.stem_slices) {
+    const StemSliceStats& q = *sum.stem_slices;
+    std::cout << std::setprecision(0) << "stem DBH from the points: " << q.refitted << " of "
+              << q.stems << " stems refitted (kept the median: " << q.too_few << " too few points, "
+              << q.one_sided << " one-sided, " << q.shrunk << " well inside it, " << q.no_fit
+              << " no fit), " << q.points << " slice points from " << q.submap_views
+              << " stem views, " << sum.stem_slices_ms << " ms\n";
+  }
   if (sum.score) std::cout << formatMergeTable(*sum.score);
   if (false_loop) {
     std::cout << "false loop " << false_loop->query_robot << "/" << false_loop->query_id << " -> "

@@ -82,6 +82,10 @@ TEST(MergeCmd, WritesTheMergedMapAndScoresIt) {
   EXPECT_LE(stems.at("mean_pos_err_m").get<double>(), 0.10);
   EXPECT_LE(stems.at("median_dbh_err_m").get<double>(), 0.02);
   EXPECT_LE(stems.at("duplicate_rate").get<double>(), 0.02);
+  // The DBH from the pooled slices: most of the inventory refitted (tiny seed 1: 53 of 89).
+  const auto& slices = j.at("stem_dbh_from_points");
+  EXPECT_GT(slices.at("refitted").get<int>(), j.at("stems").get<int>() / 2);
+  EXPECT_NE(r.out.find("stem DBH from the points"), std::string::npos);
   EXPECT_NE(r.out.find("odometry-only ATE"), std::string::npos);
   EXPECT_NE(r.out.find("rejected"), std::string::npos);
 }

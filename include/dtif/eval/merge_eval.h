@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "dtif/core/merge/map_merger.h"
+#include "dtif/core/merge/stem_slices.h"
 #include "dtif/eval/evaluation.h"
 #include "dtif/io/dataset.h"
 
@@ -69,6 +70,14 @@ MapMerger runMerger(const MergeInput& in, const MergeParams& params,
                     std::vector<MergeEvent>* events = nullptr, MergeRunStats* stats = nullptr,
                     bool false_loop_first = false);
 
+/// The inventory's DBH from the points (StemSlices, StemFusionParams::dbh_from_points): a
+/// second pass over the dataset's submap clouds, one at a time, each placed by its merged pose.
+/// Submaps without a pose are skipped. Throws DatasetError (an unreadable cloud).
+std::vector<MergedStem> refitStemDbh(const Dataset& ds, const std::vector<MergedPose>& poses,
+                                     const std::vector<MergedStem>& stems,
+                                     const StemFusionParams& params,
+                                     StemSliceStats* stats = nullptr);
+
 struct TrajectoryScore {
   size_t submaps = 0;
   double ate_m = 0.0;        ///< RMS position residual after the alignment [m]
@@ -113,6 +122,8 @@ struct MergeSummary {
   size_t loops_used = 0, loops_rejected = 0;  ///< by the back end (PCM)
   size_t inter_robot_used = 0, inter_robot_rejected = 0;
   size_t stems = 0;
+  std::optional<StemSliceStats> stem_slices;  ///< when the DBH came from the points
+  double stem_slices_ms = 0.0;                ///< that second pass over the clouds [ms]
   MergeRunStats run;
   bool false_loop_injected = false, false_loop_used = false;
   bool false_loop_added = false;          ///< the merger took it (both submaps known)

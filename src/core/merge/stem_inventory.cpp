@@ -372,6 +372,19 @@ std::string StemFusionParams::validate() const {
     e << "stems.terrain_radius_m must be in [0, 1000]; ";
   if (taper_min_pairs < 0) e << "stems.taper_min_pairs must be >= 0; ";
   if (!(overlap_margin_m <= 1.0)) e << "stems.overlap_margin_m must be <= 1 (< 0: off); ";
+  if (!(slice_min_h_m >= 0 && slice_max_h_m > slice_min_h_m && slice_max_h_m <= 5))
+    e << "stems.slice_min_h_m must be >= 0 and < slice_max_h_m <= 5; ";
+  if (!(slice_margin_m >= 0 && slice_margin_m <= 1))
+    e << "stems.slice_margin_m must be in [0, 1]; ";
+  if (slice_max_points_per_submap < 1) e << "stems.slice_max_points_per_submap must be >= 1; ";
+  if (slice_min_points < 3) e << "stems.slice_min_points must be >= 3; ";
+  if (slice_min_submaps < 1) e << "stems.slice_min_submaps must be >= 1; ";
+  if (!(slice_min_arc_deg >= 0 && slice_min_arc_deg <= 360))
+    e << "stems.slice_min_arc_deg must be in [0, 360]; ";
+  if (!(slice_max_shrink >= 0 && slice_max_shrink <= 1))
+    e << "stems.slice_max_shrink must be in [0, 1]; ";
+  if (!(slice_inlier_m > 0 && slice_inlier_m <= 0.5))
+    e << "stems.slice_inlier_m must be in (0, 0.5]; ";
   return e.str();
 }
 

@@ -34,6 +34,25 @@ struct StemFusionParams {
   /// as many submaps is dropped (two trunks cannot overlap: a second fit of the same stem);
   /// < 0: never [m].
   double overlap_margin_m = 0.1;
+  /// DBH from the points (StemSlices; `dtif merge`, which reads the submap clouds again): each
+  /// stem's slice slice_min_h_m..slice_max_h_m above its base, within r + slice_margin_m of its
+  /// centre, pooled from every submap placed by the merged poses, one robust circle fitted. A
+  /// stem seen from several sides loses the one-sided fits' range-noise bias. Where the slice
+  /// is too thin or one-sided the observations' median stays.
+  bool dbh_from_points = true;
+  double slice_min_h_m = 1.1;             ///< slice's lower edge above the stem's base [m]
+  double slice_max_h_m = 1.5;             ///< slice's upper edge above the stem's base [m]
+  double slice_margin_m = 0.15;           ///< gathered within r + this of the centre [m]
+  int slice_max_points_per_submap = 256;  ///< per stem and submap, evenly strided [points]
+  int slice_min_points = 50;              ///< fewer pooled points: the median stays [points]
+  int slice_min_submaps = 2;              ///< fewer contributing submaps: the median stays
+  double slice_min_arc_deg = 240.0;       ///< narrower pooled inlier arc: the median stays [deg]
+  double slice_inlier_m = 0.04;           ///< circle inlier distance (Tukey: twice this) [m]
+  /// A pooled circle smaller than the observations' median radius by more than this fraction
+  /// of it: the median stays. Each submap's own fit is biased small by the range noise, not
+  /// large, so a pooled circle well inside them means the submaps' arcs do not line up (poses
+  /// centimetres off: the fit takes the inner envelope of the offset arcs) [0..1]
+  double slice_max_shrink = 0.1;
   std::string validate() const;
 
   template <class V>
@@ -47,6 +66,16 @@ struct StemFusionParams {
     v("terrain_radius_m", terrain_radius_m);
     v("taper_min_pairs", taper_min_pairs);
     v("overlap_margin_m", overlap_margin_m);
+    v("dbh_from_points", dbh_from_points);
+    v("slice_min_h_m", slice_min_h_m);
+    v("slice_max_h_m", slice_max_h_m);
+    v("slice_margin_m", slice_margin_m);
+    v("slice_max_points_per_submap", slice_max_points_per_submap);
+    v("slice_min_points", slice_min_points);
+    v("slice_min_submaps", slice_min_submaps);
+    v("slice_min_arc_deg", slice_min_arc_deg);
+    v("slice_inlier_m", slice_inlier_m);
+    v("slice_max_shrink", slice_max_shrink);
   }
 };
 
@@ -64,9 +93,9 @@ struct MergedStem {
   int64_t stem_id = -1;  ///< 0.. in output order
   int component = 0;
   double x = 0.0, y = 0.0, z_base = 0.0;  ///< median of the observations [m]
-  double dbh = 0.0;                       ///< 2 x median radius [m]
-  int observations = 0;                   ///< contributing submaps
-  std::string field_id;                   ///< the field stem map's tree id when matched
+  double dbh = 0.0;      ///< 2 x median radius, or 2 x the pooled slice's radius (StemSlices) [m]
+  int observations = 0;  ///< contributing submaps
+  std::string field_id;  ///< the field stem map's tree id when matched
 };
 
 /// Clusters observations per component (greedy, nearest cluster centre within the radius and

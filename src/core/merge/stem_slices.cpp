@@ -1,0 +1,111 @@
+#include "dtif/core/merge/stem_slices.h"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+
+#include "dtif/core/cells.h"
+#include "dtif/core/extraction/trunk_extractor.h"
+
+namespace dtif {
+namespace {
+
+constexpr double kMinRadiusM = 0.01;  // a seed radius below this is taken as this [m]
+constexpr double kCellM = 1.0;        // stem lookup grid [m]
+
+double seedRadius(const MergedStem& s) { return std::max(0.5 * s.dbh, kMinRadiusM); }
+
+}  // namespace
+
+SliceFit fitStemSlice(const std::vector<Eigen::Vector2d>& xy, double x0, double y0, double r0,
+                      const StemFusionParams& params) {
+  SliceFit out;
+  r0 = std::max(r0, kMinRadiusM);
+  CircleFitParams cp;
+  cp.inlier_m = params.slice_inlier_m;
+  // The inventory's radius can be half the true one (fits up the stem where the base was a
+  // guess), but a circle farther off it, or centred beyond the margin, is a neighbour, a branch
+  // or a shrub in the slice.
+  cp.min_radius_m = 0.5 * r0;
+  cp.max_radius_m = 2.0 * r0 + 0.05;
+  const CircleFit f = fitCircleRobust(xy, cp);
+  if (!f.ok || std::hypot(f.cx - x0, f.cy - y0) > params.slice_margin_m) return out;
+  out.cx = f.cx, out.cy = f.cy, out.r = f.r, out.arc_deg = f.arc_deg;
+  out.one_sided = f.arc_deg < params.slice_min_arc_deg;
+  out.shrunk = !out.one_sided && f.r < (1.0 - params.slice_max_shrink) * r0;
+  out.ok = !out.one_sided && !out.shrunk;
+  return out;
+}
+
+StemSlices::StemSlices(const std::vector<MergedStem>& stems, const StemFusionParams& params)
+    : stems_(stems), p_(params), slices_(stems.size()) {
+  auto cell = [&](double v) { return cellIndex(v / kCellM); };
+  for (size_t k = 0; k < stems_.size(); ++k) {
+    const MergedStem& s = stems_[k];
+    if (!std::isfinite(s.x) || !std::isfinite(s.y) || !std::isfinite(s.z_base)) continue;
+    const double reach = seedRadius(s) + p_.slice_margin_m;
+    for (int64_t ix = cell(s.x - reach); ix <= cell(s.x + reach); ++ix) {
+      for (int64_t iy = cell(s.y - reach); iy <= cell(s.y + reach); ++iy)
+        grid_[packCell(ix, iy)].push_back(k);
+    }
+  }
+}
+
+void StemSlices::addSubmap(int component, const Pose& T_M_S, const Cloud& cloud_S) {
+  if (grid_.empty()) return;
+  const Eigen::Matrix3d R = T_M_S.linear();
+  const Eigen::Vector3d t = T_M_S.translation();
+  std::map<size_t, std::vector<Eigen::Vector2f>> found;  // stem -> points, relative to its centre
+  for (const pcl::PointXYZ& pt : cloud_S.points) {
+    if (!std::isfinite(pt.x) || !std::isfinite(pt.y) || !std::isfinite(pt.z)) continue;
+    const Eigen::Vector3d q = R * Eigen::Vector3d(pt.x, pt.y, pt.z) + t;
+    auto it = grid_.find(packCell(cellIndex(q.x() / kCellM), cellIndex(q.y() / kCellM)));
+    if (it == grid_.end()) continue;
+    for (size_t k : it->second) {
+      const MergedStem& s = stems_[k];
+      const double h = q.z() - s.z_base;
+      if (s.component != component || h < p_.slice_min_h_m || h > p_.slice_max_h_m) continue;
+      // Relative to the centre: floats keep millimetres even in plot coordinates.
+      const double dx = q.x() - s.x, dy = q.y() - s.y;
+      if (std::hypot(dx, dy) <= seedRadius(s) + p_.slice_margin_m)
+        found[k].emplace_back(static_cast<float>(dx), static_cast<float>(dy));
+    }
+  }
+  const size_t cap = static_cast<size_t>(p_.slice_max_points_per_submap);
+  for (const auto& [k, pts] : found) {
+    Slice& sl = slices_[k];
+    const size_t n = std::min(cap, pts.size());
+    for (size_t j = 0; j < n; ++j) sl.xy.push_back(pts[j * pts.size() / n]);
+    ++sl.submaps;
+  }
+}
+
+std::vector<MergedStem> StemSlices::refit(StemSliceStats* stats) const {
+  StemSliceStats st;
+  st.stems = stems_.size();
+  std::vector<MergedStem> out = stems_;
+  for (size_t k = 0; k < stems_.size(); ++k) {
+    const Slice& sl = slices_[k];
+    st.points += sl.xy.size();
+    st.submap_views += static_cast<size_t>(sl.submaps);
+    if (sl.xy.size() < static_cast<size_t>(p_.slice_min_points) ||
+        sl.submaps < p_.slice_min_submaps) {
+      ++st.too_few;
+      continue;
+    }
+    std::vector<Eigen::Vector2d> xy;
+    xy.reserve(sl.xy.size());
+    for (const Eigen::Vector2f& q : sl.xy) xy.push_back(q.cast<double>());
+    const SliceFit f = fitStemSlice(xy, 0.0, 0.0, seedRadius(stems_[k]), p_);
+    if (!f.ok) {
+      ++(f.one_sided ? st.one_sided : f.shrunk ? st.shrunk : st.no_fit);
+      continue;
+    }
+    out[k].dbh = 2.0 * f.r;
+    ++st.refitted;
+  }
+  if (stats) *stats = st;
+  return out;
+}
+
+}  // namespace dtif
