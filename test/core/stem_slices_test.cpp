@@ -10,6 +10,7 @@
 #include <random>
 
 #include "dtif/core/extraction/trunk_extractor.h"
+#include "dtif/core/merge/slice_store.h"
 
 namespace dtif {
 namespace {
@@ -308,6 +309,47 @@ TEST(KeepSliceCandidates, CappedPerTrunkAndEmptyInputs) {
             100u);
   EXPECT_TRUE(keepSliceCandidates(v.cloud, {}, Eigen::Matrix3d::Identity(), p)->empty());
   EXPECT_TRUE(keepSliceCandidates(Cloud(), own, Eigen::Matrix3d::Identity(), p)->empty());
+}
+
+TEST(SlicePointStore, KeepsTheSlicesOfArrivingCloudsForTheRefit) {
+  const Stem s;
+  std::mt19937 rng(12);
+  StemFusionParams p;
+  p.slice_keep_max_points = 10000;
+  const MergedStem m = inventoryEntry(s, 0.19);
+  SlicePointStore store(p);
+  StemSlices whole({m}, p);
+  std::vector<MergedPose> poses;
+  size_t all_points = 0;
+  EXPECT_FALSE(store.addCloud(0, Cloud()));  // no trunks yet: nothing kept
+  for (double b : allRound(6)) {
+    const View v = scan(s, b, 5.0, &rng);
+    const int64_t id = static_cast<int64_t>(poses.size());
+    store.addTrunks(id, {ownTrunk(v, s, Eigen::Vector3d(0.03, 0.0, 0.2), 0.09)},
+                    Eigen::Matrix3d::Identity());
+    EXPECT_TRUE(store.addCloud(id, v.cloud));
+    whole.addSubmap(0, v.T_M_S, v.cloud);
+    poses.push_back(MergedPose{id, "alpha", 0, v.T_M_S});
+    all_points += v.cloud.size();
+  }
+  EXPECT_EQ(store.submapsWithPoints(), 6u);
+  EXPECT_LT(store.points(), all_points);
+  EXPECT_GE(store.bytes(), store.points() * sizeof(pcl::PointXYZ));
+  StemSliceStats a, b;
+  const double dbh = store.refit({m}, poses, &a).at(0).dbh;
+  EXPECT_DOUBLE_EQ(dbh, whole.refit(&b).at(0).dbh);
+  EXPECT_EQ(a.refitted, 1u);
+  EXPECT_EQ(a.points, b.points);
+  EXPECT_NE(dbh, 0.19);
+  // Submaps without a merged pose add nothing.
+  poses.resize(1);
+  EXPECT_DOUBLE_EQ(store.refit({m}, poses, &a).at(0).dbh, 0.19);
+  EXPECT_EQ(a.too_few, 1u);
+  // A cloud sent again replaces the submap's points.
+  const size_t before = store.points();
+  store.addCloud(0, Cloud());
+  EXPECT_LT(store.points(), before);
+  EXPECT_EQ(store.submapsWithPoints(), 6u);
 }
 
 TEST(StemSlices, ParamsValidated) {
