@@ -250,7 +250,11 @@ class MapMergeNodelet : public nodelet::Nodelet {
     for (const auto& d : ds) changed |= addSubmap(*d);
     for (const auto& l : ls) pending_loops_.push_back(l);
     changed |= addPendingLoops();
-    for (const auto& c : cs) addCloud(c.first, *c.second);
+    // The inventory so far, for the clouds' DBH points (stems a submap saw but did not extract).
+    const std::vector<MergedStem> known = cs.empty() || !merge_params_.stems.dbh_from_points
+                                              ? std::vector<MergedStem>()
+                                              : merger_.stems();
+    for (const auto& c : cs) addCloud(c.first, *c.second, known);
     if (!changed && !dirty_) {
       releaseFreedMemory(true);  // idle: whatever the last solve freed goes back now
       return;
@@ -405,7 +409,8 @@ class MapMergeNodelet : public nodelet::Nodelet {
   // A submap cloud (odometry frame, stamped with the submap's anchor time: the extraction
   // nodelet's submap_cloud), kept voxel-downsampled in its submap frame S, and its
   // full-resolution points near its trunks for the DBH refit at save_map.
-  void addCloud(const std::string& topic_robot, const sensor_msgs::PointCloud2& msg) {
+  void addCloud(const std::string& topic_robot, const sensor_msgs::PointCloud2& msg,
+                const std::vector<MergedStem>& known) {
     const std::string robot = topic_robot.empty() ? robotOfFrame(msg.header.frame_id) : topic_robot;
     auto it = stamp_index_.find({robot, msg.header.stamp.toSec()});
     if (it == stamp_index_.end()) {
@@ -424,7 +429,11 @@ class MapMergeNodelet : public nodelet::Nodelet {
     Cloud::Ptr in_s(new Cloud);
     pcl::transformPointCloud(cloud, *in_s, T_S_O.matrix().cast<float>());
     clouds_[it->second] = voxelDown(in_s);
-    if (merge_params_.stems.dbh_from_points) slice_store_.addCloud(it->second, *in_s);
+    if (merge_params_.stems.dbh_from_points) {
+      const std::optional<Pose> T_M_S = merger_.pose(it->second);
+      slice_store_.addCloud(it->second, *in_s, known, T_M_S ? merger_.component(robot) : -1,
+                            T_M_S.value_or(Pose::Identity()));
+    }
   }
 
   // The core's centroid voxel filter (as the submaps' own downsampling).

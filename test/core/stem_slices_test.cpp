@@ -352,6 +352,42 @@ TEST(SlicePointStore, KeepsTheSlicesOfArrivingCloudsForTheRefit) {
   EXPECT_EQ(store.submapsWithPoints(), 6u);
 }
 
+TEST(SlicePointStore, KeepsThePointsOfKnownStemsTheSubmapDidNotExtract) {
+  // Three submaps see the stem; the last extracts no trunk of it, but the inventory so far
+  // (the first two's) knows it, and its current pose places it: its points are kept too.
+  const Stem s;
+  std::mt19937 rng(13);
+  StemFusionParams p;
+  p.slice_keep_max_points = 10000;
+  MergedStem m = inventoryEntry(s, 0.19);
+  m.component = 1;
+  SlicePointStore store(p);
+  StemSlices whole({m}, p);
+  std::vector<MergedPose> poses;
+  for (double b : allRound(3)) {
+    const View v = scan(s, b, 5.0, &rng);
+    const int64_t id = static_cast<int64_t>(poses.size());
+    const bool last = id == 2;
+    store.addTrunks(id, last ? Trunks{} : Trunks{ownTrunk(v, s, Eigen::Vector3d::Zero(), 0.09)},
+                    Eigen::Matrix3d::Identity());
+    // The current pose 5 cm off the final one.
+    const Pose now = Eigen::Translation3d(0.05, 0.0, 0.0) * v.T_M_S;
+    if (last) {
+      const size_t before = store.points();
+      store.addCloud(id, v.cloud, {m}, 0, now);  // the stem of another component: nothing
+      EXPECT_EQ(store.points(), before);
+    }
+    store.addCloud(id, v.cloud, last ? std::vector<MergedStem>{m} : std::vector<MergedStem>{}, 1,
+                   now);
+    whole.addSubmap(1, v.T_M_S, v.cloud);
+    poses.push_back(MergedPose{id, "alpha", 1, v.T_M_S});
+  }
+  StemSliceStats a, b;
+  EXPECT_DOUBLE_EQ(store.refit({m}, poses, &a).at(0).dbh, whole.refit(&b).at(0).dbh);
+  EXPECT_EQ(a.submap_views, 3u);
+  EXPECT_EQ(a.points, b.points);
+}
+
 TEST(StemSlices, ParamsValidated) {
   StemFusionParams p;
   EXPECT_EQ(p.validate(), "");

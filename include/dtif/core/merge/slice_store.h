@@ -26,9 +26,13 @@ class SlicePointStore {
   /// unlevelled: Descriptor::level_rotation), from its descriptor.
   void addTrunks(int64_t id, const Trunks& trunks_S, const Eigen::Matrix3d& R_L_S);
 
-  /// Its cloud in S: the points kept (a later cloud of the same submap replaces them). False
-  /// when the submap's trunks are unknown (no descriptor yet): nothing kept.
-  bool addCloud(int64_t id, const Cloud& cloud_S);
+  /// Its cloud in S: the points kept near its own trunks and near the stems of `known` (the
+  /// inventory so far, MapMerger::stems()) in `component`, placed by the submap's current pose
+  /// T_M_S in that component: a submap sees about twice the stems it extracts as trunks, and
+  /// `dtif merge` pools the points of all of them. A later cloud of the same submap replaces
+  /// the points. False when the submap's trunks are unknown (no descriptor yet): nothing kept.
+  bool addCloud(int64_t id, const Cloud& cloud_S, const std::vector<MergedStem>& known = {},
+                int component = -1, const Pose& T_M_S = Pose::Identity());
 
   /// The inventory with the DBH refitted on the kept points (StemSlices::refit), the submaps
   /// placed by `poses`; submaps without kept points or pose contribute nothing.
