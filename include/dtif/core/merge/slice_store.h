@@ -1,9 +1,9 @@
 // What the map-merge nodelet keeps of the submap clouds for the inventory's DBH from the points
 // (StemSlices): it sees each cloud once, as it arrives, long before save_map knows the merged
 // stems, and keeping the clouds whole would grow without bound. So each submap keeps only its
-// full-resolution points near its own trunks (keepSliceCandidates), in its own frame S; at
-// save_map StemSlices runs over them with the merged poses, as `dtif merge` runs it over the
-// dataset's whole clouds (refitStemDbh).
+// full-resolution points near its own trunks and the stems known then (keepSliceCandidates), in
+// its own frame S; at save_map StemSlices runs over them with the merged poses, as `dtif merge`
+// runs it over the dataset's whole clouds (refitStemDbh).
 #pragma once
 
 #include <Eigen/Core>
@@ -16,7 +16,7 @@
 
 namespace dtif {
 
-/// Per submap (the merger's id): its trunks until its cloud comes, then its kept points.
+/// Per submap (the merger's id): its trunks, and its kept points once its cloud came.
 /// Copies share the kept clouds (never modified). Not thread-safe.
 class SlicePointStore {
  public:
