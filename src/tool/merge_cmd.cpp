@@ -74,11 +74,19 @@ int runMerge(const MergeArgs& a) {
   sum.dataset = ds.root;
   sum.submaps = in.submaps.size();
   sum.loops_accepted = in.loops.size();
+  // The inventory as written: with the DBH refitted on the merged points where configured.
+  auto finalStems = [&](const std::vector<MergedPose>& poses, std::vector<MergedStem> stems,
+                        StemSliceStats* st) {
+    if (mp.stems.dbh_from_points) stems = refitStemDbh(ds, poses, stems, mp.stems, st);
+    return stems;
+  };
   if (false_loop) {
     sum.false_loop_injected = true;
     if (in.eval) {
       const MapMerger clean = runMerger(in, mp, std::nullopt, field);
-      sum.score_clean = scoreMerge(ds, clean.poses(), clean.stems());
+      const std::vector<MergedPose> poses = clean.poses();
+      StemSliceStats st;
+      sum.score_clean = scoreMerge(ds, poses, finalStems(poses, clean.stems(), &st));
     }
   }
   std::vector<MergeEvent> events;
@@ -97,12 +105,11 @@ int runMerge(const MergeArgs& a) {
   for (const std::string& r : merger.robots()) sum.robot_component[r] = merger.component(r);
   sum.robots = sum.robot_component.size();
   const std::vector<MergedPose> poses = merger.poses();
-  std::vector<MergedStem> stems = merger.stems();
+  const auto t0 = std::chrono::steady_clock::now();
+  StemSliceStats slice_stats;
+  const std::vector<MergedStem> stems = finalStems(poses, merger.stems(), &slice_stats);
   if (mp.stems.dbh_from_points) {
-    const auto t0 = std::chrono::steady_clock::now();
-    StemSliceStats st;
-    stems = refitStemDbh(ds, poses, stems, mp.stems, &st);
-    sum.stem_slices = st;
+    sum.stem_slices = slice_stats;
     sum.stem_slices_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   }

@@ -132,6 +132,23 @@ TEST(StemSlices, PooledSidesUndoTheRangeNoiseBias) {
   }
 }
 
+TEST(StemSlices, PooledSidesPlaceTheStemOnItsAxis) {
+  // The inventory's centre 4 cm off (a median of one-sided fits): the pooled circle's is not.
+  const Stem s;
+  std::mt19937 rng(4);
+  MergedStem entry = inventoryEntry(s, 2.0 * s.r);
+  entry.x += 0.03, entry.y -= 0.03;
+  StemSlices slices({entry}, StemFusionParams{});
+  for (double b : allRound(6)) {
+    const View v = scan(s, b, 5.0, &rng);
+    slices.addSubmap(0, v.T_M_S, v.cloud);
+  }
+  StemSliceStats st;
+  const MergedStem out = slices.refit(&st).at(0);
+  ASSERT_EQ(st.refitted, 1u);
+  EXPECT_LT(std::hypot(out.x - s.x, out.y - s.y), 0.005);
+}
+
 TEST(StemSlices, PooledSidesAverageAnEllipse) {
   // Axes 10 % off the mean radius: one side's curvature says anything between the two.
   Stem s;

@@ -140,6 +140,10 @@ std::vector<MergedStem> StemSlices::refit(StemSliceStats* stats) const {
       continue;
     }
     out[k].dbh = 2.0 * f.r;
+    // The pooled circle's centre is the stem's axis; the observations' median leans toward
+    // where the robots walked (each one-sided fit's centre sits too close to its sensor).
+    out[k].x += f.cx;
+    out[k].y += f.cy;
     ++st.refitted;
   }
   if (stats) *stats = st;

@@ -43,7 +43,8 @@ class StemSlices {
   /// stems); at most slice_max_points_per_submap per stem, evenly strided.
   void addSubmap(int component, const Pose& T_M_S, const Cloud& cloud_S);
 
-  /// The stems with dbh = 2 r of a robust circle fit (fitCircleRobust) to each pooled slice,
+  /// The stems with dbh = 2 r and centre (x, y) of a robust circle fit (fitCircleRobust) to
+  /// each pooled slice,
   /// where it has at least slice_min_points points from slice_min_submaps submaps and its
   /// inliers cover at least slice_min_arc_deg; everything else unchanged. Deterministic.
   std::vector<MergedStem> refit(StemSliceStats* stats = nullptr) const;
