@@ -14,7 +14,10 @@
 # dtif simulate, e.g. "--bag-max-points 4000" for a smaller bag of thinned clouds; by default the
 # bag holds every return, so the nodelets assemble the dataset's submaps; "--bag-layout fastlio", or
 # a scene with bag_layout: fastlio, gives a bag per robot with stock FAST-LIO2 names, each played
-# remapped into its robot's namespace as README "Your own FAST-LIO2 units and bags" tells).
+# remapped into its robot's namespace as README "Your own FAST-LIO2 units and bags" tells),
+# DTIF_DEMO_SUBMAP_CLOUD (1, the default: the extraction nodelets publish their submap clouds, so
+# the map merge nodelet measures the inventory's DBH on their points as dtif merge does, and
+# saves a merged cloud; 0: they do not, and the nodelet keeps the observations' median DBH).
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 SCENE="${1:-${DTIF_REPO}/config/scenes/mixed.yaml}"
@@ -67,6 +70,7 @@ echo "dtif demo: 2. roslaunch dtif demo_bag.launch (robots ${ROBOTS[*]}), rosbag
   "${RATE} (logs in ${OUT}/ros)"
 roslaunch -p "${DTIF_PORT}" dtif demo_bag.launch play:=false headless:=true bond:=false \
   robot1:="${ROBOTS[0]}" robot2:="${ROBOTS[1]:-}" robot3:="${ROBOTS[2]:-}" \
+  publish_submap_cloud:="$([ "${DTIF_DEMO_SUBMAP_CLOUD:-1}" = 0 ] && echo false || echo true)" \
   loop_log:="${LOG}" > "${OUT}/ros/roslaunch.log" 2>&1 &
 LAUNCH_PID=$!
 trap 'kill -INT ${LAUNCH_PID} 2>/dev/null || true' EXIT
@@ -144,9 +148,10 @@ echo
 echo "=== Merged map of ${NAME}: map merge nodelet on the bag (save_map: ${OUT}/ros/map) ==="
 if [ -f "${OUT}/ros/map/merged_poses.csv" ]; then
   /usr/bin/python3 "${DTIF_REPO}/scripts/score_ros_merge.py" "${OUT}/dataset" "${OUT}/ros/map"
-  grep -E "loops_used|loops_rejected|solves|last_solve_ms|max_solve_ms" "${OUT}/ros/map_info.yaml" \
+  grep -E "loops_used|loops_rejected|solves|last_solve_ms|max_solve_ms|slice_submaps|slice_bytes" "${OUT}/ros/map_info.yaml" \
     | tr '\n' ' '
   echo
+  grep -ao "save_map: DBH from the points.*" "${OUT}/ros/roslaunch.log" | tail -1 | sed 's/\x1b\[0m$//' || true
 else
   echo "dtif demo: the map merge nodelet saved no map ($(cat "${OUT}/ros/save_map.log"))" >&2
   exit 1

@@ -1,10 +1,13 @@
 #!/usr/bin/env python3
 """Scores the map merge nodelet's saved map (save_map: merged_poses.csv, submap_ids.csv) against
 a dataset's ground truth, as DATASET.md's ATE (positions, best rigid alignment, no scale), over
-all robots of each map frame and per robot (each aligned alone, odometry alone beside it).
+all robots of each map frame and per robot (each aligned alone, odometry alone beside it); and,
+when the dataset has stems.csv, its merged_stems.csv as dtif merge scores its own (each map
+frame placed by its poses' alignment; a stem matches the nearest true one within 0.5 m).
 Usage: score_ros_merge.py <dataset_dir> <map_dir>"""
 import csv
 import math
+import os
 import sys
 
 
@@ -57,19 +60,45 @@ def rotate(q, v):
             v[2] + w * t[2] + x * t[1] - y * t[0]]
 
 
-def align_rms(est, gt):
-    """RMS residual [m] after the rigid transform (no scale) that best maps est onto gt."""
+def align(est, gt):
+    """The rigid transform (no scale) that best maps est onto gt: p -> R (p - ce) + cg."""
     n = len(est)
     ce = [sum(p[i] for p in est) / n for i in range(3)]
     cg = [sum(p[i] for p in gt) / n for i in range(3)]
     h = [[sum((e[i] - ce[i]) * (g[j] - cg[j]) for e, g in zip(est, gt)) for j in range(3)]
          for i in range(3)]
     q = best_rotation(h)
-    sq = 0.0
-    for e, g in zip(est, gt):
-        r = rotate(q, [e[i] - ce[i] for i in range(3)])
-        sq += sum((r[i] + cg[i] - g[i]) ** 2 for i in range(3))
-    return math.sqrt(sq / n)
+    return lambda p: [r + c for r, c in zip(rotate(q, [p[i] - ce[i] for i in range(3)]), cg)]
+
+
+def align_rms(est, gt):
+    """RMS residual [m] after the rigid transform (no scale) that best maps est onto gt."""
+    t = align(est, gt)
+    sq = sum(sum((a - b) ** 2 for a, b in zip(t(e), g)) for e, g in zip(est, gt))
+    return math.sqrt(sq / len(est))
+
+
+def median(v):
+    v = sorted(v)
+    h = len(v) // 2
+    return v[h] if len(v) % 2 else 0.5 * (v[h - 1] + v[h])
+
+
+def score_stems(ds, mp, by_comp):
+    """Matched stems, mean position error [m] and median |DBH error| [m] (dtif merge's
+    scoreStems, match radius 0.5 m), over the map frames with poses."""
+    true = [[float(r[k]) for k in ("x", "y", "dbh")] for r in csv.DictReader(open(ds + "/stems.csv"))]
+    place = {c: align([r[0] for r in rows], [r[1] for r in rows]) for c, rows in by_comp.items()}
+    pos, dbh = [], []
+    for r in csv.DictReader(open(mp + "/merged_stems.csv")):
+        if r["component"] not in place:
+            continue
+        p = place[r["component"]]([float(r[k]) for k in ("x", "y", "z_base")])
+        d, j = min((math.hypot(p[0] - t[0], p[1] - t[1]), j) for j, t in enumerate(true))
+        if d < 0.5:
+            pos.append(d)
+            dbh.append(abs(float(r["dbh"]) - true[j][2]))
+    return len(pos), sum(pos) / max(len(pos), 1), median(dbh) if dbh else 0.0
 
 
 def main():
@@ -102,6 +131,10 @@ def main():
                                              align_rms([r[0] for r in rows], [r[1] for r in rows]),
                                              align_rms([odom[i] for i in mine],
                                                        [gt[i] for i in mine])))
+    if os.path.exists(ds + "/stems.csv") and os.path.exists(mp + "/merged_stems.csv"):
+        n, pos, dbh = score_stems(ds, mp, by_comp)
+        print("stems matched  mean position error [m]  median DBH error [cm]")
+        print("%13d  %23.3f  %21.2f" % (n, pos, 100 * dbh))
 
 
 if __name__ == "__main__":

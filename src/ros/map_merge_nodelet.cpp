@@ -33,6 +33,7 @@
 #include "dtif/core/database/loop_detector.h"
 #include "dtif/core/descriptor/validation.h"
 #include "dtif/core/merge/map_merger.h"
+#include "dtif/core/merge/slice_store.h"
 #include "dtif/core/timing.h"
 #include "dtif/core/voxel_grid.h"
 #include "dtif/io/dataset.h"
@@ -134,6 +135,7 @@ class MapMergeNodelet : public nodelet::Nodelet {
       throw;
     }
     merger_ = newMerger();
+    slice_store_ = SlicePointStore(merge_params_.stems);
   }
 
   // The field stem map (stem_map_file), once at start-up: a file that cannot be read is a
@@ -248,7 +250,11 @@ class MapMergeNodelet : public nodelet::Nodelet {
     for (const auto& d : ds) changed |= addSubmap(*d);
     for (const auto& l : ls) pending_loops_.push_back(l);
     changed |= addPendingLoops();
-    for (const auto& c : cs) addCloud(c.first, *c.second);
+    // The inventory so far, for the clouds' DBH points (stems a submap saw but did not extract).
+    const std::vector<MergedStem> known = cs.empty() || !merge_params_.stems.dbh_from_points
+                                              ? std::vector<MergedStem>()
+                                              : merger_.stems();
+    for (const auto& c : cs) addCloud(c.first, *c.second, known);
     if (!changed && !dirty_) {
       releaseFreedMemory(true);  // idle: whatever the last solve freed goes back now
       return;
@@ -317,8 +323,14 @@ class MapMergeNodelet : public nodelet::Nodelet {
     if (d.levelled()) {
       merger_.setLevelling(msg.robot, levellingInOdom(d.level_rotation.toRotationMatrix(), T_O_S));
     }
-    return addToMerger(msg.robot, msg.robot, d.submap_id, msg.header.stamp.toSec(), T_O_S,
-                       mergeSubmapOf(d, T_O_S).trunks);
+    const Trunks trunks_S = mergeSubmapOf(d, T_O_S).trunks;
+    if (!addToMerger(msg.robot, msg.robot, d.submap_id, msg.header.stamp.toSec(), T_O_S, trunks_S))
+      return false;
+    if (merge_params_.stems.dbh_from_points) {
+      slice_store_.addTrunks(next_global_id_ - 1, trunks_S,
+                             d.level_rotation.normalized().toRotationMatrix());
+    }
+    return true;
   }
 
   // addSubmap of the merger under a global id; false (logged) on a duplicate or bad pose.
@@ -395,8 +407,10 @@ class MapMergeNodelet : public nodelet::Nodelet {
   }
 
   // A submap cloud (odometry frame, stamped with the submap's anchor time: the extraction
-  // nodelet's submap_cloud), kept voxel-downsampled in its submap frame S.
-  void addCloud(const std::string& topic_robot, const sensor_msgs::PointCloud2& msg) {
+  // nodelet's submap_cloud), kept voxel-downsampled in its submap frame S, and its
+  // full-resolution points near its trunks for the DBH refit at save_map.
+  void addCloud(const std::string& topic_robot, const sensor_msgs::PointCloud2& msg,
+                const std::vector<MergedStem>& known) {
     const std::string robot = topic_robot.empty() ? robotOfFrame(msg.header.frame_id) : topic_robot;
     auto it = stamp_index_.find({robot, msg.header.stamp.toSec()});
     if (it == stamp_index_.end()) {
@@ -415,6 +429,11 @@ class MapMergeNodelet : public nodelet::Nodelet {
     Cloud::Ptr in_s(new Cloud);
     pcl::transformPointCloud(cloud, *in_s, T_S_O.matrix().cast<float>());
     clouds_[it->second] = voxelDown(in_s);
+    if (merge_params_.stems.dbh_from_points) {
+      const std::optional<Pose> T_M_S = merger_.pose(it->second);
+      slice_store_.addCloud(it->second, *in_s, known, T_M_S ? merger_.component(robot) : -1,
+                            T_M_S.value_or(Pose::Identity()));
+    }
   }
 
   // The core's centroid voxel filter (as the submaps' own downsampling).
@@ -571,6 +590,7 @@ class MapMergeNodelet : public nodelet::Nodelet {
     stamp_of_.clear();
     odom_of_.clear();
     clouds_.clear();
+    slice_store_ = SlicePointStore(merge_params_.stems);
     pending_loops_.clear();
     component_frame_.clear();
     next_global_id_ = 0;
@@ -607,6 +627,9 @@ class MapMergeNodelet : public nodelet::Nodelet {
     res.solves = static_cast<uint32_t>(solves_);
     res.last_solve_ms = last_solve_ms_;
     res.max_solve_ms = max_solve_ms_;
+    res.slice_submaps = static_cast<uint32_t>(slice_store_.submapsWithPoints());
+    res.slice_bytes = slice_store_.bytes();
+    res.stems_dbh_from_points = static_cast<uint32_t>(stems_dbh_from_points_);
     {
       std::lock_guard<std::mutex> qlock(queue_mutex_);
       res.up_to_date = !dirty_ && descriptors_.empty() && loops_in_.empty() &&
@@ -662,12 +685,13 @@ class MapMergeNodelet : public nodelet::Nodelet {
     std::map<int64_t, Cloud::Ptr> clouds;  // submap clouds are replaced, never modified
     std::map<int64_t, Key> own;            // merger id -> (robot, own submap id)
     std::map<int64_t, double> stamps;      // merger id -> anchor stamp
+    SlicePointStore slices;                // shares the kept clouds
   };
 
   SaveSnapshot saveSnapshot() {
     std::lock_guard<std::mutex> lock(merge_mutex_);
-    SaveSnapshot snap{merger_, generation_, componentOfFrame(node_.map_frame),
-                      clouds_, {},          stamp_of_};
+    SaveSnapshot snap{merger_,   generation_, componentOfFrame(node_.map_frame), clouds_, {},
+                      stamp_of_, slice_store_};
     for (const auto& [key, id] : global_id_) snap.own[id] = key;
     return snap;
   }
@@ -685,7 +709,7 @@ class MapMergeNodelet : public nodelet::Nodelet {
                    st.landmarks);
       const std::vector<MergedPose> poses = snap.merger.poses();
       writeMergedPosesCsv((dir / "merged_poses.csv").string(), poses);
-      writeMergedStemsCsv((dir / "merged_stems.csv").string(), snap.merger.stems());
+      writeMergedStemsCsv((dir / "merged_stems.csv").string(), savedStems(snap, poses));
       writeG2o((dir / "pose_graph.g2o").string(), poses, snap.merger.graphEdges());
       writeSubmapIds((dir / "submap_ids.csv").string(), poses, snap);
       res.files = {"merged_poses.csv", "merged_stems.csv", "pose_graph.g2o", "submap_ids.csv"};
@@ -703,6 +727,28 @@ class MapMergeNodelet : public nodelet::Nodelet {
       NODELET_ERROR("%s", res.message.c_str());
     }
     return true;
+  }
+
+  // The saved inventory: with stems.dbh_from_points, the DBH measured on the points the submap
+  // clouds kept (SlicePointStore), as dtif merge measures it on the dataset's clouds.
+  std::vector<MergedStem> savedStems(const SaveSnapshot& snap,
+                                     const std::vector<MergedPose>& poses) {
+    std::vector<MergedStem> stems = snap.merger.stems();
+    if (!merge_params_.stems.dbh_from_points) return stems;
+    const auto t0 = std::chrono::steady_clock::now();
+    StemSliceStats st;
+    stems = snap.slices.refit(stems, poses, &st);
+    const size_t n = snap.slices.submapsWithPoints();
+    NODELET_INFO(
+        "save_map: DBH from the points on %zu of %zu stems (%zu too few, %zu one-sided, %zu "
+        "shrunk, %zu no fit; %zu slice points from %zu submap views), %.1f ms; kept %zu points of "
+        "%zu submaps, %zu bytes (%zu per submap)",
+        st.refitted, st.stems, st.too_few, st.one_sided, st.shrunk, st.no_fit, st.points,
+        st.submap_views, msSince(t0), snap.slices.points(), n, snap.slices.bytes(),
+        n ? snap.slices.bytes() / n : size_t{0});
+    std::lock_guard<std::mutex> lock(merge_mutex_);
+    stems_dbh_from_points_ = st.refitted;
+    return stems;
   }
 
   // The published TFs and paths follow the refined map until the next solve, which starts from
@@ -783,6 +829,8 @@ class MapMergeNodelet : public nodelet::Nodelet {
   std::map<int64_t, double> stamp_of_;                             // merger id -> anchor stamp
   std::map<int64_t, Pose> odom_of_;                                // merger id -> T_O_S
   std::map<int64_t, Cloud::Ptr> clouds_;                           // merger id -> cloud in S
+  SlicePointStore slice_store_;       // merger id -> points near its trunks, in S
+  size_t stems_dbh_from_points_ = 0;  // the latest save_map's refitted stems
   std::deque<dtif::LoopClosure::ConstPtr> pending_loops_;
   std::map<int, std::string> component_frame_;
   int64_t next_global_id_ = 0;

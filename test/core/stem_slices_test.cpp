@@ -10,6 +10,7 @@
 #include <random>
 
 #include "dtif/core/extraction/trunk_extractor.h"
+#include "dtif/core/merge/slice_store.h"
 
 namespace dtif {
 namespace {
@@ -242,6 +243,168 @@ TEST(StemSlices, EmptyInputs) {
   EXPECT_DOUBLE_EQ(one.refit().at(0).dbh, 0.2);
 }
 
+// ---- keepSliceCandidates: the nodelet's per-submap keeping. ----
+
+/// The submap's own trunk as its extraction reports it, in S: the stem's base moved by `off`
+/// (in M: the one-sided fit's centre, a guessed base) with radius r.
+TrunkLandmark ownTrunk(const View& v, const Stem& s, const Eigen::Vector3d& off, double r) {
+  const Eigen::Vector3d b = v.T_M_S.inverse() * (Eigen::Vector3d(s.x, s.y, s.z_base) + off);
+  TrunkLandmark t;
+  t.x = b.x(), t.y = b.y(), t.z = b.z(), t.r = r;
+  return t;
+}
+
+TEST(KeepSliceCandidates, TheRefitSeesTheSamePointsAsFromTheWholeClouds) {
+  const Stem s;
+  std::mt19937 rng(9);
+  StemFusionParams p;
+  p.slice_keep_max_points = 10000;  // this scan's 4000 rays on one side are all near the trunk
+  const MergedStem m = inventoryEntry(s, 0.19);
+  StemSlices whole({m}, p), kept({m}, p);
+  size_t all_points = 0, kept_points = 0;
+  int k = 0;
+  for (double b : allRound(6)) {
+    const View v = scan(s, b, 5.0, &rng);
+    // Each submap's trunk off the merged stem by centimetres, its base by decimetres.
+    const Eigen::Vector3d off(0.05 * std::cos(k), 0.05 * std::sin(k), 0.3 * ((k % 3) - 1));
+    const Cloud::Ptr c =
+        keepSliceCandidates(v.cloud, {ownTrunk(v, s, off, 0.08)}, Eigen::Matrix3d::Identity(), p);
+    whole.addSubmap(0, v.T_M_S, v.cloud);
+    kept.addSubmap(0, v.T_M_S, *c);
+    all_points += v.cloud.size(), kept_points += c->size();
+    ++k;
+  }
+  ASSERT_EQ(kept.slice(0).size(), whole.slice(0).size());
+  for (size_t i = 0; i < whole.slice(0).size(); ++i)
+    EXPECT_EQ(kept.slice(0)[i], whole.slice(0)[i]) << i;
+  StemSliceStats a, b;
+  EXPECT_DOUBLE_EQ(kept.refit(&a).at(0).dbh, whole.refit(&b).at(0).dbh);
+  EXPECT_EQ(a.refitted, 1u);
+  // The ground and the shrub (0.55-0.85 m from the trunk's centre), 1000 points a view, are not
+  // kept.
+  EXPECT_LE(kept_points + 6 * 1000, all_points);
+}
+
+TEST(KeepSliceCandidates, ATiltedSubmapIsLevelledFirst) {
+  // A stock FAST-LIO2 submap: S tilted 20 deg; its stem runs askew in S. Levelled, the kept
+  // points hold the slice; taken along S's z they miss most of it (1.1-1.5 m up the stem is
+  // 0.38-0.51 m off S's vertical through its base).
+  const Stem s;
+  std::mt19937 rng(10);
+  View v = scan(s, 0.0, 5.0, &rng);
+  const Eigen::Matrix3d R_L_S = Eigen::AngleAxisd(0.35, Eigen::Vector3d::UnitX()).matrix();
+  // The same points in the tilted S: T_M_S' = T_M_S R_L_S, cloud' = R_L_S^T cloud.
+  for (pcl::PointXYZ& q : v.cloud) {
+    const Eigen::Vector3d t = R_L_S.transpose() * Eigen::Vector3d(q.x, q.y, q.z);
+    q = pcl::PointXYZ(t.x(), t.y(), t.z());
+  }
+  v.T_M_S = v.T_M_S * Pose(R_L_S);
+  const Trunks own = {ownTrunk(v, s, Eigen::Vector3d::Zero(), 0.1)};
+  StemFusionParams p;
+  p.slice_max_points_per_submap = p.slice_keep_max_points = 10000;  // every point counted
+  p.slice_keep_margin_m = 0.05;  // the trunk is exact here: kept within 0.3 m of its axis
+  StemSlices whole({inventoryEntry(s, 0.2)}, p), levelled({inventoryEntry(s, 0.2)}, p),
+      askew({inventoryEntry(s, 0.2)}, p);
+  whole.addSubmap(0, v.T_M_S, v.cloud);
+  levelled.addSubmap(0, v.T_M_S, *keepSliceCandidates(v.cloud, own, R_L_S, p));
+  askew.addSubmap(0, v.T_M_S, *keepSliceCandidates(v.cloud, own, Eigen::Matrix3d::Identity(), p));
+  ASSERT_GT(whole.slice(0).size(), 50u);
+  EXPECT_EQ(levelled.slice(0).size(), whole.slice(0).size());
+  EXPECT_LT(askew.slice(0).size(), whole.slice(0).size() / 2);
+}
+
+TEST(KeepSliceCandidates, CappedPerTrunkAndEmptyInputs) {
+  const Stem s;
+  std::mt19937 rng(11);
+  const View v = scan(s, 0.0, 5.0, &rng);
+  StemFusionParams p;
+  p.slice_keep_max_points = 100;
+  const Trunks own = {ownTrunk(v, s, Eigen::Vector3d::Zero(), 0.1)};
+  EXPECT_EQ(keepSliceCandidates(v.cloud, own, Eigen::Matrix3d::Identity(), p)->size(), 100u);
+  // The same trunk twice: its points are kept once.
+  EXPECT_EQ(keepSliceCandidates(v.cloud, {own[0], own[0]}, Eigen::Matrix3d::Identity(), p)->size(),
+            100u);
+  EXPECT_TRUE(keepSliceCandidates(v.cloud, {}, Eigen::Matrix3d::Identity(), p)->empty());
+  EXPECT_TRUE(keepSliceCandidates(Cloud(), own, Eigen::Matrix3d::Identity(), p)->empty());
+}
+
+TEST(SlicePointStore, KeepsTheSlicesOfArrivingCloudsForTheRefit) {
+  const Stem s;
+  std::mt19937 rng(12);
+  StemFusionParams p;
+  p.slice_keep_max_points = 10000;
+  const MergedStem m = inventoryEntry(s, 0.19);
+  SlicePointStore store(p);
+  StemSlices whole({m}, p);
+  std::vector<MergedPose> poses;
+  size_t all_points = 0;
+  EXPECT_FALSE(store.addCloud(0, Cloud()));  // no trunks yet: nothing kept
+  for (double b : allRound(6)) {
+    const View v = scan(s, b, 5.0, &rng);
+    const int64_t id = static_cast<int64_t>(poses.size());
+    store.addTrunks(id, {ownTrunk(v, s, Eigen::Vector3d(0.03, 0.0, 0.2), 0.09)},
+                    Eigen::Matrix3d::Identity());
+    EXPECT_TRUE(store.addCloud(id, v.cloud));
+    whole.addSubmap(0, v.T_M_S, v.cloud);
+    poses.push_back(MergedPose{id, "alpha", 0, v.T_M_S});
+    all_points += v.cloud.size();
+  }
+  EXPECT_EQ(store.submapsWithPoints(), 6u);
+  EXPECT_LT(store.points(), all_points);
+  EXPECT_GE(store.bytes(), store.points() * sizeof(pcl::PointXYZ));
+  StemSliceStats a, b;
+  const double dbh = store.refit({m}, poses, &a).at(0).dbh;
+  EXPECT_DOUBLE_EQ(dbh, whole.refit(&b).at(0).dbh);
+  EXPECT_EQ(a.refitted, 1u);
+  EXPECT_EQ(a.points, b.points);
+  EXPECT_NE(dbh, 0.19);
+  // Submaps without a merged pose add nothing.
+  poses.resize(1);
+  EXPECT_DOUBLE_EQ(store.refit({m}, poses, &a).at(0).dbh, 0.19);
+  EXPECT_EQ(a.too_few, 1u);
+  // A cloud sent again replaces the submap's points.
+  const size_t before = store.points();
+  store.addCloud(0, Cloud());
+  EXPECT_LT(store.points(), before);
+  EXPECT_EQ(store.submapsWithPoints(), 6u);
+}
+
+TEST(SlicePointStore, KeepsThePointsOfKnownStemsTheSubmapDidNotExtract) {
+  // Three submaps see the stem; the last extracts no trunk of it, but the inventory so far
+  // (the first two's) knows it, and its current pose places it: its points are kept too.
+  const Stem s;
+  std::mt19937 rng(13);
+  StemFusionParams p;
+  p.slice_keep_max_points = 10000;
+  MergedStem m = inventoryEntry(s, 0.19);
+  m.component = 1;
+  SlicePointStore store(p);
+  StemSlices whole({m}, p);
+  std::vector<MergedPose> poses;
+  for (double b : allRound(3)) {
+    const View v = scan(s, b, 5.0, &rng);
+    const int64_t id = static_cast<int64_t>(poses.size());
+    const bool last = id == 2;
+    store.addTrunks(id, last ? Trunks{} : Trunks{ownTrunk(v, s, Eigen::Vector3d::Zero(), 0.09)},
+                    Eigen::Matrix3d::Identity());
+    // The current pose 5 cm off the final one.
+    const Pose now = Eigen::Translation3d(0.05, 0.0, 0.0) * v.T_M_S;
+    if (last) {
+      const size_t before = store.points();
+      store.addCloud(id, v.cloud, {m}, 0, now);  // the stem of another component: nothing
+      EXPECT_EQ(store.points(), before);
+    }
+    store.addCloud(id, v.cloud, last ? std::vector<MergedStem>{m} : std::vector<MergedStem>{}, 1,
+                   now);
+    whole.addSubmap(1, v.T_M_S, v.cloud);
+    poses.push_back(MergedPose{id, "alpha", 1, v.T_M_S});
+  }
+  StemSliceStats a, b;
+  EXPECT_DOUBLE_EQ(store.refit({m}, poses, &a).at(0).dbh, whole.refit(&b).at(0).dbh);
+  EXPECT_EQ(a.submap_views, 3u);
+  EXPECT_EQ(a.points, b.points);
+}
+
 TEST(StemSlices, ParamsValidated) {
   StemFusionParams p;
   EXPECT_EQ(p.validate(), "");
@@ -259,6 +422,15 @@ TEST(StemSlices, ParamsValidated) {
   p = StemFusionParams{};
   p.slice_inlier_m = 0.0;
   EXPECT_NE(p.validate().find("slice_inlier_m"), std::string::npos);
+  p = StemFusionParams{};
+  p.slice_keep_margin_m = -0.1;
+  EXPECT_NE(p.validate().find("slice_keep_margin_m"), std::string::npos);
+  p = StemFusionParams{};
+  p.slice_keep_band_m = NAN;
+  EXPECT_NE(p.validate().find("slice_keep_band_m"), std::string::npos);
+  p = StemFusionParams{};
+  p.slice_keep_max_points = 0;
+  EXPECT_NE(p.validate().find("slice_keep_max_points"), std::string::npos);
 }
 
 }  // namespace

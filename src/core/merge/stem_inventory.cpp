@@ -385,6 +385,11 @@ std::string StemFusionParams::validate() const {
     e << "stems.slice_max_shrink must be in [0, 1]; ";
   if (!(slice_inlier_m > 0 && slice_inlier_m <= 0.5))
     e << "stems.slice_inlier_m must be in (0, 0.5]; ";
+  if (!(slice_keep_margin_m >= 0 && slice_keep_margin_m <= 2))
+    e << "stems.slice_keep_margin_m must be in [0, 2]; ";
+  if (!(slice_keep_band_m >= 0 && slice_keep_band_m <= 3))
+    e << "stems.slice_keep_band_m must be in [0, 3]; ";
+  if (slice_keep_max_points < 1) e << "stems.slice_keep_max_points must be >= 1; ";
   return e.str();
 }
 

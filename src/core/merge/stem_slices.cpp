@@ -80,6 +80,44 @@ void StemSlices::addSubmap(int component, const Pose& T_M_S, const Cloud& cloud_
   }
 }
 
+Cloud::Ptr keepSliceCandidates(const Cloud& cloud_S, const Trunks& trunks_S,
+                               const Eigen::Matrix3d& R_L_S, const StemFusionParams& params) {
+  const double lo = params.slice_min_h_m - params.slice_keep_band_m;
+  const double hi = params.slice_max_h_m + params.slice_keep_band_m;
+  std::vector<Eigen::Vector3d> base_L;
+  std::vector<double> reach;
+  for (const TrunkLandmark& t : trunks_S) {
+    base_L.push_back(R_L_S * Eigen::Vector3d(t.x, t.y, t.z));
+    reach.push_back(std::max(t.r, kMinRadiusM) + params.slice_margin_m +
+                    params.slice_keep_margin_m);
+  }
+  std::vector<std::vector<size_t>> near(trunks_S.size());  // trunk -> point indices, in order
+  for (size_t i = 0; i < cloud_S.size(); ++i) {
+    const pcl::PointXYZ& pt = cloud_S[i];
+    if (!std::isfinite(pt.x) || !std::isfinite(pt.y) || !std::isfinite(pt.z)) continue;
+    const Eigen::Vector3d q = R_L_S * Eigen::Vector3d(pt.x, pt.y, pt.z);
+    for (size_t k = 0; k < base_L.size(); ++k) {
+      const double h = q.z() - base_L[k].z();
+      if (h >= lo && h <= hi &&
+          std::hypot(q.x() - base_L[k].x(), q.y() - base_L[k].y()) <= reach[k])
+        near[k].push_back(i);
+    }
+  }
+  // A point near two trunks is kept once; the strided picks stay in cloud order.
+  std::vector<size_t> keep;
+  const size_t cap = static_cast<size_t>(params.slice_keep_max_points);
+  for (const std::vector<size_t>& idx : near) {
+    const size_t n = std::min(cap, idx.size());
+    for (size_t j = 0; j < n; ++j) keep.push_back(idx[j * idx.size() / n]);
+  }
+  std::sort(keep.begin(), keep.end());
+  keep.erase(std::unique(keep.begin(), keep.end()), keep.end());
+  Cloud::Ptr out(new Cloud);
+  out->reserve(keep.size());
+  for (size_t i : keep) out->push_back(cloud_S[i]);
+  return out;
+}
+
 std::vector<MergedStem> StemSlices::refit(StemSliceStats* stats) const {
   StemSliceStats st;
   st.stems = stems_.size();

@@ -53,6 +53,13 @@ struct StemFusionParams {
   /// large, so a pooled circle well inside them means the submaps' arcs do not line up (poses
   /// centimetres off: the fit takes the inner envelope of the offset arcs) [0..1]
   double slice_max_shrink = 0.1;
+  /// Online (MapMergeNodelet, keepSliceCandidates): what each arriving submap cloud keeps for
+  /// the refit at save_map, around the submap's own trunks, before the merged stems exist. The
+  /// merged stem's centre, radius and base differ from this submap's trunk by centimetres
+  /// (decimetres for a guessed base), so the kept cylinder is wider and taller than the slice.
+  double slice_keep_margin_m = 0.25;  ///< kept within r + slice_margin_m + this [m]
+  double slice_keep_band_m = 0.5;     ///< kept slice_min_h_m - this .. slice_max_h_m + this [m]
+  int slice_keep_max_points = 2048;   ///< per trunk and submap, evenly strided [points]
   std::string validate() const;
 
   template <class V>
@@ -76,6 +83,9 @@ struct StemFusionParams {
     v("slice_min_arc_deg", slice_min_arc_deg);
     v("slice_inlier_m", slice_inlier_m);
     v("slice_max_shrink", slice_max_shrink);
+    v("slice_keep_margin_m", slice_keep_margin_m);
+    v("slice_keep_band_m", slice_keep_band_m);
+    v("slice_keep_max_points", slice_keep_max_points);
   }
 };
 

@@ -64,6 +64,17 @@ class StemSlices {
   std::unordered_map<int64_t, std::vector<size_t>> grid_;  // 1 m cell -> stems near it
 };
 
+/// Online counterpart of a submap cloud kept for StemSlices (MapMergeNodelet): the points of
+/// `cloud_S` (in S, non-finite skipped, in their order) that lie, levelled by R_L_S (identity for
+/// an unlevelled submap), within r + slice_margin_m + slice_keep_margin_m of one of the submap's
+/// own trunks (`trunks_S`, in S as MergeSubmap::trunks) and slice_min_h_m - slice_keep_band_m ..
+/// slice_max_h_m + slice_keep_band_m above its base; at most slice_keep_max_points per trunk,
+/// evenly strided. For a merged stem within slice_keep_margin_m (centre and radius together) and
+/// slice_keep_band_m (base) of the submap's trunk, and below the cap, StemSlices::addSubmap then
+/// gathers the very points it gathers from the whole cloud: a superset filtered in order.
+Cloud::Ptr keepSliceCandidates(const Cloud& cloud_S, const Trunks& trunks_S,
+                               const Eigen::Matrix3d& R_L_S, const StemFusionParams& params);
+
 /// The circle fit a pooled slice gets: fitCircleRobust with the radius bounded to
 /// [0.5 r0, 2 r0 + 0.05 m] about the inventory's radius r0, inlier distance slice_inlier_m.
 /// `ok` false when the fit failed, the centre is more than slice_margin_m from (x0, y0), the
