@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <unordered_map>
 
 #include "dtif/core/cells.h"
 #include "dtif/core/extraction/trunk_extractor.h"
@@ -12,6 +13,7 @@ namespace {
 
 constexpr double kMinRadiusM = 0.01;  // a seed radius below this is taken as this [m]
 constexpr double kCellM = 1.0;        // stem lookup grid [m]
+constexpr double kMaxReachM = 10.0;   // a trunk reaching farther is no stem [m]
 
 double seedRadius(const MergedStem& s) { return std::max(0.5 * s.dbh, kMinRadiusM); }
 
@@ -91,12 +93,25 @@ Cloud::Ptr keepSliceCandidates(const Cloud& cloud_S, const Trunks& trunks_S,
     reach.push_back(std::max(t.r, kMinRadiusM) + params.slice_margin_m +
                     params.slice_keep_margin_m);
   }
+  // Trunks by the cells their reach touches: a point tests only the trunks of its own cell
+  // (a submap of ~1 M points and ~200 trunks and known stems would otherwise test every pair).
+  auto cell = [](double v) { return cellIndex(v / kCellM); };
+  std::unordered_map<int64_t, std::vector<size_t>> grid;
+  for (size_t k = 0; k < base_L.size(); ++k) {
+    if (!base_L[k].allFinite() || !(reach[k] <= kMaxReachM)) continue;  // no stem: malformed
+    for (int64_t ix = cell(base_L[k].x() - reach[k]); ix <= cell(base_L[k].x() + reach[k]); ++ix) {
+      for (int64_t iy = cell(base_L[k].y() - reach[k]); iy <= cell(base_L[k].y() + reach[k]); ++iy)
+        grid[packCell(ix, iy)].push_back(k);
+    }
+  }
   std::vector<std::vector<size_t>> near(trunks_S.size());  // trunk -> point indices, in order
   for (size_t i = 0; i < cloud_S.size(); ++i) {
     const pcl::PointXYZ& pt = cloud_S[i];
     if (!std::isfinite(pt.x) || !std::isfinite(pt.y) || !std::isfinite(pt.z)) continue;
     const Eigen::Vector3d q = R_L_S * Eigen::Vector3d(pt.x, pt.y, pt.z);
-    for (size_t k = 0; k < base_L.size(); ++k) {
+    const auto it = grid.find(packCell(cell(q.x()), cell(q.y())));
+    if (it == grid.end()) continue;
+    for (size_t k : it->second) {
       const double h = q.z() - base_L[k].z();
       if (h >= lo && h <= hi &&
           std::hypot(q.x() - base_L[k].x(), q.y() - base_L[k].y()) <= reach[k])
