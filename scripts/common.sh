@@ -7,8 +7,14 @@ DTIF_JOBS="${DTIF_JOBS:-2}"
 export ROS_HOME="${ROS_HOME:-${DTIF_WS}/ros_home}"
 export ROS_LOG_DIR="${ROS_LOG_DIR:-${ROS_HOME}/log}"
 export ROSCONSOLE_STDOUT_LINE_BUFFERED=1
+# ccache (install_deps.sh installs it) makes a rebuild in a fresh clone or a new workspace quick.
+# Paths under the repository are hashed relative to it and the working directory is left out of
+# the hash, so clones in other folders (CI's, git worktrees) share one cache.
+export CCACHE_BASEDIR="${CCACHE_BASEDIR:-${DTIF_REPO}}"
+export CCACHE_NOHASHDIR="${CCACHE_NOHASHDIR:-1}"
+DTIF_CCACHE_ARGS=(-DCMAKE_C_COMPILER_LAUNCHER=ccache -DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
 DTIF_CMAKE_ARGS=(-DCMAKE_BUILD_TYPE=Release -DPYTHON_EXECUTABLE=/usr/bin/python3
-  -DPython3_EXECUTABLE=/usr/bin/python3)
+  -DPython3_EXECUTABLE=/usr/bin/python3 "${DTIF_CCACHE_ARGS[@]}")
 DTIF_BIN="${DTIF_WS}/devel/lib/dtif/dtif"
 
 # Sets up the catkin workspace (src/dtif links to this repository) and builds dtif.
@@ -83,7 +89,7 @@ dtif_san_build() {
   [ -e "${DTIF_SAN_WS}/src/dtif" ] || ln -s "${DTIF_REPO}" "${DTIF_SAN_WS}/src/dtif"
   # A build type of its own: Release's -O3 -DNDEBUG would override the flags (asserts stay on).
   (cd "${DTIF_SAN_WS}" && CC="${DTIF_SAN_CC:-clang}" CXX="${DTIF_SAN_CXX:-clang++}" \
-    catkin_make -j"${DTIF_JOBS}" -DCMAKE_BUILD_TYPE=Sanitize -DDTIF_FUZZ=ON \
+    catkin_make -j"${DTIF_JOBS}" -DCMAKE_BUILD_TYPE=Sanitize -DDTIF_FUZZ=ON "${DTIF_CCACHE_ARGS[@]}" \
     -DCMAKE_C_FLAGS_SANITIZE="${flags}" -DCMAKE_CXX_FLAGS_SANITIZE="${flags}" \
     -DCMAKE_EXE_LINKER_FLAGS_SANITIZE="-fsanitize=address,undefined" \
     -DCMAKE_SHARED_LINKER_FLAGS_SANITIZE="-fsanitize=address,undefined" \

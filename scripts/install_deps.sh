@@ -5,7 +5,7 @@
 set -euo pipefail
 
 PKGS=(
-  build-essential cmake clang-format
+  build-essential cmake clang-format ccache
   clang libclang-rt-14-dev
   ros-core-dev catkin libnodeletlib-dev libnodelet-dev libnodeletlib-tools
   libpcl-ros-dev libpcl-conversions-dev libpcl-dev libcgal-dev libeigen3-dev
