@@ -102,8 +102,13 @@ TEST(MapMergeRostest, EveryRobotsMapTfMatchesGroundTruth) {
   ASSERT_TRUE(waitFor([&] { return info_srv.exists() && ls.getNumPublishers() > 0; }, 30.0))
       << "the nodelets did not come up";
 
-  const std::string play = "rosbag play --clock --quiet --delay 1 --rate " + std::to_string(rate) +
-                           " " + bag + " > " + (dir / "play.log").string() + " 2>&1";
+  // Each robot's submap windows start at its first cloud received, and the paths are matched to
+  // the dataset by stamp: the player waits until every topic of the bag has its subscriber (this
+  // node's TF listener takes /tf), as --delay alone did not on a loaded machine (a robot's first
+  // clouds lost, its windows 0.1 s late, none of its submaps matched).
+  const std::string play = "rosbag play --clock --quiet --delay 1 --wait-for-subscribers --rate " +
+                           std::to_string(rate) + " " + bag + " > " + (dir / "play.log").string() +
+                           " 2>&1";
   ASSERT_EQ(std::system(play.c_str()), 0) << play;
 
   // Every submap in the graph and the latest solve holding all of it.

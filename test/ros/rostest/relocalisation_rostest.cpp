@@ -104,8 +104,12 @@ void playAndCollect(const Dataset& ds, const std::string& bag, const fs::path& d
       remap += " /" + from + "/" + topic + ":=/" + to + "/" + topic;
     }
   }
-  const std::string play = "rosbag play --clock --quiet --delay 1 --rate 3 " + bag + remap + " > " +
-                           (dir / ("play_" + r1 + ".log")).string() + " 2>&1";
+  // The player waits until every topic has its subscriber (this node's TF listener takes /tf):
+  // a robot's submap windows start at its first cloud received, and the submaps are matched to
+  // the dataset by stamp.
+  const std::string play =
+      "rosbag play --clock --quiet --delay 1 --wait-for-subscribers --rate 3 " + bag + remap +
+      " > " + (dir / ("play_" + r1 + ".log")).string() + " 2>&1";
   ASSERT_EQ(std::system(play.c_str()), 0) << play;
 
   dtif::GetMapInfo info;
