@@ -382,5 +382,71 @@ TEST(Elevation, FitsResidualTiltFromGroundMaps) {
   }
 }
 
+/// No stem base seen, and the two submaps' levelled frames off by a residual tilt of about
+/// 1 deg (each robot's levelling error: tenths of a degree, up to ~1 deg for its first
+/// submaps): their ground maps, 40 m across, differ by t_z plus a plane, spread over
+/// +-0.3 m, and the mode of the differences alone is too weak or ambiguous to trust. The search
+/// over the residual tilt (ground_tilt_search_deg) settles t_z; without it (0) the same loops
+/// are rejected.
+TEST(Elevation, GroundMapsOfTiltedFramesSettleTheElevation) {
+  int checked = 0, accepted_flat = 0, accepted_search = 0;
+  std::mt19937 rng(47);
+  for (PairCase& pc : overlappingPairs(12, 515)) {
+    for (TrunkLandmark& t : pc.q.trunks) t.base_seen = false;
+    for (TrunkLandmark& t : pc.c.trunks) t.base_seen = false;
+    Verification ver;
+    EXPECT_FALSE(matchPair(pc.q, pc.c, LoopDetectorParams(), nullptr, &ver).has_value());
+    // Rejected before the elevation otherwise.
+    if (ver.rejection != Rejection::kElevationUnobserved || ver.vote_rejection != Rejection::kNone)
+      continue;
+    ++checked;
+    // The query's frame turned by the residual tilt about its origin (the true t_z stays): its
+    // trunks in that frame (their faces change by millimetres) and its ground map seen from it.
+    const Pose T_W_c = Pose::Identity(), T_W_q = tilted(pc.T_c_q, 1.0, -0.8);
+    const Pose T_q_tilted = pc.T_c_q.inverse() * T_W_q;
+    for (TrunkLandmark& t : pc.q.trunks) {
+      const Eigen::Vector3d p = T_q_tilted.inverse() * Eigen::Vector3d(t.x, t.y, t.z);
+      t.x = p.x(), t.y = p.y(), t.z = p.z();
+    }
+    pc.T_c_q = T_W_q;
+    // The query was levelled by dtif (a stock FAST-LIO2 frame 8 deg off): the search is for
+    // its levelling error. Trunks and maps are in the levelled frame L, the loop in S.
+    pc.q.level_rotation =
+        Eigen::Quaterniond(Eigen::AngleAxisd(8.0 * M_PI / 180.0, Eigen::Vector3d::UnitX()));
+    Pose R_L_S = Pose::Identity();
+    R_L_S.linear() = pc.q.level_rotation.toRotationMatrix();
+    const Pose T_c_q_S = T_W_q * R_L_S;
+    pc.c.ground_map =
+        test::mapOf(test::hillyGround(rng, Eigen::Vector2d::Zero(), 20.0, true), T_W_c, 0.5, 0.05);
+    pc.q.ground_map = test::mapOf(
+        test::hillyGround(rng, pc.T_c_q.translation().head<2>(), 20.0, true), T_W_q, 0.5, 0.05);
+    LoopDetectorParams flat;
+    flat.verification.ground_tilt_search_deg = 0.0;
+    Verification v_flat;
+    const auto lf = matchPair(pc.q, pc.c, flat, nullptr, &v_flat);
+    accepted_flat += lf.has_value();
+    Verification v;
+    const auto lc = matchPair(pc.q, pc.c, LoopDetectorParams(), nullptr, &v);
+    if (!lc) continue;
+    ++accepted_search;
+    EXPECT_EQ(v.z_pairs, 0);
+    EXPECT_GE(v.ground_cells, LoopDetectorParams().verification.min_ground_cells);
+    EXPECT_NEAR(lc->T_c_q.translation().z(), T_c_q_S.translation().z(), 0.05);
+    EXPECT_LT(rotationErrorDeg(lc->T_c_q, T_c_q_S), 0.3);  // the tilt found, not only t_z
+    // Between frames that were not levelled it does not search.
+    pc.q.level_rotation = Eigen::Quaterniond::Identity();
+    Verification v_level;
+    EXPECT_EQ(matchPair(pc.q, pc.c, LoopDetectorParams(), nullptr, &v_level).has_value(),
+              lf.has_value());
+  }
+  std::printf(
+      "[ info ] tilted frames, no base seen: %d pairs, %d accepted untilted, %d with the "
+      "tilt search\n",
+      checked, accepted_flat, accepted_search);
+  EXPECT_GE(checked, 8);
+  EXPECT_LT(accepted_flat, checked);  // the case the search is for: measured 7 of 12
+  EXPECT_EQ(accepted_search, checked);
+}
+
 }  // namespace
 }  // namespace dtif

@@ -244,6 +244,92 @@ void addGroundSamples(const Descriptor& q, const Descriptor& c, const Pose& T,
   smp->ground_start = g.dz_m;
 }
 
+/// T turned by a small tilt (roll alpha, pitch beta) about `centre` (horizontal, z 0).
+Pose tiltedAbout(const Pose& T, double alpha, double beta, const Eigen::Vector2d& centre) {
+  Pose R = Pose::Identity();
+  R.linear() = (Eigen::AngleAxisd(alpha, Eigen::Vector3d::UnitX()) *
+                Eigen::AngleAxisd(beta, Eigen::Vector3d::UnitY()))
+                   .toRotationMatrix();
+  const Eigen::Vector3d c3(centre.x(), centre.y(), 0.0);
+  R.translation() = c3 - R.linear() * c3;
+  return R * T;
+}
+
+/// The ground maps' elevation under `T` turned by the residual tilt that gives their
+/// differences the strongest mode, searched within ground_tilt_search_deg per axis when either
+/// submap was levelled (Descriptor::levelled). Each robot's
+/// levelled frame is off gravity by its levelling error (tenths of a degree, up to ~1 deg for a
+/// robot's first submaps), so two maps 20-40 m across differ by a plane, not a constant: at
+/// 0.6 deg their cells' differences spread over +-0.2 m and the 15 cm window's mode can look no
+/// better than a runner-up (`elevation ambiguous`) although the horizontal pose is right.
+/// The search tilts the differences (to first order, a tilt about their centroid adds a plane
+/// to them) in steps of 0.2 deg (0.07 m at 20 m, within the window), then 0.05 deg around the
+/// best, by the count within the window of the smoothed 5 cm histogram's peak, as
+/// groundElevation counts it; the winner is measured exactly with `T` turned by it. `T` is
+/// turned when the winner's support beats no tilt's.
+GroundElevation tiltedGroundElevation(const Descriptor& q, const Descriptor& c,
+                                      const VerifierParams& params, Pose* T) {
+  const GroundElevation flat =
+      groundElevation(q.ground_map, c.ground_map, *T, params.ground_window_m);
+  // Only frames dtif levelled (tilted odometry frames) carry a levelling error to search for;
+  // between gravity-aligned frames (a few tenths of a degree) the search only adds freedom:
+  // on level scenes it moved queries' best loops to worse-fitting ones (very_sparse seeds 1-3).
+  if (!(params.ground_tilt_search_deg > 0.0) || !(q.levelled() || c.levelled())) return flat;
+  const GroundDifferences d = groundDifferences(q.ground_map, c.ground_map, *T);
+  if (d.xy.empty()) return flat;
+  Eigen::Vector2d centre = Eigen::Vector2d::Zero();
+  for (const auto& p : d.xy) centre += p;
+  centre /= static_cast<double>(d.xy.size());
+  constexpr double kBin = 0.05, kMaxDz = 30.0;  // groundElevation's histogram
+  const int nb = static_cast<int>(std::lround(kMaxDz / kBin));
+  std::vector<int> hist(2 * nb + 1);
+  std::vector<double> dz(d.dz.size());
+  // Support of the mode with the differences tilted by roll a, pitch b (z' = z + a y - b x).
+  const auto support = [&](double a, double b) {
+    std::fill(hist.begin(), hist.end(), 0);
+    for (size_t k = 0; k < d.dz.size(); ++k) {
+      dz[k] = d.dz[k] - a * (d.xy[k].y() - centre.y()) + b * (d.xy[k].x() - centre.x());
+      const long bin = std::lround(dz[k] / kBin);
+      if (std::abs(bin) <= nb) ++hist[static_cast<size_t>(bin + nb)];
+    }
+    int peak_s = -1;
+    size_t peak = 0;
+    for (size_t i = 1; i + 1 < hist.size(); ++i) {
+      const int sm = hist[i - 1] + 2 * hist[i] + hist[i + 1];
+      if (sm > peak_s) peak_s = sm, peak = i;
+    }
+    const double mode = (static_cast<double>(peak) - nb) * kBin;
+    int n = 0;
+    for (double x : dz) n += std::abs(x) <= kMaxDz && std::abs(x - mode) <= params.ground_window_m;
+    return n;
+  };
+  const double deg = M_PI / 180.0, range = params.ground_tilt_search_deg * deg;
+  double best_a = 0.0, best_b = 0.0;
+  int best = support(0.0, 0.0);
+  const auto search = [&](double a0, double b0, double half, double step) {
+    const int n = static_cast<int>(std::floor(half / step + 1e-9));
+    double next_a = best_a, next_b = best_b;
+    for (int i = -n; i <= n; ++i) {
+      for (int j = -n; j <= n; ++j) {
+        const double a = a0 + i * step, b = b0 + j * step;
+        if (std::abs(a) > range + 1e-12 || std::abs(b) > range + 1e-12) continue;
+        const int s = support(a, b);
+        if (s > best) best = s, next_a = a, next_b = b;
+      }
+    }
+    best_a = next_a, best_b = next_b;
+  };
+  search(0.0, 0.0, range, 0.2 * deg);
+  search(best_a, best_b, 0.15 * deg, 0.05 * deg);
+  if (best_a == 0.0 && best_b == 0.0) return flat;
+  const Pose T_tilted = tiltedAbout(*T, best_a, best_b, centre);
+  const GroundElevation g =
+      groundElevation(q.ground_map, c.ground_map, T_tilted, params.ground_window_m);
+  if (!g.ok || g.support <= flat.support) return flat;
+  *T = T_tilted;
+  return g;
+}
+
 }  // namespace
 
 double refineElevation(const Descriptor& q, const Descriptor& c,
@@ -291,7 +377,18 @@ Rejection checkElevation(const Descriptor& q, const Descriptor& c, const Verifie
       v->tilt_fitted) {
     return why;
   }
-  const GroundElevation g = groundElevation(q.ground_map, c.ground_map, *T, params.ground_window_m);
+  GroundElevation g = groundElevation(q.ground_map, c.ground_map, *T, params.ground_window_m);
+  if (!g.ok || g.support < params.min_ground_cells || g.ambiguity > params.max_ground_ambiguity) {
+    // Perhaps only the two levelled frames' residual tilt smears the mode: search it. Only
+    // here, so that every elevation the maps settle untilted stays as it was.
+    Pose T_tilted = *T;
+    const GroundElevation gt = tiltedGroundElevation(q, c, params, &T_tilted);
+    if (gt.ok && gt.support >= params.min_ground_cells &&
+        gt.ambiguity <= params.max_ground_ambiguity) {
+      g = gt;
+      *T = T_tilted;
+    }
+  }
   v->ground_ambiguity = g.ok ? g.ambiguity : -1.0;
   if (!g.ok || g.support < params.min_ground_cells) return why;
   if (g.ambiguity > params.max_ground_ambiguity) return Rejection::kElevationAmbiguous;

@@ -277,6 +277,8 @@ std::string VerifierParams::validate() const {
     err << "ground_window_m must be in (0, 1]; ";
   if (!(max_ground_ambiguity >= 0.0 && max_ground_ambiguity <= 1.0))
     err << "max_ground_ambiguity must be in [0, 1]; ";
+  if (!(ground_tilt_search_deg >= 0.0 && ground_tilt_search_deg <= 5.0))
+    err << "ground_tilt_search_deg must be in [0, 5] (0: no search); ";
   if (!(max_fit_ambiguity >= 0.0 && max_fit_ambiguity < 1.0)) {
     err << "max_fit_ambiguity must be in [0, 1) (0: ambiguous hypotheses are rejected); ";
   }

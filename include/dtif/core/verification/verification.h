@@ -84,6 +84,12 @@ struct VerifierParams {
   /// The highest other difference (more than 2 ground_window_m away) over the mode, at most;
   /// a wrong horizontal pose gives a flat histogram [0..1].
   double max_ground_ambiguity = 0.6;
+  /// When the ground maps' mode is too weak or ambiguous under the loop's pose and either
+  /// submap was levelled (tilted odometry frame), it is searched again with the query turned by
+  /// a residual tilt of up to this per axis (roll, pitch): two robots' levelled frames differ by
+  /// their levelling errors, which smear the differences of maps 20-40 m across. 0: no search
+  /// [deg].
+  double ground_tilt_search_deg = 1.0;
 
   std::string validate() const;
 
@@ -114,6 +120,7 @@ struct VerifierParams {
     v("min_ground_cells", min_ground_cells);
     v("ground_window_m", ground_window_m);
     v("max_ground_ambiguity", max_ground_ambiguity);
+    v("ground_tilt_search_deg", ground_tilt_search_deg);
   }
 };
 
