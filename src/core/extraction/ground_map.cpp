@@ -478,14 +478,17 @@ GroundDifferences groundDifferences(const GroundMap& q, const GroundMap& c, cons
 
 GroundElevation groundElevation(const GroundMap& q, const GroundMap& c, const Pose& T_c_q,
                                 double window_m) {
+  if (q.empty() || c.empty()) return GroundElevation();
+  return groundElevationOf(groundDifferences(q, c, T_c_q).dz, window_m);
+}
+
+GroundElevation groundElevationOf(const std::vector<double>& differences, double window_m) {
   GroundElevation out;
-  if (q.empty() || c.empty()) return out;
   const int nb = static_cast<int>(std::lround(kMaxDz / kBin));
   std::vector<double> hist(2 * nb + 1, 0.0);
   std::vector<double> dz;
-  const GroundDifferences diff = groundDifferences(q, c, T_c_q);
-  out.compared = static_cast<int>(diff.dz.size());
-  for (double d : diff.dz) {
+  out.compared = static_cast<int>(differences.size());
+  for (double d : differences) {
     const long b = std::lround(d / kBin);
     if (std::abs(b) > nb) continue;
     hist[static_cast<size_t>(b + nb)] += 1.0;

@@ -179,6 +179,17 @@ double tiltSpread(const TiltSamples& smp, Eigen::Vector2d* centre) {
       std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(cov).eigenvalues().minCoeff()));
 }
 
+/// T turned by a small tilt (roll alpha, pitch beta) about `centre` (horizontal, z 0).
+Pose tiltedAbout(const Pose& T, double alpha, double beta, const Eigen::Vector2d& centre) {
+  Pose R = Pose::Identity();
+  R.linear() = (Eigen::AngleAxisd(alpha, Eigen::Vector3d::UnitX()) *
+                Eigen::AngleAxisd(beta, Eigen::Vector3d::UnitY()))
+                   .toRotationMatrix();
+  const Eigen::Vector3d c3(centre.x(), centre.y(), 0.0);
+  R.translation() = c3 - R.linear() * c3;
+  return R * T;
+}
+
 /// Residual roll/pitch from the samples when they spread enough, the ground cells kept are
 /// enough (tilt_min_ground_cells; else the bases alone, when tilt_min_pairs of them) and the
 /// fitted tilt is plausible (max_tilt_deg): rotates `T` about their centre and fills v's tilt
@@ -204,16 +215,10 @@ void fitTilt(TiltSamples smp, double z_applied, const VerifierParams& params, Po
   // z' = z - beta x + alpha y for a small rotation R_x(alpha) R_y(beta) about `mean`.
   const double alpha = std::asin(std::clamp(s(3), -1.0, 1.0));
   const double beta = -std::asin(std::clamp(s(2), -1.0, 1.0));
-  const Eigen::Matrix3d R_tilt = (Eigen::AngleAxisd(alpha, Eigen::Vector3d::UnitX()) *
-                                  Eigen::AngleAxisd(beta, Eigen::Vector3d::UnitY()))
-                                     .toRotationMatrix();
   // Rotate about the centre at its refined elevation, so t_z stays well conditioned.
   const double offset = smp.bases.xy.empty() ? s(1) : s(0);
-  Pose T_tilt = Pose::Identity();
-  const Eigen::Vector3d centre(mean.x(), mean.y(), 0.0);
-  T_tilt.linear() = R_tilt;
-  T_tilt.translation() = centre - R_tilt * centre + Eigen::Vector3d(0, 0, offset - z_applied);
-  *T = T_tilt * *T;
+  *T = tiltedAbout(*T, alpha, beta, mean);
+  T->translation().z() += offset - z_applied;
   v->tilt_fitted = true;
   v->tilt_ground_cells = smp.ground.xy.empty() ? 0 : kept;
   // Information in units of a full-weight pair of std dev base_sigma_m; s3 is the roll
@@ -233,26 +238,15 @@ void fitTilt(TiltSamples smp, double z_applied, const VerifierParams& params, Po
 void addGroundSamples(const Descriptor& q, const Descriptor& c, const Pose& T,
                       const VerifierParams& params, TiltSamples* smp) {
   if (params.tilt_min_ground_cells <= 0 || q.ground_map.empty() || c.ground_map.empty()) return;
-  const GroundElevation g = groundElevation(q.ground_map, c.ground_map, T, params.ground_window_m);
+  const GroundDifferences d = groundDifferences(q.ground_map, c.ground_map, T);
+  const GroundElevation g = groundElevationOf(d.dz, params.ground_window_m);
   if (!g.ok || g.support < params.tilt_min_ground_cells ||
       g.ambiguity > params.max_ground_ambiguity) {
     return;
   }
-  const GroundDifferences d = groundDifferences(q.ground_map, c.ground_map, T);
   smp->ground.xy = d.xy;
   smp->ground.dz = d.dz;
   smp->ground_start = g.dz_m;
-}
-
-/// T turned by a small tilt (roll alpha, pitch beta) about `centre` (horizontal, z 0).
-Pose tiltedAbout(const Pose& T, double alpha, double beta, const Eigen::Vector2d& centre) {
-  Pose R = Pose::Identity();
-  R.linear() = (Eigen::AngleAxisd(alpha, Eigen::Vector3d::UnitX()) *
-                Eigen::AngleAxisd(beta, Eigen::Vector3d::UnitY()))
-                   .toRotationMatrix();
-  const Eigen::Vector3d c3(centre.x(), centre.y(), 0.0);
-  R.translation() = c3 - R.linear() * c3;
-  return R * T;
 }
 
 /// The ground maps' elevation under `T` turned by the residual tilt that gives their
@@ -266,11 +260,10 @@ Pose tiltedAbout(const Pose& T, double alpha, double beta, const Eigen::Vector2d
 /// to them) in steps of 0.2 deg (0.07 m at 20 m, within the window), then 0.05 deg around the
 /// best, by the count within the window of the smoothed 5 cm histogram's peak, as
 /// groundElevation counts it; the winner is measured exactly with `T` turned by it. `T` is
-/// turned when the winner's support beats no tilt's.
+/// turned when the winner's support beats `flat`'s (the untilted elevation).
 GroundElevation tiltedGroundElevation(const Descriptor& q, const Descriptor& c,
-                                      const VerifierParams& params, Pose* T) {
-  const GroundElevation flat =
-      groundElevation(q.ground_map, c.ground_map, *T, params.ground_window_m);
+                                      const VerifierParams& params, const GroundElevation& flat,
+                                      Pose* T) {
   // Only frames dtif levelled (tilted odometry frames) carry a levelling error to search for;
   // between gravity-aligned frames (a few tenths of a degree) the search only adds freedom:
   // on level scenes it moved queries' best loops to worse-fitting ones (very_sparse seeds 1-3).
@@ -280,32 +273,17 @@ GroundElevation tiltedGroundElevation(const Descriptor& q, const Descriptor& c,
   Eigen::Vector2d centre = Eigen::Vector2d::Zero();
   for (const auto& p : d.xy) centre += p;
   centre /= static_cast<double>(d.xy.size());
-  constexpr double kBin = 0.05, kMaxDz = 30.0;  // groundElevation's histogram
-  const int nb = static_cast<int>(std::lround(kMaxDz / kBin));
-  std::vector<int> hist(2 * nb + 1);
   std::vector<double> dz(d.dz.size());
   // Support of the mode with the differences tilted by roll a, pitch b (z' = z + a y - b x).
   const auto support = [&](double a, double b) {
-    std::fill(hist.begin(), hist.end(), 0);
     for (size_t k = 0; k < d.dz.size(); ++k) {
       dz[k] = d.dz[k] - a * (d.xy[k].y() - centre.y()) + b * (d.xy[k].x() - centre.x());
-      const long bin = std::lround(dz[k] / kBin);
-      if (std::abs(bin) <= nb) ++hist[static_cast<size_t>(bin + nb)];
     }
-    int peak_s = -1;
-    size_t peak = 0;
-    for (size_t i = 1; i + 1 < hist.size(); ++i) {
-      const int sm = hist[i - 1] + 2 * hist[i] + hist[i + 1];
-      if (sm > peak_s) peak_s = sm, peak = i;
-    }
-    const double mode = (static_cast<double>(peak) - nb) * kBin;
-    int n = 0;
-    for (double x : dz) n += std::abs(x) <= kMaxDz && std::abs(x - mode) <= params.ground_window_m;
-    return n;
+    return groundElevationOf(dz, params.ground_window_m).support;
   };
   const double deg = M_PI / 180.0, range = params.ground_tilt_search_deg * deg;
   double best_a = 0.0, best_b = 0.0;
-  int best = support(0.0, 0.0);
+  int best = flat.support;  // the untilted differences are d.dz
   const auto search = [&](double a0, double b0, double half, double step) {
     const int n = static_cast<int>(std::floor(half / step + 1e-9));
     double next_a = best_a, next_b = best_b;
@@ -382,7 +360,7 @@ Rejection checkElevation(const Descriptor& q, const Descriptor& c, const Verifie
     // Perhaps only the two levelled frames' residual tilt smears the mode: search it. Only
     // here, so that every elevation the maps settle untilted stays as it was.
     Pose T_tilted = *T;
-    const GroundElevation gt = tiltedGroundElevation(q, c, params, &T_tilted);
+    const GroundElevation gt = tiltedGroundElevation(q, c, params, g, &T_tilted);
     if (gt.ok && gt.support >= params.min_ground_cells &&
         gt.ambiguity <= params.max_ground_ambiguity) {
       g = gt;

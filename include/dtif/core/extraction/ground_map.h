@@ -89,4 +89,8 @@ struct GroundElevation {
 GroundElevation groundElevation(const GroundMap& q, const GroundMap& c, const Pose& T_c_q,
                                 double window_m);
 
+/// groundElevation of given differences (e.g. groundDifferences with a plane removed);
+/// `compared` is their count.
+GroundElevation groundElevationOf(const std::vector<double>& differences, double window_m);
+
 }  // namespace dtif
