@@ -140,6 +140,13 @@ VoteBin& VoteAccumulator::at(int64_t iyaw, int64_t ix, int64_t iy) {
 VoteAccumulator accumulateVotes(const std::vector<TrunkPair>& pq, const std::vector<TrunkPair>& pc,
                                 const MatcherParams& params) {
   VoteAccumulator acc;
+  accumulateVotes(pq, pc, params, &acc);
+  return acc;
+}
+
+void accumulateVotes(const std::vector<TrunkPair>& pq, const std::vector<TrunkPair>& pc,
+                     const MatcherParams& params, VoteAccumulator* out) {
+  VoteAccumulator& acc = *out;
   const int64_t n_yaw = std::clamp<int64_t>(std::llround(360.0 / params.vote_yaw_bin_deg), 1, 4095);
   const double yaw_bin = kTwoPi / static_cast<double>(n_yaw);
   const double xy_bin = params.vote_xy_bin_m;
@@ -186,7 +193,6 @@ VoteAccumulator accumulateVotes(const std::vector<TrunkPair>& pq, const std::vec
     const double turned = yaw < 0.0 ? yaw + M_PI : yaw - M_PI;
     vote(bins.of(turned, [&] { return std::atan2(-sy, -cy); }), -cy, -sy, a.mid, b.mid);
   });
-  return acc;
 }
 
 std::vector<ScoredSeed> scoreSeeds(const VoteAccumulator& acc) {
@@ -263,7 +269,9 @@ std::vector<VotePeak> votePoses(const Descriptor& q, const Descriptor& c,
   const std::vector<TrunkPair> pq = pair_vote_stages::trunkPairs(q, params.vote_max_pair_m);
   const std::vector<TrunkPair> pc = pair_vote_stages::trunkPairs(c, params.vote_max_pair_m);
   if (pq.empty() || pc.empty()) return {};
-  const pair_vote_stages::VoteAccumulator acc = pair_vote_stages::accumulateVotes(pq, pc, params);
+  // One accumulator per thread, its memory kept between calls (see accumulateVotes).
+  thread_local pair_vote_stages::VoteAccumulator acc;
+  pair_vote_stages::accumulateVotes(pq, pc, params, &acc);
   if (acc.bins.empty()) return {};
   return pair_vote_stages::selectPeaks(pair_vote_stages::scoreSeeds(acc), acc.n_yaw, max_peaks);
 }

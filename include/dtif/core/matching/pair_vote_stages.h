@@ -67,6 +67,10 @@ struct VoteAccumulator {
 /// with j, and for the one turned by pi. Translations beyond the bin packing range do not vote.
 VoteAccumulator accumulateVotes(const std::vector<TrunkPair>& pq, const std::vector<TrunkPair>& pc,
                                 const MatcherParams& params);
+/// The same, into *acc (its contents replaced; its memory reused): votePoses keeps one per
+/// thread, as a fresh table of ~1.5 MB was mapped, page-faulted and unmapped per candidate.
+void accumulateVotes(const std::vector<TrunkPair>& pq, const std::vector<TrunkPair>& pc,
+                     const MatcherParams& params, VoteAccumulator* acc);
 
 /// A seed bin and the sums over its 3 x 3 x 3 neighbourhood (yaw wraps around).
 struct ScoredSeed {
