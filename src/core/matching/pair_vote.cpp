@@ -104,6 +104,21 @@ void VoteAccumulator::reserve(size_t n) {
   bins.reserve(n);
 }
 
+void VoteAccumulator::rehash(size_t n) {
+  size_t cap = 16;
+  while (cap < 2 * n) cap *= 2;  // as reserve(n)
+  slots_.assign(cap, Slot{});
+  mask_ = cap - 1;
+  // The bins stay where they are (a reused accumulator keeps their memory); their slots are
+  // taken again in bin order, as re-adding them one by one to an empty table would.
+  for (size_t i = 0; i < bins.size(); ++i) {
+    const int64_t key = packBin(bins[i].iyaw, bins[i].ix, bins[i].iy);
+    Slot& s = slots_[slot(key)];
+    s.key = key;
+    s.index = static_cast<int64_t>(i);
+  }
+}
+
 size_t VoteAccumulator::slot(int64_t key) const {
   // Fibonacci hashing, then linear probing to the key or the first free slot.
   size_t k =
@@ -119,12 +134,7 @@ const VoteBin* VoteAccumulator::find(int64_t iyaw, int64_t ix, int64_t iy) const
 }
 
 VoteBin& VoteAccumulator::at(int64_t iyaw, int64_t ix, int64_t iy) {
-  if (2 * (bins.size() + 1) > slots_.size()) {  // full: rehash into a table twice the size
-    std::vector<VoteBin> old;
-    old.swap(bins);
-    reserve(std::max<size_t>(16, 2 * old.size()));
-    for (const VoteBin& b : old) at(b.iyaw, b.ix, b.iy) = b;
-  }
+  if (2 * (bins.size() + 1) > slots_.size()) rehash(std::max<size_t>(16, 2 * bins.size()));
   const int64_t key = packBin(iyaw, ix, iy);
   Slot& s = slots_[slot(key)];
   if (s.index < 0) {

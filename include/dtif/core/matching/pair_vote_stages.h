@@ -52,6 +52,8 @@ struct VoteAccumulator {
 
  private:
   size_t slot(int64_t key) const;
+  /// A table for up to n bins holding the current ones.
+  void rehash(size_t n);
   /// Per slot its packed indices (-1: free) and its bin in bins, side by side: a probe reads
   /// one cache line, not one in each of two arrays.
   struct Slot {
