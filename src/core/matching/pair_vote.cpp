@@ -283,7 +283,12 @@ std::vector<VotePeak> votePoses(const Descriptor& q, const Descriptor& c,
   thread_local pair_vote_stages::VoteAccumulator acc;
   pair_vote_stages::accumulateVotes(pq, pc, params, &acc);
   if (acc.bins.empty()) return {};
-  return pair_vote_stages::selectPeaks(pair_vote_stages::scoreSeeds(acc), acc.n_yaw, max_peaks);
+  std::vector<VotePeak> peaks =
+      pair_vote_stages::selectPeaks(pair_vote_stages::scoreSeeds(acc), acc.n_yaw, max_peaks);
+  // Submap pairs fill ~10^4-10^5 bins; an outsized pair's table is not held on to.
+  constexpr size_t kKeptBins = size_t{1} << 20;
+  if (acc.bins.capacity() > kKeptBins) acc = pair_vote_stages::VoteAccumulator{};
+  return peaks;
 }
 
 }  // namespace dtif
