@@ -283,6 +283,45 @@ TEST(QueryIndex, VotesFallInTheBinsOfTheirOwnAtan2) {
   }
 }
 
+TEST(QueryIndex, AReusedVoteAccumulatorEqualsAFreshOne) {
+  // votePoses keeps one accumulator per thread: filled again after a larger and after a smaller
+  // pair of stands (left full and grown, or with room to spare), its bins, in order, and its
+  // lookups are those of a fresh one.
+  const MatcherParams params;
+  const auto cases = test::overlappingPairs(3, 23);
+  ASSERT_EQ(cases.size(), 3u);
+  auto pairsOf = [&](const Descriptor& d) {
+    return pair_vote_stages::trunkPairs(d, params.vote_max_pair_m);
+  };
+  pair_vote_stages::VoteAccumulator reused;
+  std::vector<std::tuple<int64_t, int64_t, int64_t>> previous;
+  size_t checked = 0;
+  for (const size_t k : {size_t{0}, size_t{1}, size_t{2}, size_t{0}}) {
+    const auto pq = pairsOf(cases[k].q), pc = pairsOf(cases[k].c);
+    const pair_vote_stages::VoteAccumulator fresh =
+        pair_vote_stages::accumulateVotes(pq, pc, params);
+    pair_vote_stages::accumulateVotes(pq, pc, params, &reused);
+    ASSERT_EQ(reused.bins.size(), fresh.bins.size());
+    ASSERT_GT(fresh.bins.size(), 100u);
+    for (size_t i = 0; i < fresh.bins.size(); ++i) {
+      const pair_vote_stages::VoteBin &a = reused.bins[i], &b = fresh.bins[i];
+      ASSERT_EQ(std::make_tuple(a.iyaw, a.ix, a.iy), std::make_tuple(b.iyaw, b.ix, b.iy));
+      EXPECT_EQ(a.count, b.count);
+      EXPECT_EQ(a.cos_sum, b.cos_sum);
+      EXPECT_EQ(a.sin_sum, b.sin_sum);
+      EXPECT_EQ(a.t_sum, b.t_sum);
+      EXPECT_EQ(reused.find(a.iyaw, a.ix, a.iy), &a);
+      EXPECT_EQ(reused.find(a.iyaw, a.ix + 100000, a.iy), nullptr);
+    }
+    for (const auto& [iyaw, ix, iy] : previous)  // no bin left over from the last fill
+      EXPECT_EQ(reused.find(iyaw, ix, iy) == nullptr, fresh.find(iyaw, ix, iy) == nullptr);
+    previous.clear();
+    for (const auto& b : fresh.bins) previous.emplace_back(b.iyaw, b.ix, b.iy);
+    ++checked;
+  }
+  EXPECT_EQ(checked, 4u);
+}
+
 /// matchTriangles as it was before the squared-distance bound: every trunk pair's hypot sorted.
 std::vector<MatchTriangle> referenceMatchTriangles(const Descriptor& d, int k) {
   const int n = static_cast<int>(d.trunks.size());

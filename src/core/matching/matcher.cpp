@@ -8,6 +8,9 @@
 #include <cstring>
 #include <limits>
 #include <sstream>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 #include "dtif/core/matching/matcher_stages.h"
 
@@ -493,10 +496,24 @@ std::pair<size_t, size_t> lengthWindow(const std::vector<float>& len0, double l,
   return {static_cast<size_t>(from - len0.begin()), static_cast<size_t>(to - len0.begin())};
 }
 
-/// f(k, m[k]) for every k < n with m[k] != 0, in order; eight zero bytes are skipped at once.
+/// f(k, m[k]) for every k < n with m[k] != 0, in order. With SSE2, the nonzero bytes of 16 at
+/// a time become bits, visited lowest first: no branch per byte (about one mask byte in ten is
+/// nonzero in a lattice stand, at random places, which the per-byte branch mispredicted).
 template <class F>
 void forEachNonzero(const uint8_t* m, size_t n, const F& f) {
   size_t j = 0;
+#ifdef __SSE2__
+  const __m128i zero = _mm_setzero_si128();
+  for (; j + 16 <= n; j += 16) {
+    const __m128i v = _mm_loadu_si128(reinterpret_cast<const __m128i*>(m + j));
+    unsigned bits = ~static_cast<unsigned>(_mm_movemask_epi8(_mm_cmpeq_epi8(v, zero))) & 0xffffu;
+    while (bits != 0) {
+      const size_t k = j + static_cast<size_t>(__builtin_ctz(bits));
+      f(k, m[k]);
+      bits &= bits - 1;
+    }
+  }
+#endif
   for (; j + 8 <= n; j += 8) {
     uint64_t word = 0;
     std::memcpy(&word, m + j, sizeof word);

@@ -104,6 +104,21 @@ void VoteAccumulator::reserve(size_t n) {
   bins.reserve(n);
 }
 
+void VoteAccumulator::rehash(size_t n) {
+  size_t cap = 16;
+  while (cap < 2 * n) cap *= 2;  // as reserve(n)
+  slots_.assign(cap, Slot{});
+  mask_ = cap - 1;
+  // The bins stay where they are (a reused accumulator keeps their memory); their slots are
+  // taken again in bin order, as re-adding them one by one to an empty table would.
+  for (size_t i = 0; i < bins.size(); ++i) {
+    const int64_t key = packBin(bins[i].iyaw, bins[i].ix, bins[i].iy);
+    Slot& s = slots_[slot(key)];
+    s.key = key;
+    s.index = static_cast<int64_t>(i);
+  }
+}
+
 size_t VoteAccumulator::slot(int64_t key) const {
   // Fibonacci hashing, then linear probing to the key or the first free slot.
   size_t k =
@@ -119,12 +134,7 @@ const VoteBin* VoteAccumulator::find(int64_t iyaw, int64_t ix, int64_t iy) const
 }
 
 VoteBin& VoteAccumulator::at(int64_t iyaw, int64_t ix, int64_t iy) {
-  if (2 * (bins.size() + 1) > slots_.size()) {  // full: rehash into a table twice the size
-    std::vector<VoteBin> old;
-    old.swap(bins);
-    reserve(std::max<size_t>(16, 2 * old.size()));
-    for (const VoteBin& b : old) at(b.iyaw, b.ix, b.iy) = b;
-  }
+  if (2 * (bins.size() + 1) > slots_.size()) rehash(std::max<size_t>(16, 2 * bins.size()));
   const int64_t key = packBin(iyaw, ix, iy);
   Slot& s = slots_[slot(key)];
   if (s.index < 0) {
@@ -140,6 +150,13 @@ VoteBin& VoteAccumulator::at(int64_t iyaw, int64_t ix, int64_t iy) {
 VoteAccumulator accumulateVotes(const std::vector<TrunkPair>& pq, const std::vector<TrunkPair>& pc,
                                 const MatcherParams& params) {
   VoteAccumulator acc;
+  accumulateVotes(pq, pc, params, &acc);
+  return acc;
+}
+
+void accumulateVotes(const std::vector<TrunkPair>& pq, const std::vector<TrunkPair>& pc,
+                     const MatcherParams& params, VoteAccumulator* out) {
+  VoteAccumulator& acc = *out;
   const int64_t n_yaw = std::clamp<int64_t>(std::llround(360.0 / params.vote_yaw_bin_deg), 1, 4095);
   const double yaw_bin = kTwoPi / static_cast<double>(n_yaw);
   const double xy_bin = params.vote_xy_bin_m;
@@ -186,7 +203,6 @@ VoteAccumulator accumulateVotes(const std::vector<TrunkPair>& pq, const std::vec
     const double turned = yaw < 0.0 ? yaw + M_PI : yaw - M_PI;
     vote(bins.of(turned, [&] { return std::atan2(-sy, -cy); }), -cy, -sy, a.mid, b.mid);
   });
-  return acc;
 }
 
 std::vector<ScoredSeed> scoreSeeds(const VoteAccumulator& acc) {
@@ -263,9 +279,16 @@ std::vector<VotePeak> votePoses(const Descriptor& q, const Descriptor& c,
   const std::vector<TrunkPair> pq = pair_vote_stages::trunkPairs(q, params.vote_max_pair_m);
   const std::vector<TrunkPair> pc = pair_vote_stages::trunkPairs(c, params.vote_max_pair_m);
   if (pq.empty() || pc.empty()) return {};
-  const pair_vote_stages::VoteAccumulator acc = pair_vote_stages::accumulateVotes(pq, pc, params);
+  // One accumulator per thread, its memory kept between calls (see accumulateVotes).
+  thread_local pair_vote_stages::VoteAccumulator acc;
+  pair_vote_stages::accumulateVotes(pq, pc, params, &acc);
   if (acc.bins.empty()) return {};
-  return pair_vote_stages::selectPeaks(pair_vote_stages::scoreSeeds(acc), acc.n_yaw, max_peaks);
+  std::vector<VotePeak> peaks =
+      pair_vote_stages::selectPeaks(pair_vote_stages::scoreSeeds(acc), acc.n_yaw, max_peaks);
+  // Submap pairs fill ~10^4-10^5 bins; an outsized pair's table is not held on to.
+  constexpr size_t kKeptBins = size_t{1} << 20;
+  if (acc.bins.capacity() > kKeptBins) acc = pair_vote_stages::VoteAccumulator{};
+  return peaks;
 }
 
 }  // namespace dtif

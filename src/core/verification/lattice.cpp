@@ -190,12 +190,15 @@ class TrunkGrid {
 /// the nearest trunks under the refitted pose; on `sample`, an even subset of the query trunks.
 /// The best few are refined by fitPose anyway: a second Procrustes round (until 2026-11-25)
 /// cost a third more and gave the same loops on the built-in scenes, seeds 1-3.
+/// `pairs` is scratch, reused by the caller across the ~1,500 poses of a search.
 std::pair<double, Pose> quickFit(const std::vector<Eigen::Vector2d>& sample, const TrunkGrid& grid,
-                                 Pose T, double radius, double score_radius) {
+                                 Pose T, double radius, double score_radius,
+                                 std::vector<std::pair<P2, P2>>* scratch) {
   auto at = [&T](const Eigen::Vector2d& t) {
     return (T * Eigen::Vector3d(t.x(), t.y(), 0.0)).head<2>().eval();
   };
-  std::vector<std::pair<P2, P2>> pairs;
+  std::vector<std::pair<P2, P2>>& pairs = *scratch;
+  pairs.clear();
   for (const Eigen::Vector2d& t : sample) {
     int j = -1;
     grid.nearest2(at(t), radius, &j);
@@ -231,6 +234,8 @@ std::vector<std::pair<double, Pose>> rankLatticePoses(const Descriptor& q, const
   for (size_t i = 0; i < q.trunks.size(); i += stride)
     sample.emplace_back(q.trunks[i].x, q.trunks[i].y);
   std::vector<std::pair<double, Pose>> ranked;
+  std::vector<std::pair<P2, P2>> pairs;
+  pairs.reserve(sample.size());
   for (int turn = 0; turn < 4; ++turn) {
     const double yaw = yaw0 + turn * M_PI / 2.0;
     const Eigen::Matrix2d R = Eigen::Rotation2Dd(yaw).toRotationMatrix();
@@ -238,7 +243,7 @@ std::vector<std::pair<double, Pose>> rankLatticePoses(const Descriptor& q, const
       Pose T = Pose::Identity();
       T.linear() = rotZ(yaw);
       T.translation() = Eigen::Vector3d(t.x(), t.y(), T0.translation().z());
-      ranked.push_back(quickFit(sample, grid, T, radius, score_radius));
+      ranked.push_back(quickFit(sample, grid, T, radius, score_radius, &pairs));
     }
   }
   *full = std::min(kFullFits, ranked.size());

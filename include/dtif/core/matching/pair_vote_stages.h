@@ -52,6 +52,8 @@ struct VoteAccumulator {
 
  private:
   size_t slot(int64_t key) const;
+  /// A table for up to n bins holding the current ones.
+  void rehash(size_t n);
   /// Per slot its packed indices (-1: free) and its bin in bins, side by side: a probe reads
   /// one cache line, not one in each of two arrays.
   struct Slot {
@@ -67,6 +69,10 @@ struct VoteAccumulator {
 /// with j, and for the one turned by pi. Translations beyond the bin packing range do not vote.
 VoteAccumulator accumulateVotes(const std::vector<TrunkPair>& pq, const std::vector<TrunkPair>& pc,
                                 const MatcherParams& params);
+/// The same, into *acc (its contents replaced; its memory reused): votePoses keeps one per
+/// thread, as a fresh table of ~1.5 MB was mapped, page-faulted and unmapped per candidate.
+void accumulateVotes(const std::vector<TrunkPair>& pq, const std::vector<TrunkPair>& pc,
+                     const MatcherParams& params, VoteAccumulator* acc);
 
 /// A seed bin and the sums over its 3 x 3 x 3 neighbourhood (yaw wraps around).
 struct ScoredSeed {
