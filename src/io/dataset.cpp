@@ -17,6 +17,7 @@
 #include <sstream>
 
 #include "dtif/core/file_io.h"
+#include "dtif/io/csv.h"
 #include "dtif/io/pcd_reader.h"
 
 namespace dtif {
@@ -32,20 +33,6 @@ namespace {
 
 [[noreturn]] void fail(const std::string& file, const std::string& what) {
   throw DatasetError(file + ": " + what);
-}
-
-std::vector<std::string> splitCsv(const std::string& line) {
-  std::vector<std::string> out;
-  std::string cell;
-  std::istringstream ss(line);
-  while (std::getline(ss, cell, ',')) {
-    // Trim blanks and a trailing carriage return (files written on Windows).
-    const auto b = cell.find_first_not_of(" \t\r");
-    const auto e = cell.find_last_not_of(" \t\r");
-    out.push_back(b == std::string::npos ? std::string() : cell.substr(b, e - b + 1));
-  }
-  if (!line.empty() && line.back() == ',') out.emplace_back();
-  return out;
 }
 
 /// A CSV table read whole: header names and rows, with the line number of each row.
@@ -76,7 +63,7 @@ CsvTable readCsv(const std::string& path, bool header_required = true) {
   while (std::getline(in, line)) {
     ++n;
     if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
-    auto cells = splitCsv(line);
+    auto cells = splitCsvLine(line);
     if (t.header.empty() && header_required) {
       t.header = cells;
       continue;

@@ -9,6 +9,7 @@
 #include <set>
 #include <sstream>
 
+#include "dtif/io/csv.h"
 #include "dtif/io/dataset.h"
 
 namespace dtif {
@@ -16,28 +17,6 @@ namespace {
 
 [[noreturn]] void fail(const std::string& file, const std::string& what) {
   throw DatasetError(file + ": " + what);
-}
-
-std::vector<std::string> splitCells(const std::string& line) {
-  std::vector<std::string> out;
-  std::string cur;
-  bool quoted = false;
-  for (char ch : line) {
-    if (ch == '"') {
-      quoted = !quoted;
-    } else if (ch == ',' && !quoted) {
-      out.push_back(cur);
-      cur.clear();
-    } else if (ch != '\r') {
-      cur += ch;
-    }
-  }
-  out.push_back(cur);
-  for (std::string& c : out) {
-    c.erase(0, c.find_first_not_of(" \t"));
-    c.erase(c.find_last_not_of(" \t") + 1);
-  }
-  return out;
 }
 
 bool parseNumber(const std::string& s, double* v) {
@@ -57,7 +36,7 @@ std::vector<std::pair<size_t, std::vector<std::string>>> readRows(const std::str
   while (std::getline(in, line)) {
     ++n;
     if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
-    rows.emplace_back(n, splitCells(line));
+    rows.emplace_back(n, splitCsvLine(line));
   }
   if (in.bad()) fail(path, "read error");
   return rows;

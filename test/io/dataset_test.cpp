@@ -5,6 +5,10 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <string>
+#include <vector>
+
+#include "dtif/io/csv.h"
 
 namespace dtif {
 namespace {
@@ -302,6 +306,14 @@ TEST_F(DatasetTest, ZeroPointPcdGivesAnEmptyCloud) {
             "VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 0\nHEIGHT 1\n"
             "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 0\nDATA binary\n");
   EXPECT_TRUE(loadPcd((dir_ / "empty.pcd").string())->empty());
+}
+
+TEST(CsvLine, QuotesBlanksCarriageReturnsAndTrailingCommas) {
+  using V = std::vector<std::string>;
+  EXPECT_EQ(splitCsvLine("id,robot, stamp "), (V{"id", "robot", "stamp"}));
+  EXPECT_EQ(splitCsvLine("1,\"a, b\",2\r"), (V{"1", "a, b", "2"}));
+  EXPECT_EQ(splitCsvLine("1,,3,"), (V{"1", "", "3", ""}));
+  EXPECT_EQ(splitCsvLine("\t7\t"), (V{"7"}));
 }
 
 }  // namespace
