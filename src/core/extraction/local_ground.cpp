@@ -135,21 +135,6 @@ class PointCell {
   int nx_, ny_;
 };
 
-// The counting sort's scatter: point i to out[fill[its cell]++], the place per run of points in
-// one cell kept in a register (as the counts).
-void scatterByCell(const LocalPoints& pts, const PointCell& cell_of, uint32_t* fill,
-                   GroundGrid::SortedPoint* out) {
-  const size_t n = pts.size();
-  const float *X = pts.x.data(), *Y = pts.y.data(), *Z = pts.z.data();
-  uint32_t run_cell = cell_of(X[0], Y[0]), at = fill[run_cell];
-  for (size_t i = 0; i < n; ++i) {
-    prefetchAhead(X, i, n), prefetchAhead(Y, i, n), prefetchAhead(Z, i, n);
-    const uint32_t c = cell_of(X[i], Y[i]);
-    if (c != run_cell) fill[run_cell] = at, run_cell = c, at = fill[c];
-    out[at++] = {X[i], Y[i], Z[i]};
-  }
-}
-
 }  // namespace
 
 LocalPoints toLocalPoints(const Cloud& cloud) {
@@ -246,22 +231,21 @@ void binGroundGrid(const LocalPoints& pts, const TrunkExtractorParams& p, Ground
   // than an array of them, read back twice: this is bound by memory traffic).
   grid.start.assign(gcells + 1, 0);
   const PointCell cell_of(grid);
-  // Raw pointers: through the members the compiler reloads them at every point. Consecutive
-  // points mostly share a cell: counted per run in a register, not by an increment in memory
-  // per point, each waiting for the previous one's store.
+  // Raw pointers: through the members the compiler reloads them at every point.
   uint32_t* count = grid.start.data() + 1;
-  uint32_t run_cell = cell_of(X[0], Y[0]), run = 0;
   for (size_t i = 0; i < n; ++i) {
     prefetchAhead(X, i, n), prefetchAhead(Y, i, n);
-    const uint32_t c = cell_of(X[i], Y[i]);
-    if (c != run_cell) count[run_cell] += run, run_cell = c, run = 0;
-    ++run;
+    ++count[cell_of(X[i], Y[i])];
   }
-  count[run_cell] += run;
   for (size_t c = 0; c < gcells; ++c) grid.start[c + 1] += grid.start[c];
   std::vector<uint32_t> fill(grid.start.begin(), grid.start.end() - 1);
   grid.sorted.resize(n);
-  scatterByCell(pts, cell_of, fill.data(), grid.sorted.data());
+  GroundGrid::SortedPoint* out_pts = grid.sorted.data();
+  const float* Z = pts.z.data();
+  for (size_t i = 0; i < n; ++i) {
+    prefetchAhead(X, i, n), prefetchAhead(Y, i, n), prefetchAhead(Z, i, n);
+    out_pts[fill[cell_of(X[i], Y[i])]++] = {X[i], Y[i], Z[i]};
+  }
 }
 
 GroundCells openGroundCells(const LocalPoints& /*pts: read through grid.sorted*/,
