@@ -125,6 +125,28 @@ TEST(Footprint, MarksGiveTrunkHeightCells) {
   }
 }
 
+TEST(Footprint, MarksOfOnePassEqualMarksPerPoint) {
+  // extraction marks through one branch-free Pass: the cells add() gives, and a point of the band
+  // outside the box (a box too small here) reported as incomplete, as add() reports it.
+  const Cloud cloud = bumpyStand(3);
+  std::vector<float> sx, sy, sz;
+  for (size_t i = 0; i < cloud.size(); i += 8)
+    sx.push_back(cloud[i].x), sy.push_back(cloud[i].y), sz.push_back(cloud[i].z);
+  for (const double hi_x : {20.0, 5.0}) {
+    HeightCellMarks one, each;
+    const Eigen::Vector2d lo(-20.0, 0.0), hi(hi_x, 40.0);
+    ASSERT_TRUE(one.init(sx, sy, sz, 0.3, lo, hi));
+    ASSERT_TRUE(each.init(sx, sy, sz, 0.3, lo, hi));
+    HeightCellMarks::Pass pass = one.pass();
+    for (const pcl::PointXYZ& q : cloud) pass.add(q.x, q.y, q.z), each.add(q.x, q.y, q.z);
+    one.finish(pass);
+    EXPECT_EQ(one.complete(), hi_x > 10.0);
+    EXPECT_EQ(each.complete(), one.complete());
+    EXPECT_GT(one.cells().size(), 50u);
+    EXPECT_EQ(one.cells(), each.cells());
+  }
+}
+
 TEST(Footprint, MarksRefuseFarCoordinates) {
   // Beyond 1e6 m the margins of the tiles lose metres in float: trunkHeightCells is used.
   HeightCellMarks marks;

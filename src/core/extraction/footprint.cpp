@@ -304,7 +304,7 @@ bool HeightCellMarks::init(const std::vector<float>& sx, const std::vector<float
   cx0_ = fastCellIndex(lo.x() / cell_m), cy0_ = fastCellIndex(lo.y() / cell_m);
   cw_ = fastCellIndex(hi.x() / cell_m) - cx0_ + 1, ch_ = fastCellIndex(hi.y() / cell_m) - cy0_ + 1;
   if (!(static_cast<double>(cw_) * static_cast<double>(ch_) <= 16e6)) return false;
-  marks_.assign(static_cast<size_t>(cw_ * ch_), 0);
+  marks_.assign(static_cast<size_t>(cw_ * ch_) + 1, 0);  // the cells and Pass's sink
   outside_ = false;
   return true;
 }

@@ -260,12 +260,14 @@ bool firstPass(const Cloud& cloud, const PointBounds& b, LocalPoints* pts, Heigh
   float minx = 0.0f, maxx = 0.0f, miny = 0.0f, maxy = 0.0f;
   bool have_origin = false;
   size_t n = 0, nf = 0;
+  const bool marking = marks != nullptr;
+  HeightCellMarks::Pass marker = marking ? marks->pass() : HeightCellMarks::Pass();
   for (size_t i = 0; i < size; ++i) {
     const float x = P[i].x, y = P[i].y, z = P[i].z;
     if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) continue;
     ++nf;
     if (!(std::abs(x - cx) <= hs && std::abs(y - cy) <= hs && std::abs(z - cz) <= hs)) return false;
-    if (marks) marks->add(x, y, z);
+    if (marking) marker.add(x, y, z);
     // As toLocalPoints: absurd magnitudes would overflow the cell indices.
     if (std::abs(x) > 1e8f || std::abs(y) > 1e8f || std::abs(z) > 1e8f) continue;
     if (!have_origin)
@@ -278,6 +280,7 @@ bool firstPass(const Cloud& cloud, const PointBounds& b, LocalPoints* pts, Heigh
     miny = std::min(miny, ly), maxy = std::max(maxy, ly);
     ++n;
   }
+  if (marking) marks->finish(marker);
   pts->ox = ox, pts->oy = oy, pts->oz = oz;
   pts->minx = minx, pts->maxx = maxx, pts->miny = miny, pts->maxy = maxy;
   pts->has_extent = n > 0;

@@ -63,19 +63,60 @@ class HeightCellMarks {
   bool init(const std::vector<float>& sx, const std::vector<float>& sy,
             const std::vector<float>& sz, double cell_m, const Eigen::Vector2d& lo,
             const Eigen::Vector2d& hi);
+  /// add() for a pass over many points, branch-free (about half the points lie in the band, in
+  /// no pattern the branch predictor follows) and held in the caller's registers: through the
+  /// object, each mark (a byte store, which may alias anything) made the compiler reload every
+  /// member. finish() it before complete() or cells().
+  class Pass {
+   public:
+    /// Marks the cell of a point (inside the box) when it lies in the trunk-height band; a
+    /// point without a tile or outside the band marks the sink, one byte past the cells.
+    void add(float x, float y, float z) {
+      const int64_t tx = floorOf(static_cast<double>(x) * 0.5) - tx0_;  // x / 2 m tile, exactly
+      const int64_t ty = floorOf(static_cast<double>(y) * 0.5) - ty0_;
+      const bool tile = (static_cast<uint64_t>(tx) < static_cast<uint64_t>(tw_)) &
+                        (static_cast<uint64_t>(ty) < static_cast<uint64_t>(th_));
+      const float h =
+          z - ground_[select(tile, static_cast<size_t>(ty * tw_ + tx), 0)];  // NaN: none
+      const bool band = tile & (h >= kMin) & (h <= kMax);
+      const int64_t cx = floorOf(cellDiv(x)) - cx0_, cy = floorOf(cellDiv(y)) - cy0_;
+      const bool box = (static_cast<uint64_t>(cx) < static_cast<uint64_t>(cw_)) &
+                       (static_cast<uint64_t>(cy) < static_cast<uint64_t>(ch_));
+      outside_ |= band & !box;  // only by rounding at the box's edge
+      marks_[select(band & box, static_cast<size_t>(cx * ch_ + cy), sink_)] = 1;
+    }
+
+   private:
+    friend class HeightCellMarks;
+    // c ? a : b by a mask: the compiler made a branch of the conditional.
+    static size_t select(bool c, size_t a, size_t b) {
+      const size_t m = size_t{0} - static_cast<size_t>(c);
+      return (a & m) | (b & ~m);
+    }
+    double cellDiv(float v) const { return pow2_ ? v * inv_cell_ : v / cell_m_; }
+    double cell_m_ = 1.0, inv_cell_ = 1.0;
+    bool pow2_ = true;
+    int64_t tx0_ = 0, ty0_ = 0, tw_ = 0, th_ = 0, cx0_ = 0, cy0_ = 0, cw_ = 0, ch_ = 0;
+    const float* ground_ = nullptr;
+    uint8_t* marks_ = nullptr;
+    size_t sink_ = 0;
+    bool outside_ = false;
+  };
+  /// A pass over points that add() each (init succeeded).
+  Pass pass() {
+    Pass p;
+    p.cell_m_ = cell_m_, p.inv_cell_ = inv_cell_, p.pow2_ = pow2_;
+    p.tx0_ = tx0_, p.ty0_ = ty0_, p.tw_ = tw_, p.th_ = th_;
+    p.cx0_ = cx0_, p.cy0_ = cy0_, p.cw_ = cw_, p.ch_ = ch_;
+    p.ground_ = ground_.data(), p.marks_ = marks_.data(), p.sink_ = marks_.size() - 1;
+    return p;
+  }
+  void finish(const Pass& p) { outside_ = outside_ || p.outside_; }
   /// Marks the cell of a point (inside the box) when it lies in the trunk-height band.
   void add(float x, float y, float z) {
-    const int64_t tx = floorOf(static_cast<double>(x) * 0.5) - tx0_;  // x / 2 m tile, exactly
-    const int64_t ty = floorOf(static_cast<double>(y) * 0.5) - ty0_;
-    if (tx < 0 || ty < 0 || tx >= tw_ || ty >= th_) return;           // no sample in the window
-    const float h = z - ground_[static_cast<size_t>(ty * tw_ + tx)];  // NaN: no ground
-    if (!(h >= kMin && h <= kMax)) return;
-    const int64_t cx = floorOf(cellDiv(x)) - cx0_, cy = floorOf(cellDiv(y)) - cy0_;
-    if (cx < 0 || cy < 0 || cx >= cw_ || cy >= ch_) {
-      outside_ = true;  // only by rounding at the box's edge
-      return;
-    }
-    marks_[static_cast<size_t>(cx * ch_ + cy)] = 1;
+    Pass p = pass();
+    p.add(x, y, z);
+    finish(p);
   }
   /// false when a point fell outside the box: then cells() misses it.
   bool complete() const { return !outside_; }
@@ -87,14 +128,13 @@ class HeightCellMarks {
     const int64_t i = static_cast<int64_t>(v);
     return i - (v < static_cast<double>(i));
   }
-  double cellDiv(float v) const { return pow2_ ? v * inv_cell_ : v / cell_m_; }
   static constexpr double kMin = 0.3, kMax = 3.0;  // the band, as trunkHeightCells compares it
   double cell_m_ = 1.0, inv_cell_ = 1.0;
   bool pow2_ = true;
   int64_t tx0_ = 0, ty0_ = 0, tw_ = 0, th_ = 0;  // tile grid (ground_)
   int64_t cx0_ = 0, cy0_ = 0, cw_ = 0, ch_ = 0;  // cell grid (marks_, column-major)
   std::vector<float> ground_;                    // per tile; NaN: no sample in its window
-  std::vector<uint8_t> marks_;
+  std::vector<uint8_t> marks_;                   // and the sink, last
   bool outside_ = false;
 };
 
