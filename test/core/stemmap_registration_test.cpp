@@ -6,11 +6,11 @@
 #include <cstdio>
 #include <fstream>
 #include <map>
-#include <sstream>
 #include <string>
 
 #include "dtif/core/database/loop_detector.h"
 #include "dtif/core/merge/stem_map.h"
+#include "dtif/io/csv.h"
 #include "dtif_test/test_config.h"
 
 namespace dtif {
@@ -23,30 +23,12 @@ bool exists(const std::string& p) {
   return ::stat(p.c_str(), &st) == 0;
 }
 
-std::vector<std::string> splitCsv(const std::string& line) {
-  std::vector<std::string> out;
-  std::string cur;
-  bool quoted = false;
-  for (char ch : line) {
-    if (ch == '"') {
-      quoted = !quoted;
-    } else if (ch == ',' && !quoted) {
-      out.push_back(cur);
-      cur.clear();
-    } else if (ch != '\r') {
-      cur += ch;
-    }
-  }
-  out.push_back(cur);
-  return out;
-}
-
 /// TrunkLandmark maps (x, y, 0, dbh / 2) keyed by plot id (0 when the file has no plot_id column).
 std::map<int, Trunks> readStemMap(const std::string& path) {
   std::ifstream f(path);
   std::string line;
   std::getline(f, line);
-  const std::vector<std::string> head = splitCsv(line);
+  const std::vector<std::string> head = splitCsvLine(line);
   auto col = [&](const std::string& name) {
     for (size_t i = 0; i < head.size(); ++i) {
       if (head[i] == name) return static_cast<int>(i);
@@ -58,7 +40,7 @@ std::map<int, Trunks> readStemMap(const std::string& path) {
   if (cx < 0 || cy < 0 || cd < 0) return out;
   while (std::getline(f, line)) {
     if (line.empty()) continue;
-    const std::vector<std::string> v = splitCsv(line);
+    const std::vector<std::string> v = splitCsvLine(line);
     try {
       TrunkLandmark t;
       t.x = std::stod(v.at(cx));
