@@ -295,25 +295,28 @@ bool HeightCellMarks::init(const std::vector<float>& sx, const std::vector<float
   tiles.init(pre.minx, pre.maxx, pre.miny, pre.maxy);
   if (!tiles.dense()) return false;
   ground_ = tileGround(pre, &tiles);
-  tx0_ = tileOf(pre.minx), ty0_ = tileOf(pre.miny);
-  tw_ = tileOf(pre.maxx) - tx0_ + 1, th_ = tileOf(pre.maxy) - ty0_ + 1;
-  cell_m_ = cell_m;
+  Pass& g = grid_;
+  g = Pass();
+  g.tx0_ = tileOf(pre.minx), g.ty0_ = tileOf(pre.miny);
+  g.tw_ = tileOf(pre.maxx) - g.tx0_ + 1, g.th_ = tileOf(pre.maxy) - g.ty0_ + 1;
+  g.cell_m_ = cell_m;
   int e = 0;
-  pow2_ = std::frexp(cell_m, &e) == 0.5 && e > -1000 && e < 1000;  // as Divisor
-  inv_cell_ = pow2_ ? 1.0 / cell_m : 0.0;
-  cx0_ = fastCellIndex(lo.x() / cell_m), cy0_ = fastCellIndex(lo.y() / cell_m);
-  cw_ = fastCellIndex(hi.x() / cell_m) - cx0_ + 1, ch_ = fastCellIndex(hi.y() / cell_m) - cy0_ + 1;
-  if (!(static_cast<double>(cw_) * static_cast<double>(ch_) <= 16e6)) return false;
-  marks_.assign(static_cast<size_t>(cw_ * ch_) + 1, 0);  // the cells and Pass's sink
-  outside_ = false;
+  g.pow2_ = std::frexp(cell_m, &e) == 0.5 && e > -1000 && e < 1000;  // as Divisor
+  g.inv_cell_ = g.pow2_ ? 1.0 / cell_m : 0.0;
+  g.cx0_ = fastCellIndex(lo.x() / cell_m), g.cy0_ = fastCellIndex(lo.y() / cell_m);
+  g.cw_ = fastCellIndex(hi.x() / cell_m) - g.cx0_ + 1;
+  g.ch_ = fastCellIndex(hi.y() / cell_m) - g.cy0_ + 1;
+  if (!(static_cast<double>(g.cw_) * static_cast<double>(g.ch_) <= 16e6)) return false;
+  marks_.assign(static_cast<size_t>(g.cw_ * g.ch_) + 1, 0);  // the cells and Pass's sink
   return true;
 }
 
 std::vector<std::pair<int64_t, int64_t>> HeightCellMarks::cells() const {
   std::vector<std::pair<int64_t, int64_t>> out;
-  for (int64_t cx = 0; cx < cw_; ++cx) {
-    for (int64_t cy = 0; cy < ch_; ++cy) {
-      if (marks_[static_cast<size_t>(cx * ch_ + cy)]) out.emplace_back(cx0_ + cx, cy0_ + cy);
+  const Pass& g = grid_;
+  for (int64_t cx = 0; cx < g.cw_; ++cx) {
+    for (int64_t cy = 0; cy < g.ch_; ++cy) {
+      if (marks_[static_cast<size_t>(cx * g.ch_ + cy)]) out.emplace_back(g.cx0_ + cx, g.cy0_ + cy);
     }
   }
   return out;

@@ -96,7 +96,8 @@ class HeightCellMarks {
     double cellDiv(float v) const { return pow2_ ? v * inv_cell_ : v / cell_m_; }
     double cell_m_ = 1.0, inv_cell_ = 1.0;
     bool pow2_ = true;
-    int64_t tx0_ = 0, ty0_ = 0, tw_ = 0, th_ = 0, cx0_ = 0, cy0_ = 0, cw_ = 0, ch_ = 0;
+    int64_t tx0_ = 0, ty0_ = 0, tw_ = 0, th_ = 0;  // tile grid
+    int64_t cx0_ = 0, cy0_ = 0, cw_ = 0, ch_ = 0;  // cell grid
     const float* ground_ = nullptr;
     uint8_t* marks_ = nullptr;
     size_t sink_ = 0;
@@ -104,14 +105,11 @@ class HeightCellMarks {
   };
   /// A pass over points that add() each (init succeeded).
   Pass pass() {
-    Pass p;
-    p.cell_m_ = cell_m_, p.inv_cell_ = inv_cell_, p.pow2_ = pow2_;
-    p.tx0_ = tx0_, p.ty0_ = ty0_, p.tw_ = tw_, p.th_ = th_;
-    p.cx0_ = cx0_, p.cy0_ = cy0_, p.cw_ = cw_, p.ch_ = ch_;
+    Pass p = grid_;
     p.ground_ = ground_.data(), p.marks_ = marks_.data(), p.sink_ = marks_.size() - 1;
     return p;
   }
-  void finish(const Pass& p) { outside_ = outside_ || p.outside_; }
+  void finish(const Pass& p) { grid_.outside_ = grid_.outside_ || p.outside_; }
   /// Marks the cell of a point (inside the box) when it lies in the trunk-height band.
   void add(float x, float y, float z) {
     Pass p = pass();
@@ -119,7 +117,7 @@ class HeightCellMarks {
     finish(p);
   }
   /// false when a point fell outside the box: then cells() misses it.
-  bool complete() const { return !outside_; }
+  bool complete() const { return !grid_.outside_; }
   /// The marked cells, sorted, unique.
   std::vector<std::pair<int64_t, int64_t>> cells() const;
 
@@ -129,13 +127,11 @@ class HeightCellMarks {
     return i - (v < static_cast<double>(i));
   }
   static constexpr double kMin = 0.3, kMax = 3.0;  // the band, as trunkHeightCells compares it
-  double cell_m_ = 1.0, inv_cell_ = 1.0;
-  bool pow2_ = true;
-  int64_t tx0_ = 0, ty0_ = 0, tw_ = 0, th_ = 0;  // tile grid (ground_)
-  int64_t cx0_ = 0, cy0_ = 0, cw_ = 0, ch_ = 0;  // cell grid (marks_, column-major)
-  std::vector<float> ground_;                    // per tile; NaN: no sample in its window
-  std::vector<uint8_t> marks_;                   // and the sink, last
-  bool outside_ = false;
+  // The tile grid (ground_), the cell grid (marks_, column-major) and whether a point fell
+  // outside; pass() hands out a copy pointing at the vectors.
+  Pass grid_;
+  std::vector<float> ground_;   // per tile; NaN: no sample in its window
+  std::vector<uint8_t> marks_;  // and the sink, last
 };
 
 }  // namespace dtif
