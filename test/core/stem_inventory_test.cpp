@@ -165,6 +165,77 @@ TEST(StemInventory, RadiiFittedAboveBreastHeightAreCorrectedByTheStandsTaper) {
   }
 }
 
+/// observeOnSlope's stand, and one more tree at x = 50 whose base nobody saw and whose six
+/// observations were all fitted 4 m up (a downhill stem above the understory): 29 m from the
+/// nearest seen base, farther than terrain_far_radius_m.
+std::vector<StemObservation> observeWithAFarTree(std::vector<Tree>* trees) {
+  std::vector<StemObservation> obs = observeOnSlope(trees);
+  const Tree far{50.0, 7.5, 10.0, 0.15};
+  for (int s = 0; s < 6; ++s)
+    obs.push_back({s, 0, far.x, far.y, far.z + 4.0, far.r - 0.048, false});
+  trees->push_back(far);
+  return obs;
+}
+
+/// A helmet 1.7 m above observeOnSlope's ground (z = 0.2 x), from x = 0 to 48, weaving 3 m
+/// either side of y = 7.5 (a straight path would leave the slope across it unknown).
+std::vector<SensorPosition> helmetPath(double bob_m) {
+  std::vector<SensorPosition> path;
+  for (int i = 0; i <= 16; ++i) {
+    const double x = 3.0 * i;
+    path.push_back({0, 7, x, 7.5 + 3.0 * (i % 3 - 1), 0.2 * x + 1.7 + (i % 2 ? bob_m : -bob_m)});
+  }
+  return path;
+}
+
+TEST(StemInventory, AHiddenBaseFarFromSeenOnesTakesTheGroundUnderTheRobotsPath) {
+  std::vector<Tree> trees;
+  const std::vector<StemObservation> obs = observeWithAFarTree(&trees);
+  const Tree& far = trees.back();
+  auto farStem = [&](const std::vector<MergedStem>& stems) {
+    for (const MergedStem& m : stems) {
+      if (std::hypot(m.x - far.x, m.y - far.y) < 0.5) return m;
+    }
+    ADD_FAILURE() << "the far tree is missing";
+    return MergedStem{};
+  };
+  // Without the path: no ground around it, so the base is its guesses' and the DBH the raw
+  // radius 4 m up (9.6 cm thin).
+  const MergedStem alone = farStem(fuseStems(obs, StemFusionParams{}));
+  EXPECT_NEAR(alone.z_base, far.z + 4.0, 1e-9);
+  EXPECT_NEAR(alone.dbh, 2.0 * far.r - 0.096, 1e-9);
+  // The helmet's height comes from the positions over the stand (their seen bases' plane),
+  // the ground under the rest of the path gives the far tree its base, and the stand's taper
+  // brings its radius down to breast height.
+  const MergedStem with_path = farStem(fuseStems(obs, StemFusionParams{}, helmetPath(0.02)));
+  EXPECT_NEAR(with_path.z_base, far.z, 0.05);
+  EXPECT_NEAR(with_path.dbh, 2.0 * far.r, 0.005);
+  // A sensor whose height above the ground swings by a metre (a drone) gives no ground.
+  const MergedStem drone = farStem(fuseStems(obs, StemFusionParams{}, helmetPath(1.0)));
+  EXPECT_NEAR(drone.z_base, far.z + 4.0, 1e-9);
+  StemFusionParams off;
+  off.path_min_samples = 0;
+  EXPECT_NEAR(farStem(fuseStems(obs, off, helmetPath(0.02))).z_base, far.z + 4.0, 1e-9);
+}
+
+TEST(StemInventory, AHiddenBaseTakesTheFartherSeenBasesWhenNoneAreNear) {
+  // observeOnSlope's stand ends at x = 21; a tree at x = 36 has no seen base within 12 m but
+  // the stand's within 24 m.
+  std::vector<Tree> trees;
+  std::vector<StemObservation> obs = observeOnSlope(&trees);
+  for (int s = 0; s < 6; ++s) obs.push_back({s, 0, 36.0, 7.5, 7.2 + 2.0, 0.2 - 0.024, false});
+  auto baseAt36 = [](const std::vector<MergedStem>& stems) {
+    for (const MergedStem& m : stems) {
+      if (std::fabs(m.x - 36.0) < 0.5) return m.z_base;
+    }
+    return -1.0;
+  };
+  EXPECT_NEAR(baseAt36(fuseStems(obs, StemFusionParams{})), 7.2, 0.05);
+  StemFusionParams near_only;
+  near_only.terrain_far_radius_m = 0.0;
+  EXPECT_NEAR(baseAt36(fuseStems(obs, near_only)), 9.2, 1e-9);
+}
+
 TEST(StemInventory, TaperNeedsEnoughObservationsAboveBreastHeight) {
   StemFusionParams p;
   std::vector<TaperPair> pairs;
@@ -213,6 +284,15 @@ TEST(StemInventory, NewParametersAreValidated) {
   p = StemFusionParams{};
   p.taper_min_pairs = -1;
   EXPECT_NE(p.validate().find("taper_min_pairs"), std::string::npos);
+  p = StemFusionParams{};
+  p.terrain_far_radius_m = 5.0 * p.terrain_radius_m;
+  EXPECT_NE(p.validate().find("terrain_far_radius_m"), std::string::npos);
+  p = StemFusionParams{};
+  p.path_min_samples = -1;
+  EXPECT_NE(p.validate().find("path_min_samples"), std::string::npos);
+  p = StemFusionParams{};
+  p.path_max_spread_m = -0.1;
+  EXPECT_NE(p.validate().find("path_max_spread_m"), std::string::npos);
   p = StemFusionParams{};
   p.overlap_margin_m = 2.0;
   EXPECT_NE(p.validate().find("overlap_margin_m"), std::string::npos);

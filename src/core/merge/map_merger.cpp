@@ -687,9 +687,16 @@ struct MapMerger::Impl {
 
   std::vector<MergedStem> fuseInventory(bool with_field_transform) const {
     std::vector<StemObservation> obs;
+    std::vector<SensorPosition> sensors;
+    std::map<std::string, int> robot_ids;
     for (const Node& n : nodes) {
       const int comp = robots.at(n.robot).component;
       const Pose T = (with_field_transform ? outputTransform(comp) : Pose::Identity()) * n.pose();
+      // S's origin is the sensor at the submap's anchor time (DATASET.md).
+      const Eigen::Vector3d sensor = T.translation();
+      const int robot_id =
+          robot_ids.emplace(n.robot, static_cast<int>(robot_ids.size())).first->second;
+      sensors.push_back({comp, robot_id, sensor.x(), sensor.y(), sensor.z()});
       for (const TrunkLandmark& tr : n.trunks) {
         const Eigen::Vector3d pm = T * Eigen::Vector3d(tr.x, tr.y, tr.z);
         StemObservation o;
@@ -703,7 +710,7 @@ struct MapMerger::Impl {
         obs.push_back(o);
       }
     }
-    return fuseStems(obs, p.stems);
+    return fuseStems(obs, p.stems, sensors);
   }
 
   // --- joining components by their inventories ---------------------------------------------

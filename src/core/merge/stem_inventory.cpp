@@ -244,30 +244,85 @@ bool terrainAt(double x, double y, const std::vector<Eigen::Vector3d>& bases, do
   return true;
 }
 
-/// Trees whose base nobody saw take the ground of the seen bases around them.
-void terrainBases(const StemFusionParams& p, std::vector<Tree>* trees) {
-  if (!(p.terrain_radius_m > 0.0)) return;
-  std::unordered_map<int64_t, std::vector<size_t>> grid;
-  auto cell = [&](double v) { return cellIndex(v / p.terrain_radius_m); };
-  for (size_t k = 0; k < trees->size(); ++k) {
-    const Tree& t = (*trees)[k];
-    if (t.base_seen) grid[packCell(cell(t.x), cell(t.y))].push_back(k);
+/// The ground of each component: the seen bases of its trees and, once addPathGround ran, the
+/// ground under its robots' sensor positions; a plane through those around a point.
+class Terrain {
+ public:
+  Terrain(const std::vector<Tree>& trees, const StemFusionParams& p) : p_(p) {
+    for (const Tree& t : trees) {
+      if (t.base_seen) add(t.component, Eigen::Vector3d(t.x, t.y, t.z_base));
+    }
   }
-  for (Tree& t : *trees) {
-    if (t.has_base) continue;
-    std::vector<Eigen::Vector3d> bases;
-    for (int64_t dx = -1; dx <= 1; ++dx) {
-      for (int64_t dy = -1; dy <= 1; ++dy) {
-        auto it = grid.find(packCell(cell(t.x) + dx, cell(t.y) + dy));
-        if (it == grid.end()) continue;
-        for (size_t k : it->second) {
-          const Tree& n = (*trees)[k];
-          if (n.component == t.component && std::hypot(n.x - t.x, n.y - t.y) <= p.terrain_radius_m)
-            bases.emplace_back(n.x, n.y, n.z_base);
+
+  /// The plane through the ground points within terrain_radius_m, else within
+  /// terrain_far_radius_m (a downhill stem seen only from afar, its crown above the understory).
+  bool at(int component, double x, double y, double* z) const {
+    return terrainAt(x, y, around(component, x, y, p_.terrain_radius_m), z) ||
+           (p_.terrain_far_radius_m > p_.terrain_radius_m &&
+            terrainAt(x, y, around(component, x, y, p_.terrain_far_radius_m), z));
+  }
+
+  /// Each robot's sensor height above the seen bases' plane (the median over its positions,
+  /// when enough agree), then the ground under every position of those robots.
+  void addPathGround(const std::vector<SensorPosition>& sensors) {
+    if (p_.path_min_samples < 1) return;
+    std::map<int, std::vector<double>> heights;
+    for (const SensorPosition& s : sensors) {
+      double z = 0.0;
+      if (finite(s) && at(s.component, s.x, s.y, &z)) heights[s.robot].push_back(s.z - z);
+    }
+    std::map<int, double> height;
+    for (const auto& [robot, hs] : heights) {
+      if (static_cast<int>(hs.size()) < p_.path_min_samples) continue;
+      const double h = median(hs);
+      std::vector<double> dev;
+      for (double v : hs) dev.push_back(std::fabs(v - h));
+      if (median(dev) <= p_.path_max_spread_m) height[robot] = h;
+    }
+    for (const SensorPosition& s : sensors) {
+      auto it = height.find(s.robot);
+      if (it != height.end() && finite(s))
+        add(s.component, Eigen::Vector3d(s.x, s.y, s.z - it->second));
+    }
+  }
+
+ private:
+  static bool finite(const SensorPosition& s) {
+    return std::isfinite(s.x) && std::isfinite(s.y) && std::isfinite(s.z);
+  }
+  int64_t cell(double v) const { return cellIndex(v / p_.terrain_radius_m); }
+
+  void add(int component, const Eigen::Vector3d& g) {
+    grid_[packCell(cell(g.x()), cell(g.y()))].emplace_back(component, g);
+  }
+
+  std::vector<Eigen::Vector3d> around(int component, double x, double y, double radius) const {
+    std::vector<Eigen::Vector3d> out;
+    const int64_t reach = static_cast<int64_t>(std::ceil(radius / p_.terrain_radius_m));
+    for (int64_t dx = -reach; dx <= reach; ++dx) {
+      for (int64_t dy = -reach; dy <= reach; ++dy) {
+        auto it = grid_.find(packCell(cell(x) + dx, cell(y) + dy));
+        if (it == grid_.end()) continue;
+        for (const auto& [c, g] : it->second) {
+          if (c == component && std::hypot(g.x() - x, g.y() - y) <= radius) out.push_back(g);
         }
       }
     }
-    t.has_base = terrainAt(t.x, t.y, bases, &t.z_base);
+    return out;
+  }
+
+  const StemFusionParams& p_;
+  std::unordered_map<int64_t, std::vector<std::pair<int, Eigen::Vector3d>>> grid_;
+};
+
+/// Trees whose base nobody saw take the ground around them (Terrain).
+void terrainBases(const StemFusionParams& p, const std::vector<SensorPosition>& sensors,
+                  std::vector<Tree>* trees) {
+  if (!(p.terrain_radius_m > 0.0)) return;
+  Terrain terrain(*trees, p);
+  terrain.addPathGround(sensors);
+  for (Tree& t : *trees) {
+    if (!t.has_base) t.has_base = terrain.at(t.component, t.x, t.y, &t.z_base);
   }
 }
 
@@ -299,9 +354,15 @@ MergedStem fuse(const std::vector<StemObservation>& obs, const Tree& t, double t
   std::vector<double> xs_all, ys_all, zs_all, rs_all, xs, ys, rs;
   for (size_t i : t.members) {
     const StemObservation& o = obs[i];
-    xs_all.push_back(o.x), ys_all.push_back(o.y), zs_all.push_back(o.z), rs_all.push_back(o.r);
-    if (!t.has_base) continue;
+    xs_all.push_back(o.x), ys_all.push_back(o.y), zs_all.push_back(o.z);
+    if (!t.has_base) {
+      rs_all.push_back(o.r);
+      continue;
+    }
+    // Fitted dz above breast height: the taper brings every radius down there, the farther
+    // ones too (a downhill stem seen only above the understory: its crown side from afar).
     const double dz = o.z - t.z_base;
+    rs_all.push_back(o.r + taper * dz);
     if (std::fabs(dz) <= p.base_tol_m) xs.push_back(o.x), ys.push_back(o.y);
     if (std::fabs(dz) <= p.max_base_offset_m) rs.push_back(o.r + taper * dz);
   }
@@ -370,6 +431,10 @@ std::string StemFusionParams::validate() const {
   if (!(max_base_offset_m >= base_tol_m)) e << "stems.max_base_offset_m must be >= base_tol_m; ";
   if (!(terrain_radius_m >= 0 && terrain_radius_m <= 1000))
     e << "stems.terrain_radius_m must be in [0, 1000]; ";
+  if (!(terrain_far_radius_m >= 0 && terrain_far_radius_m <= 4 * terrain_radius_m))
+    e << "stems.terrain_far_radius_m must be in [0, 4 x terrain_radius_m]; ";
+  if (path_min_samples < 0) e << "stems.path_min_samples must be >= 0; ";
+  if (!(path_max_spread_m >= 0)) e << "stems.path_max_spread_m must be >= 0; ";
   if (taper_min_pairs < 0) e << "stems.taper_min_pairs must be >= 0; ";
   if (!(overlap_margin_m <= 1.0)) e << "stems.overlap_margin_m must be <= 1 (< 0: off); ";
   if (!(slice_min_h_m >= 0 && slice_max_h_m > slice_min_h_m && slice_max_h_m <= 5))
@@ -410,9 +475,10 @@ double taperFromObservations(const std::vector<TaperPair>& pairs, const StemFusi
 }
 
 std::vector<MergedStem> fuseStems(const std::vector<StemObservation>& observations,
-                                  const StemFusionParams& params) {
+                                  const StemFusionParams& params,
+                                  const std::vector<SensorPosition>& sensors) {
   std::vector<Tree> trees = clusterTrees(observations, params);
-  terrainBases(params, &trees);
+  terrainBases(params, sensors, &trees);
   const double taper = taperFromObservations(taperPairs(observations, trees, params), params);
   std::vector<MergedStem> out;
   for (const Tree& t : trees) out.push_back(fuse(observations, t, taper, params));

@@ -26,6 +26,15 @@ struct StemFusionParams {
   /// A tree with no seen base takes its base from a plane through the seen bases of the trees
   /// within this radius (at least 4, spread over >= 1 m); 0: never [m].
   double terrain_radius_m = 12.0;
+  /// Where that finds no plane, the ground points within this; <= terrain_radius_m: never [m].
+  double terrain_far_radius_m = 24.0;
+  /// The robots walked on the ground: where understory hides the bases, the ground under the
+  /// sensor positions (SensorPosition) joins the seen bases in that plane. Each robot's sensor
+  /// height is the median of its positions' height above the seen bases' plane; a robot with
+  /// fewer such positions than this, or whose heights spread (median absolute deviation) more
+  /// than path_max_spread_m, adds no ground (a drone, a mast that moves); 0: never.
+  int path_min_samples = 3;
+  double path_max_spread_m = 0.6;  ///< [m]
   /// Radii fitted above (below) breast height are too small (large) by the stand's taper,
   /// estimated from the inventory itself: the radius change per metre of base offset within
   /// trees whose base was seen. Fewer such observations than this: no correction; 0: never.
@@ -71,6 +80,9 @@ struct StemFusionParams {
     v("base_tol_m", base_tol_m);
     v("max_base_offset_m", max_base_offset_m);
     v("terrain_radius_m", terrain_radius_m);
+    v("terrain_far_radius_m", terrain_far_radius_m);
+    v("path_min_samples", path_min_samples);
+    v("path_max_spread_m", path_max_spread_m);
     v("taper_min_pairs", taper_min_pairs);
     v("overlap_margin_m", overlap_margin_m);
     v("dbh_from_points", dbh_from_points);
@@ -98,6 +110,13 @@ struct StemObservation {
   bool base_seen = true;
 };
 
+/// Where a robot's sensor was (a submap frame's origin), in its component's M.
+struct SensorPosition {
+  int component = 0;
+  int robot = 0;                     ///< any id, the same for all of one robot's positions
+  double x = 0.0, y = 0.0, z = 0.0;  ///< [m]
+};
+
 /// One physical tree of the inventory, in its component's M.
 struct MergedStem {
   int64_t stem_id = -1;  ///< 0.. in output order
@@ -112,7 +131,8 @@ struct MergedStem {
 /// a similar radius, at most one observation per submap in a cluster; then clusters closer than
 /// the radius with no submap in common are joined) and fuses each cluster robustly. The tree's
 /// base: the median of the observations whose base was seen, else the seen bases of the trees
-/// around it (a plane), else the median of all. Each observation fitted its circle 1.3 m above
+/// around it and the ground under the robots' paths there (a plane; StemFusionParams::
+/// path_min_samples), else the median of all. Each observation fitted its circle 1.3 m above
 /// its own base estimate, which for a hidden base can be metres too high: DBH is the median
 /// radius of the observations within max_base_offset_m of the tree's base, each corrected to
 /// breast height by the stand's taper (taperFromObservations), and x, y the median of those
@@ -120,7 +140,8 @@ struct MergedStem {
 /// qualify. Deterministic: the output is ordered by component, then x, then y; stem ids follow
 /// that order.
 std::vector<MergedStem> fuseStems(const std::vector<StemObservation>& observations,
-                                  const StemFusionParams& params);
+                                  const StemFusionParams& params,
+                                  const std::vector<SensorPosition>& sensors = {});
 
 /// One observation of a tree whose base was seen: its base offset from the tree's base (dz,
 /// metres up) and its radius minus the radius of the tree's observations at breast height.
