@@ -137,6 +137,44 @@ TEST(Lattice, LatticeFitReachesSitesFarFromTheHypothesis) {
   EXPECT_GE(resolved, n - 1);
 }
 
+/// The lattice search ranks its ~1,000 poses coarse to fine: the coarse fit must put the true
+/// site first, so that refining only its best pose (lattice_refined_poses 1) still reaches it
+/// from a hypothesis 3 x 2 sites and 90 deg off; with the default the search returns what
+/// ranking every pose by the finer fit (0) returns.
+TEST(Lattice, CoarseRankingPutsTheTrueSiteFirst) {
+  std::mt19937 rng(2024);
+  const Trunks world = test::plantation(rng, 180, 180, 3.0, 0.15);
+  VerifierParams all, one;
+  all.lattice_refined_poses = 0;
+  one.lattice_refined_poses = 1;
+  int reached = 0;
+  const int n = 6;
+  for (int i = 0; i < n; ++i) {
+    const Pose T_w_c = poseXyYaw(90.0, 90.0, 0.0, 0.0);
+    const double a = 0.7 * i;
+    const Eigen::Vector2d qc(90.0 + 12.0 * std::cos(a), 90.0 + 12.0 * std::sin(a));
+    const Pose T_w_q = poseXyYaw(qc.x(), qc.y(), 0.0, 0.4 + a);
+    const Descriptor c = describe(observe(rng, world, Eigen::Vector2d(90.0, 90.0), T_w_c), "b", 1);
+    const Descriptor q = describe(observe(rng, world, qc, T_w_q), "a", 0);
+    const Pose T_true = T_w_c.inverse() * T_w_q;
+    const Pose T_wrong = poseXyYaw(9.0, -6.0, 0.0, M_PI / 2.0) * T_true;
+
+    const auto [fit_all, ratio_all] = resolveByFit(q, c, T_wrong, all);
+    const auto [fit, ratio] = resolveByFit(q, c, T_wrong, VerifierParams{});
+    EXPECT_TRUE(fit.T.isApprox(fit_all.T, 1e-12)) << "pair " << i;
+    EXPECT_EQ(fit.score, fit_all.score) << "pair " << i;
+    EXPECT_EQ(ratio, ratio_all) << "pair " << i;
+
+    const Fit fit_one = resolveByFit(q, c, T_wrong, one).first;
+    const bool at_true = test::yawError(fit_one.T, T_true) < 0.3 * M_PI / 180.0 &&
+                         (fit_one.T.translation() - T_true.translation()).head<2>().norm() < 0.15;
+    reached += at_true;
+  }
+  std::printf("[ info ] only the coarse ranking's best pose refined: %d/%d at the true site\n",
+              reached, n);
+  EXPECT_GE(reached, n - 1);
+}
+
 TEST(Lattice, RejectsDifferentPlacesOfAPlantationGrid) {
   // 3 m x 3 m grid, 0.15 m planting jitter, radii 15 +- 1 cm: every window looks alike up to
   // the jitter. Pairs of windows >= 33 m apart share no tree; each must be rejected.

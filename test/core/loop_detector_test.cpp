@@ -274,6 +274,10 @@ TEST(LoopDetector, ParamsValidate) {
   EXPECT_NE(p.validate().find("max_lattice_searches"), std::string::npos);
   p.database.max_lattice_searches = 0;  // no limit
   EXPECT_EQ(p.validate(), "");
+  p.verification.lattice_refined_poses = -1;
+  EXPECT_NE(p.validate().find("lattice_refined_poses"), std::string::npos);
+  p.verification.lattice_refined_poses = 0;  // every pose by the finer fit
+  EXPECT_EQ(p.validate(), "");
 }
 
 /// Two correspondences at most: the triangles give no hypothesis ("few correspondences"). With

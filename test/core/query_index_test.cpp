@@ -511,6 +511,7 @@ TEST(QueryIndex, QueryKeepsTheBestScoringLoopOfItsCandidates) {
   LoopDetectorParams p;
   p.database.max_vote_candidates = 3;   // candidates past it are matched without the votes
   p.database.max_lattice_searches = 0;  // no limit: every candidate as if verified
+  p.database.decisive_score = 0.0;      // every candidate matched
   size_t loops = 0, several = 0, unverified = 0;
   for (const auto& views : stands) {
     LoopDetector det(p);
@@ -538,6 +539,61 @@ TEST(QueryIndex, QueryKeepsTheBestScoringLoopOfItsCandidates) {
   EXPECT_GE(loops, 12u);
   EXPECT_GT(several, 0u);
   EXPECT_GT(unverified, 0u);
+}
+
+TEST(QueryIndex, ADecisiveLoopEndsMatching) {
+  // Two robots' views of a natural stand. A query that stops matching does so at a candidate
+  // whose loop scores at least decisive_score (with another robot when an inter-robot loop is
+  // asked for) and returns the best loop of the candidates matched so far; a query that does
+  // not stop returns what matching every candidate returns.
+  std::mt19937 rng(29);
+  const auto views = standViews(test::randomStand(rng, 100, 70, 600), 5);
+  for (const bool inter : {false, true}) {
+    LoopDetectorParams decisive, every;
+    decisive.database.decisive_score = 0.5;
+    every.database.decisive_score = 0.0;  // every candidate matched
+    LoopDetector det(decisive), det_every(every);
+    size_t stopped = 0, went_on = 0;
+    for (const auto& d : views) {
+      QueryStats st, st_every;
+      std::optional<Loop> beside, beside_every;
+      const std::optional<Loop> got = det.query(*d, &st, inter ? &beside : nullptr);
+      const std::optional<Loop> all =
+          det_every.query(*d, &st_every, inter ? &beside_every : nullptr);
+      EXPECT_EQ(st_every.hypothesized, st_every.candidates.size());
+      if (st.hypothesized < st.candidates.size()) {
+        ++stopped;
+        const int64_t last_id = st.candidates[st.hypothesized - 1];
+        const auto last = std::find_if(det.entries().begin(), det.entries().end(),
+                                       [&](const auto& e) { return e->submap_id == last_id; });
+        const std::optional<Loop> ended = matchPair(*d, **last, decisive);
+        ASSERT_TRUE(ended.has_value()) << d->submap_id;
+        EXPECT_GE(ended->score, 0.5);
+        if (inter) {
+          EXPECT_NE((*last)->robot, d->robot);
+        }
+        const std::vector<int64_t> matched(st.candidates.begin(),
+                                           st.candidates.begin() + st.hypothesized);
+        const std::optional<Loop> want = bruteBestLoop(det, *d, matched);
+        ASSERT_TRUE(got.has_value() && want.has_value()) << d->submap_id;
+        EXPECT_EQ(got->score, want->score);
+        EXPECT_EQ(got->T_c_q.matrix(), want->T_c_q.matrix());
+      } else {
+        went_on += got.has_value();
+        ASSERT_EQ(got.has_value(), all.has_value()) << d->submap_id;
+        if (got) {
+          EXPECT_EQ(got->candidate_id, all->candidate_id);
+          EXPECT_EQ(got->score, all->score);
+        }
+        EXPECT_EQ(beside.has_value(), beside_every.has_value());
+      }
+      det.insert(d);
+      det_every.insert(d);
+    }
+    // The cases under test happened: queries that stopped, and loops of queries that did not.
+    EXPECT_GT(stopped, 0u) << "inter " << inter;
+    EXPECT_GT(went_on, 0u) << "inter " << inter;
+  }
 }
 
 TEST(QueryIndex, LatticeSearchIsNeededExactlyWhenVerificationSearches) {

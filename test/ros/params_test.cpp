@@ -62,12 +62,13 @@ void flatten(const YAML::Node& n, const std::string& prefix, std::vector<std::st
 
 TEST(StrictParams, DeclaredKeysComeFromVisit) {
   const auto keys = declaredKeys<DatabaseParams>("database");
-  ASSERT_EQ(keys.size(), 5u);
+  ASSERT_EQ(keys.size(), 6u);
   EXPECT_EQ(keys[0], "database/exclude_recent_s");
   EXPECT_EQ(keys[1], "database/max_candidates");
   EXPECT_EQ(keys[2], "database/max_vote_candidates");
   EXPECT_EQ(keys[3], "database/inter_robot_verifications");
   EXPECT_EQ(keys[4], "database/max_lattice_searches");
+  EXPECT_EQ(keys[5], "database/decisive_score");
 }
 
 TEST(StrictParams, UnknownKeyUnderTheNamespaceIsReported) {

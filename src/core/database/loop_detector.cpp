@@ -179,10 +179,12 @@ struct BestLoops {
 /// loop is with q's own robot, other robots' hypotheses past that point are verified on, at
 /// most `extra_budget` of them, for the best inter-robot loop as well; the best loop stays the
 /// same. At most database.max_lattice_searches verifications search the lattice; hypotheses
-/// that would search it beyond that are skipped like rejected ones.
+/// that would search it beyond that are skipped like rejected ones. `verified` holds the
+/// verifications already made (by rank; endsMatching's), used instead of verifying again.
 BestLoops verifyBest(const Descriptor& q, const std::vector<const Descriptor*>& cands,
-                     const std::vector<Hypothesis>& hyps, const LoopDetectorParams& params,
-                     int extra_budget, QueryStats* stats) {
+                     const std::vector<Hypothesis>& hyps,
+                     const std::vector<std::optional<Verification>>& verified,
+                     const LoopDetectorParams& params, int extra_budget, QueryStats* stats) {
   std::vector<std::pair<double, size_t>> order;  // (bound, rank)
   for (size_t rank = 0; rank < hyps.size(); ++rank) {
     if (hyps[rank].ok())
@@ -216,7 +218,9 @@ BestLoops verifyBest(const Descriptor& q, const std::vector<const Descriptor*>& 
       if (stats) ++stats->lattice_searches;
     }
     ++attempted;
-    const Verification ver = verifyHypothesis(q, *cands[rank], hyps[rank], params, stats);
+    const Verification ver = verified[rank]
+                                 ? *verified[rank]
+                                 : verifyHypothesis(q, *cands[rank], hyps[rank], params, stats);
     if (!ver.accepted) continue;
     if (stats) {
       ++stats->verified;
@@ -241,6 +245,23 @@ BestLoops verifyBest(const Descriptor& q, const std::vector<const Descriptor*>& 
   }
   if (!out.best || out.best->candidate_robot != q.robot) out.inter_robot.reset();
   return out;
+}
+
+/// Whether a query may stop matching after this candidate (database.decisive_score): its
+/// hypothesis' score bound reaches the decisive score, so it is verified now (into `ver`, for
+/// verifyBest), and its loop scores at least that, with another robot than q's or without an
+/// inter-robot loop asked for. Hypotheses that would search the lattice are left to
+/// verifyBest, which holds the budget of searches.
+bool endsMatching(const Descriptor& q, const Descriptor& c, const Hypothesis& h,
+                  const LoopDetectorParams& params, bool inter_robot,
+                  std::optional<Verification>* ver, QueryStats* stats) {
+  const double decisive = params.database.decisive_score;
+  if (decisive <= 0.0 || !h.ok() || needsLatticeSearch(h.est, params.verification) ||
+      inlierWeightShare(h.corrs, h.est) < decisive) {
+    return false;
+  }
+  *ver = verifyHypothesis(q, c, h, params, stats);
+  return (*ver)->accepted && (*ver)->score >= decisive && (!inter_robot || c.robot != q.robot);
 }
 
 }  // namespace
@@ -273,6 +294,8 @@ std::string DatabaseParams::validate() const {
   if (max_vote_candidates < 0) err << "max_vote_candidates must be >= 0; ";
   if (inter_robot_verifications < 0) err << "inter_robot_verifications must be >= 0; ";
   if (max_lattice_searches < 0) err << "max_lattice_searches must be >= 0 (0: no limit); ";
+  if (!(decisive_score >= 0.0 && decisive_score <= 1.0))
+    err << "decisive_score must be in [0, 1] (0: match every candidate); ";
   return err.str();
 }
 
@@ -430,17 +453,24 @@ std::optional<Loop> LoopDetector::query(const Descriptor& q, QueryStats* stats,
   // Candidates past the best max_vote_candidates are matched without the vote fallback.
   LoopDetectorParams no_votes = params_;
   no_votes.matcher.vote_fallback = false;
-  std::vector<Hypothesis> hyps(cands.size());
+  std::vector<Hypothesis> hyps;
   std::vector<const Descriptor*> matched;
+  std::vector<std::optional<Verification>> verified;  // by rank, endsMatching's
   for (size_t rank = 0; rank < cands.size(); ++rank) {
     const Cand& cd = cands[rank];
     const bool votes = rank < static_cast<size_t>(params_.database.max_vote_candidates);
     matched.push_back(entries_[cd.index].get());
-    hyps[rank] = hypothesize(q, *matched.back(), votes ? params_ : no_votes, &solver_, &st, &tq,
-                             &triangles_[cd.index], &bq);
+    hyps.push_back(hypothesize(q, *matched.back(), votes ? params_ : no_votes, &solver_, &st, &tq,
+                               &triangles_[cd.index], &bq));
+    verified.emplace_back();
+    if (endsMatching(q, *matched.back(), hyps.back(), params_, inter_robot != nullptr,
+                     &verified.back(), &st)) {
+      break;
+    }
   }
+  st.hypothesized = hyps.size();
   const int budget = inter_robot ? params_.database.inter_robot_verifications : 0;
-  BestLoops found = verifyBest(q, matched, hyps, params_, budget, &st);
+  BestLoops found = verifyBest(q, matched, hyps, verified, params_, budget, &st);
   if (inter_robot) *inter_robot = std::move(found.inter_robot);
   return found.best;
 }

@@ -267,6 +267,7 @@ std::string VerifierParams::validate() const {
     err << "ground_tilt_floor_deg must be in [0, 10]; ";
   if (!(min_overlap >= 0.0 && min_overlap <= 1.0)) err << "min_overlap must be in [0, 1]; ";
   if (!(max_fit_median_m > 0.0)) err << "max_fit_median_m must be > 0; ";
+  if (lattice_refined_poses < 0) err << "lattice_refined_poses must be >= 0 (0: all); ";
   if (!(fit_score_radius_m > 0.0 && std::isfinite(fit_score_radius_m))) {
     err << "fit_score_radius_m must be > 0; ";
   }

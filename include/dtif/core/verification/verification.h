@@ -60,6 +60,11 @@ struct VerifierParams {
   /// where at least min_inliers trunks pair up); that fit is kept when the runner-up pose scores
   /// at most this share of it. 0: ambiguous is always rejected [0..1).
   double max_fit_ambiguity = 0.7;
+  /// The lattice search ranks every lattice-consistent pose (~1,500 in a plantation) by a
+  /// coarse fit first (the pairs of one nearest-trunk pass, refitted once), then this many of
+  /// the best by the finer quick fit (a second pass under the refitted pose), whose best 8 are
+  /// fitted to all trunks. 0: every pose by the quick fit (no coarse ranking).
+  int lattice_refined_poses = 32;
   /// A fit scores each refined pair (1 - (d / r)^2)^2 for residuals d below this r: tight, so
   /// a wrong lattice site, paired only to the planting jitter, scores little [m].
   double fit_score_radius_m = 0.2;
@@ -114,6 +119,7 @@ struct VerifierParams {
     v("min_overlap", min_overlap);
     v("max_fit_ambiguity", max_fit_ambiguity);
     v("max_fit_median_m", max_fit_median_m);
+    v("lattice_refined_poses", lattice_refined_poses);
     v("fit_score_radius_m", fit_score_radius_m);
     v("min_z_pairs", min_z_pairs);
     v("max_z_ambiguity", max_z_ambiguity);
