@@ -399,9 +399,14 @@ std::optional<Loop> LoopDetector::query(const Descriptor& q, QueryStats* stats,
   QueryStats& st = stats ? *stats : local;
   st = QueryStats{};
   if (!q.valid) return std::nullopt;
-
-  // Screening: histogram similarity of every eligible entry, best max_candidates kept.
   const auto t0 = std::chrono::steady_clock::now();
+  const std::vector<size_t> cands = screen(q, &st);
+  for (size_t i : cands) st.candidates.push_back(entries_[i]->submap_id);
+  st.screen_ms = msSince(t0);
+  return matchCandidates(q, cands, &st, inter_robot);
+}
+
+std::vector<size_t> LoopDetector::screen(const Descriptor& q, QueryStats* st) const {
   struct Cand {
     double sim;
     size_t index;
@@ -427,23 +432,28 @@ std::optional<Loop> LoopDetector::query(const Descriptor& q, QueryStats* stats,
         (c.robot == q_robot && c.submap_id == q.submap_id)) {
       continue;
     }
-    ++st.eligible;
+    ++st->eligible;
     const double se = intersect(q.edge_hist, c.offset, c.edge_n);
     if (se < mp.min_edge_hist_sim) continue;
     const double sr = intersect(q.radius_hist, c.offset + c.edge_n, c.radius_n);
     if (sr < mp.min_radius_hist_sim) continue;
     cands.push_back({0.5 * (se + sr), i});
   }
-  st.screened_in = cands.size();
+  st->screened_in = cands.size();
   const size_t keep = std::min(cands.size(), static_cast<size_t>(params_.database.max_candidates));
   std::partial_sort(cands.begin(), cands.begin() + keep, cands.end(),
                     [](const Cand& a, const Cand& b) {
                       return a.sim > b.sim || (a.sim == b.sim && a.index < b.index);
                     });
-  cands.resize(keep);
-  for (const Cand& cd : cands) st.candidates.push_back(entries_[cd.index]->submap_id);
-  st.screen_ms = msSince(t0);
+  std::vector<size_t> out(keep);
+  for (size_t k = 0; k < keep; ++k) out[k] = cands[k].index;
+  return out;
+}
 
+std::optional<Loop> LoopDetector::matchCandidates(const Descriptor& q,
+                                                  const std::vector<size_t>& cands, QueryStats* st,
+                                                  std::optional<Loop>* inter_robot) const {
+  const MatcherParams& mp = params_.matcher;
   std::vector<MatchTriangle> tq;
   std::vector<ConsistencyBounds> bq;  // the query's, tested against every candidate's
   if (!cands.empty()) {
@@ -457,20 +467,20 @@ std::optional<Loop> LoopDetector::query(const Descriptor& q, QueryStats* stats,
   std::vector<const Descriptor*> matched;
   std::vector<std::optional<Verification>> verified;  // by rank, endsMatching's
   for (size_t rank = 0; rank < cands.size(); ++rank) {
-    const Cand& cd = cands[rank];
+    const size_t index = cands[rank];
     const bool votes = rank < static_cast<size_t>(params_.database.max_vote_candidates);
-    matched.push_back(entries_[cd.index].get());
-    hyps.push_back(hypothesize(q, *matched.back(), votes ? params_ : no_votes, &solver_, &st, &tq,
-                               &triangles_[cd.index], &bq));
+    matched.push_back(entries_[index].get());
+    hyps.push_back(hypothesize(q, *matched.back(), votes ? params_ : no_votes, &solver_, st, &tq,
+                               &triangles_[index], &bq));
     verified.emplace_back();
     if (endsMatching(q, *matched.back(), hyps.back(), params_, inter_robot != nullptr,
-                     &verified.back(), &st)) {
+                     &verified.back(), st)) {
       break;
     }
   }
-  st.hypothesized = hyps.size();
+  st->hypothesized = hyps.size();
   const int budget = inter_robot ? params_.database.inter_robot_verifications : 0;
-  BestLoops found = verifyBest(q, matched, hyps, verified, params_, budget, &st);
+  BestLoops found = verifyBest(q, matched, hyps, verified, params_, budget, st);
   if (inter_robot) *inter_robot = std::move(found.inter_robot);
   return found.best;
 }

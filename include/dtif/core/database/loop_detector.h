@@ -247,6 +247,12 @@ class LoopDetector {
   void indexEntry(const Descriptor& d, std::vector<MatchTriangle>* triangles = nullptr);
   /// The index of entries_, with saved match triangles (one per entry) when given.
   void rebuildIndex(std::vector<std::vector<MatchTriangle>>* saved = nullptr);
+  /// query's screening: the best max_candidates eligible entries by histogram similarity,
+  /// best first (indices into entries_).
+  std::vector<size_t> screen(const Descriptor& q, QueryStats* st) const;
+  /// query's matching and verification of the screened entries.
+  std::optional<Loop> matchCandidates(const Descriptor& q, const std::vector<size_t>& cands,
+                                      QueryStats* st, std::optional<Loop>* inter_robot) const;
 };
 
 /// Indices of db's entries in (stamp, robot) order, ties in database order: the order in which
