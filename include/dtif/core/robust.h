@@ -13,4 +13,11 @@ inline double tukeyWeight(double r, double c) {
   return t * t;
 }
 
+/// The same biweight of a residual given as its square r2 = r^2 (no square root where a
+/// nearest-neighbour search already returns squared distances).
+inline double tukeyWeightOfSquare(double r2, double c) {
+  const double u = r2 / (c * c);
+  return u < 1.0 ? (1.0 - u) * (1.0 - u) : 0.0;
+}
+
 }  // namespace dtif

@@ -10,6 +10,7 @@
 
 #include "dtif/core/cells.h"
 #include "dtif/core/pose/rigid2d.h"
+#include "dtif/core/robust.h"
 
 namespace dtif {
 namespace {
@@ -199,12 +200,6 @@ Pose pairAndRefit(const std::vector<Eigen::Vector2d>& sample, const TrunkGrid& g
   return pairs->size() >= 2 ? rigid2d(*pairs, T.translation().z()) : T;
 }
 
-/// Tukey weight of a residual: (1 - (d / r)^2)^2 below r, else 0.
-inline double tukey(double d2, double score_radius) {
-  const double u = d2 / (score_radius * score_radius);
-  return u < 1.0 ? (1.0 - u) * (1.0 - u) : 0.0;
-}
-
 /// A cheap fitPose for ranking lattice poses: pairAndRefit, then the same Tukey score of the
 /// nearest trunks under the refitted pose; on `sample`, an even subset of the query trunks.
 /// The best few are refined by fitPose anyway: a second Procrustes round (until 2026-11-25)
@@ -218,7 +213,7 @@ std::pair<double, Pose> quickFit(const std::vector<Eigen::Vector2d>& sample, con
   for (const Eigen::Vector2d& t : sample) {
     int j = -1;
     const double d2 = grid.nearest2((T * Eigen::Vector3d(t.x(), t.y(), 0.0)).head<2>(), radius, &j);
-    if (j >= 0) score += tukey(d2, score_radius);
+    if (j >= 0) score += tukeyWeightOfSquare(d2, score_radius);
   }
   return {score, T};
 }
@@ -233,8 +228,8 @@ double coarseFit(const std::vector<Eigen::Vector2d>& sample, const TrunkGrid& gr
   const Pose T = pairAndRefit(sample, grid, T0, radius, scratch);
   double score = 0.0;
   for (const auto& [a, b] : *scratch)
-    score +=
-        tukey(((T * Eigen::Vector3d(a.x(), a.y(), 0.0)).head<2>() - b).squaredNorm(), score_radius);
+    score += tukeyWeightOfSquare(
+        ((T * Eigen::Vector3d(a.x(), a.y(), 0.0)).head<2>() - b).squaredNorm(), score_radius);
   return score;
 }
 
@@ -304,8 +299,7 @@ Fit fitPose(const Descriptor& q, const Descriptor& c, const Pose& T0, double rad
   for (const auto& [i, j] : r.pairs) {
     const Eigen::Vector2d d = (r.T * Eigen::Vector3d(q.trunks[i].x, q.trunks[i].y, 0.0)).head<2>() -
                               Eigen::Vector2d(c.trunks[j].x, c.trunks[j].y);
-    const double u = d.squaredNorm() / (score_radius * score_radius);
-    if (u < 1.0) f.score += (1.0 - u) * (1.0 - u);
+    f.score += tukeyWeightOfSquare(d.squaredNorm(), score_radius);
     residual.push_back(d.norm());
   }
   if (!residual.empty()) {
