@@ -99,26 +99,40 @@ TEST(Lattice, LatticeFitJudgesTheMedianResidual) {
   EXPECT_GE(t.accepted, n / 2);
 }
 
-/// A hypothesis on a wrong lattice site far from the true one (3 and 2 spacings off, turned
-/// by 90 deg), as the triangles of a plantation give when the submaps overlap only in part:
-/// the lattice search must reach the true site, not only the hypothesis' neighbours.
+/// Pair i of a plantation's submaps: the candidate at (90, 90), the query 12 m away in a
+/// direction and with a heading that change with i, and a hypothesis on a wrong lattice site
+/// far from the true one (3 and 2 spacings off, turned by 90 deg), as the triangles of a
+/// plantation give when the submaps overlap only in part.
+struct FarHypothesisPair {
+  Descriptor q, c;
+  Pose T_true, T_wrong;
+};
+
+FarHypothesisPair farHypothesisPair(std::mt19937& rng, const Trunks& world, int i) {
+  // The candidate frame is axis-aligned on a lattice node, so lattice vectors and 90 deg
+  // turns about its origin map lattice nodes onto lattice nodes.
+  const Pose T_w_c = poseXyYaw(90.0, 90.0, 0.0, 0.0);
+  const double a = 0.7 * i;
+  const Eigen::Vector2d qc(90.0 + 12.0 * std::cos(a), 90.0 + 12.0 * std::sin(a));
+  const Pose T_w_q = poseXyYaw(qc.x(), qc.y(), 0.0, 0.4 + a);
+  FarHypothesisPair p;
+  // One draw sequence per statement: the candidate's observation first, as before.
+  p.c = describe(observe(rng, world, Eigen::Vector2d(90.0, 90.0), T_w_c), "b", 1);
+  p.q = describe(observe(rng, world, qc, T_w_q), "a", 0);
+  p.T_true = T_w_c.inverse() * T_w_q;
+  p.T_wrong = poseXyYaw(9.0, -6.0, 0.0, M_PI / 2.0) * p.T_true;
+  return p;
+}
+
+/// farHypothesisPair's wrong hypotheses: the lattice search must reach the true site, not
+/// only the hypothesis' neighbours.
 TEST(Lattice, LatticeFitReachesSitesFarFromTheHypothesis) {
   std::mt19937 rng(2024);
   const Trunks world = test::plantation(rng, 180, 180, 3.0, 0.15);
   int resolved = 0;
   const int n = 6;
   for (int i = 0; i < n; ++i) {
-    // The candidate frame is axis-aligned on a lattice node, so lattice vectors and 90 deg
-    // turns about its origin map lattice nodes onto lattice nodes.
-    const Pose T_w_c = poseXyYaw(90.0, 90.0, 0.0, 0.0);
-    const double a = 0.7 * i;
-    const Eigen::Vector2d qc(90.0 + 12.0 * std::cos(a), 90.0 + 12.0 * std::sin(a));
-    const Pose T_w_q = poseXyYaw(qc.x(), qc.y(), 0.0, 0.4 + a);
-    const Descriptor c = describe(observe(rng, world, Eigen::Vector2d(90.0, 90.0), T_w_c), "b", 1);
-    const Descriptor q = describe(observe(rng, world, qc, T_w_q), "a", 0);
-    const Pose T_true = T_w_c.inverse() * T_w_q;
-    const Pose T_wrong = poseXyYaw(9.0, -6.0, 0.0, M_PI / 2.0) * T_true;
-
+    const auto [q, c, T_true, T_wrong] = farHypothesisPair(rng, world, i);
     std::vector<Correspondence> corrs;  // what an ambiguous triangle hypothesis looks like
     const PoseEstimate est = hypothesis(T_wrong, true, &corrs);
     const Verification v = verifyLoop(q, c, corrs, est, VerifierParams{});
@@ -139,7 +153,7 @@ TEST(Lattice, LatticeFitReachesSitesFarFromTheHypothesis) {
 
 /// The lattice search ranks its ~1,000 poses coarse to fine: the coarse fit must put the true
 /// site first, so that refining only its best pose (lattice_refined_poses 1) still reaches it
-/// from a hypothesis 3 x 2 sites and 90 deg off; with the default the search returns what
+/// from farHypothesisPair's hypotheses; with the default the search returns what
 /// ranking every pose by the finer fit (0) returns.
 TEST(Lattice, CoarseRankingPutsTheTrueSiteFirst) {
   std::mt19937 rng(2024);
@@ -150,15 +164,7 @@ TEST(Lattice, CoarseRankingPutsTheTrueSiteFirst) {
   int reached = 0;
   const int n = 6;
   for (int i = 0; i < n; ++i) {
-    const Pose T_w_c = poseXyYaw(90.0, 90.0, 0.0, 0.0);
-    const double a = 0.7 * i;
-    const Eigen::Vector2d qc(90.0 + 12.0 * std::cos(a), 90.0 + 12.0 * std::sin(a));
-    const Pose T_w_q = poseXyYaw(qc.x(), qc.y(), 0.0, 0.4 + a);
-    const Descriptor c = describe(observe(rng, world, Eigen::Vector2d(90.0, 90.0), T_w_c), "b", 1);
-    const Descriptor q = describe(observe(rng, world, qc, T_w_q), "a", 0);
-    const Pose T_true = T_w_c.inverse() * T_w_q;
-    const Pose T_wrong = poseXyYaw(9.0, -6.0, 0.0, M_PI / 2.0) * T_true;
-
+    const auto [q, c, T_true, T_wrong] = farHypothesisPair(rng, world, i);
     const auto [fit_all, ratio_all] = resolveByFit(q, c, T_wrong, all);
     const auto [fit, ratio] = resolveByFit(q, c, T_wrong, VerifierParams{});
     EXPECT_TRUE(fit.T.isApprox(fit_all.T, 1e-12)) << "pair " << i;
