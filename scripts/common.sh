@@ -79,7 +79,8 @@ dtif_scene_dataset() {
 # Builds the given targets in the sanitizer workspace (.ws-san) shared by scripts/sanitize.sh
 # and scripts/fuzz.sh: clang, -O1, AddressSanitizer + UndefinedBehaviorSanitizer, libFuzzer's
 # coverage instrumentation (harmless for the unit tests), the fuzz targets enabled. The build
-# log is .ws-san/build.log, printed when the build fails (then exits).
+# log is .ws-san/build.log, printed when the build fails (then exits). The targets are built as
+# one goal, dtif_goal (CMakeLists.txt), so that make runs DTIF_JOBS compilers on them at once.
 DTIF_SAN_WS="${DTIF_SAN_WS:-${DTIF_REPO}/.ws-san}"
 dtif_san_build() {
   local flags="-O1 -g -fno-omit-frame-pointer -fsanitize=address,undefined,fuzzer-no-link"
@@ -93,6 +94,7 @@ dtif_san_build() {
     -DCMAKE_C_FLAGS_SANITIZE="${flags}" -DCMAKE_CXX_FLAGS_SANITIZE="${flags}" \
     -DCMAKE_EXE_LINKER_FLAGS_SANITIZE="-fsanitize=address,undefined" \
     -DCMAKE_SHARED_LINKER_FLAGS_SANITIZE="-fsanitize=address,undefined" \
-    -DPYTHON_EXECUTABLE=/usr/bin/python3 -DPython3_EXECUTABLE=/usr/bin/python3 "$@" \
+    -DPYTHON_EXECUTABLE=/usr/bin/python3 -DPython3_EXECUTABLE=/usr/bin/python3 \
+    -DDTIF_GOAL_TARGETS="$(IFS=';'; echo "$*")" dtif_goal \
     > "${DTIF_SAN_WS}/build.log" 2>&1) || { tail -60 "${DTIF_SAN_WS}/build.log"; exit 1; }
 }
