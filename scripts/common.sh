@@ -98,3 +98,27 @@ dtif_san_build() {
     -DDTIF_GOAL_TARGETS="$(IFS=';'; echo "$*")" dtif_goal \
     > "${DTIF_SAN_WS}/build.log" 2>&1) || { tail -60 "${DTIF_SAN_WS}/build.log"; exit 1; }
 }
+
+# dtif_pool <run> <report> <item...>: runs "<run> <item>" for every item in the background,
+# DTIF_JOBS at a time, in the order given (so put the slowest first); as each one ends, this
+# shell runs "<report> <item> <exit status>", so reports come one at a time and never
+# interleave (scripts/sanitize.sh and scripts/fuzz.sh: their test binaries and fuzz targets are
+# single-threaded, and CI's machine has 2 cores).
+dtif_pool() {
+  local run="$1" report="$2" item pid status
+  shift 2
+  local -A running=()  # pid -> item
+  for item in "$@" ""; do
+    # Wait for a free slot (after the last item: for all of them).
+    while [ "${#running[@]}" -gt 0 ] \
+        && { [ -z "${item}" ] || [ "${#running[@]}" -ge "${DTIF_JOBS}" ]; }; do
+      status=0
+      wait -n -p pid "${!running[@]}" || status=$?
+      "${report}" "${running[${pid}]}" "${status}"
+      unset "running[${pid}]"
+    done
+    [ -z "${item}" ] && break
+    "${run}" "${item}" &
+    running[$!]="${item}"
+  done
+}
