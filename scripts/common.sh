@@ -83,8 +83,13 @@ dtif_scene_dataset() {
 # one goal, dtif_goal (CMakeLists.txt), so that make runs DTIF_JOBS compilers on them at once.
 DTIF_SAN_WS="${DTIF_SAN_WS:-${DTIF_REPO}/.ws-san}"
 dtif_san_build() {
-  local flags="-O1 -g -fno-omit-frame-pointer -fsanitize=address,undefined,fuzzer-no-link"
-  flags+=" -fno-sanitize-recover=all"
+  # -gline-tables-only: the file:line (inlined frames included) of the sanitizers' stack
+  # traces, without the variables' debug info that a debugger needs (as OSS-Fuzz builds);
+  # clang's compile time drops by ~30-40 % (dataset_test.cpp 17 -> 12 s, map_merger.cpp 56 ->
+  # 33 s of CPU) and the objects by 2-4x. ASan names a stack frame's variables from its own
+  # instrumentation, and UBSan's source locations are compiled in: reports stay the same.
+  local flags="-O1 -gline-tables-only -fno-omit-frame-pointer"
+  flags+=" -fsanitize=address,undefined,fuzzer-no-link -fno-sanitize-recover=all"
   bash "${DTIF_REPO}/scripts/install_deps.sh"
   mkdir -p "${DTIF_SAN_WS}/src"
   [ -e "${DTIF_SAN_WS}/src/dtif" ] || ln -s "${DTIF_REPO}" "${DTIF_SAN_WS}/src/dtif"
