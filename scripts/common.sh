@@ -79,11 +79,17 @@ dtif_scene_dataset() {
 # Builds the given targets in the sanitizer workspace (.ws-san) shared by scripts/sanitize.sh
 # and scripts/fuzz.sh: clang, -O1, AddressSanitizer + UndefinedBehaviorSanitizer, libFuzzer's
 # coverage instrumentation (harmless for the unit tests), the fuzz targets enabled. The build
-# log is .ws-san/build.log, printed when the build fails (then exits).
+# log is .ws-san/build.log, printed when the build fails (then exits). The targets are built as
+# one goal, dtif_goal (CMakeLists.txt), so that make runs DTIF_JOBS compilers on them at once.
 DTIF_SAN_WS="${DTIF_SAN_WS:-${DTIF_REPO}/.ws-san}"
 dtif_san_build() {
-  local flags="-O1 -g -fno-omit-frame-pointer -fsanitize=address,undefined,fuzzer-no-link"
-  flags+=" -fno-sanitize-recover=all"
+  # -gline-tables-only: the file:line (inlined frames included) of the sanitizers' stack
+  # traces, without the variables' debug info that a debugger needs (as OSS-Fuzz builds);
+  # clang's compile time drops by ~30-40 % (dataset_test.cpp 17 -> 12 s, map_merger.cpp 56 ->
+  # 33 s of CPU) and the objects by 2-4x. ASan names a stack frame's variables from its own
+  # instrumentation, and UBSan's source locations are compiled in: reports stay the same.
+  local flags="-O1 -gline-tables-only -fno-omit-frame-pointer"
+  flags+=" -fsanitize=address,undefined,fuzzer-no-link -fno-sanitize-recover=all"
   bash "${DTIF_REPO}/scripts/install_deps.sh"
   mkdir -p "${DTIF_SAN_WS}/src"
   [ -e "${DTIF_SAN_WS}/src/dtif" ] || ln -s "${DTIF_REPO}" "${DTIF_SAN_WS}/src/dtif"
@@ -93,6 +99,31 @@ dtif_san_build() {
     -DCMAKE_C_FLAGS_SANITIZE="${flags}" -DCMAKE_CXX_FLAGS_SANITIZE="${flags}" \
     -DCMAKE_EXE_LINKER_FLAGS_SANITIZE="-fsanitize=address,undefined" \
     -DCMAKE_SHARED_LINKER_FLAGS_SANITIZE="-fsanitize=address,undefined" \
-    -DPYTHON_EXECUTABLE=/usr/bin/python3 -DPython3_EXECUTABLE=/usr/bin/python3 "$@" \
+    -DPYTHON_EXECUTABLE=/usr/bin/python3 -DPython3_EXECUTABLE=/usr/bin/python3 \
+    -DDTIF_GOAL_TARGETS="$(IFS=';'; echo "$*")" dtif_goal \
     > "${DTIF_SAN_WS}/build.log" 2>&1) || { tail -60 "${DTIF_SAN_WS}/build.log"; exit 1; }
+}
+
+# dtif_pool <run> <report> <item...>: runs "<run> <item>" for every item in the background,
+# DTIF_JOBS at a time, in the order given (so put the slowest first); as each one ends, this
+# shell runs "<report> <item> <exit status>", so reports come one at a time and never
+# interleave (scripts/sanitize.sh and scripts/fuzz.sh: their test binaries and fuzz targets are
+# single-threaded, and CI's machine has 2 cores).
+dtif_pool() {
+  local run="$1" report="$2" item pid status
+  shift 2
+  local -A running=()  # pid -> item
+  for item in "$@" ""; do
+    # Wait for a free slot (after the last item: for all of them).
+    while [ "${#running[@]}" -gt 0 ] \
+        && { [ -z "${item}" ] || [ "${#running[@]}" -ge "${DTIF_JOBS}" ]; }; do
+      status=0
+      wait -n -p pid "${!running[@]}" || status=$?
+      "${report}" "${running[${pid}]}" "${status}"
+      unset "running[${pid}]"
+    done
+    [ -z "${item}" ] && break
+    "${run}" "${item}" &
+    running[$!]="${item}"
+  done
 }

@@ -18,21 +18,27 @@ dtif_san_build "${TARGETS[@]}"
 export ASAN_OPTIONS="detect_leaks=1:allocator_may_return_null=0"
 export LSAN_OPTIONS="suppressions=${DTIF_REPO}/scripts/lsan.supp:print_suppressions=0"
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
-failed=()
-for t in "${TARGETS[@]}"; do
-  out="${DTIF_SAN_WS}/fuzz/${t}"
+# Two targets at a time (common.sh's dtif_pool; libFuzzer runs one thread), each in its own
+# folder with its own log.
+run_target() {
+  local t="$1" out="${DTIF_SAN_WS}/fuzz/$1"
   rm -rf "${out}"
   mkdir -p "${out}/corpus"
-  seeds="${DTIF_REPO}/fuzz/corpus/${t#fuzz_}"
-  log="${out}/fuzz.log"
-  if (cd "${out}" && "${DTIF_SAN_WS}/devel/lib/dtif/${t}" -seed=1 -max_total_time="${SECONDS_EACH}" \
-      -timeout=20 -rss_limit_mb=2048 -max_len=65536 -print_final_stats=1 \
-      -artifact_prefix="${out}/" corpus "${seeds}" > "${log}" 2>&1); then
-    echo "fuzz: ${t} ok: $(grep -E '^#[0-9]+.*DONE' "${log}" | tail -1)"
+  cd "${out}"
+  "${DTIF_SAN_WS}/devel/lib/dtif/${t}" -seed=1 -max_total_time="${SECONDS_EACH}" \
+    -timeout=20 -rss_limit_mb=2048 -max_len=65536 -print_final_stats=1 \
+    -artifact_prefix="${out}/" corpus "${DTIF_REPO}/fuzz/corpus/${t#fuzz_}" > "${out}/fuzz.log" 2>&1
+}
+report_target() {
+  local t="$1" out="${DTIF_SAN_WS}/fuzz/$1"
+  if [ "$2" -eq 0 ]; then
+    echo "fuzz: ${t} ok: $(grep -E '^#[0-9]+.*DONE' "${out}/fuzz.log" | tail -1)"
   else
-    echo "fuzz: ${t} FAILED (reproducer in ${out}/)"; tail -40 "${log}"; failed+=("${t}")
+    echo "fuzz: ${t} FAILED (reproducer in ${out}/)"; tail -40 "${out}/fuzz.log"; failed+=("${t}")
   fi
-done
+}
+failed=()
+dtif_pool run_target report_target "${TARGETS[@]}"
 if [ ${#failed[@]} -gt 0 ]; then
   echo "fuzz: ${#failed[@]} of ${#TARGETS[@]} targets found a problem: ${failed[*]}"
   exit 1

@@ -32,14 +32,27 @@ dtif_san_build "${TESTS[@]}"
 export ASAN_OPTIONS="detect_leaks=1:abort_on_error=0:strict_string_checks=1"
 export LSAN_OPTIONS="suppressions=${DTIF_REPO}/scripts/lsan.supp:print_suppressions=0"
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
-failed=()
-for t in "${TESTS[@]}"; do
-  if "${DTIF_SAN_WS}/devel/lib/dtif/${t}" --gtest_brief=1 > "${DTIF_SAN_WS}/${t}.log" 2>&1; then
-    echo "sanitize: ${t} ok"
-  else
-    echo "sanitize: ${t} FAILED"; tail -40 "${DTIF_SAN_WS}/${t}.log"; failed+=("${t}")
+# Two binaries at a time (common.sh's dtif_pool; each one is single-threaded), the slowest
+# first so that neither core idles at the end: cli_test (~190 s under ASan), merge_cmd_test
+# (~140 s), elevation_test (~80 s) run the tool or whole surveys; the rest take seconds.
+ordered=()
+for t in cli_test merge_cmd_test elevation_test "${TESTS[@]}"; do
+  if [[ " ${TESTS[*]} " == *" ${t} "* && " ${ordered[*]} " != *" ${t} "* ]]; then
+    ordered+=("${t}")
   fi
 done
+run_test() {
+  "${DTIF_SAN_WS}/devel/lib/dtif/$1" --gtest_brief=1 > "${DTIF_SAN_WS}/$1.log" 2>&1
+}
+report_test() {
+  if [ "$2" -eq 0 ]; then
+    echo "sanitize: $1 ok"
+  else
+    echo "sanitize: $1 FAILED"; tail -40 "${DTIF_SAN_WS}/$1.log"; failed+=("$1")
+  fi
+}
+failed=()
+dtif_pool run_test report_test "${ordered[@]}"
 if [ ${#failed[@]} -gt 0 ]; then
   echo "sanitize: ${#failed[@]} of ${#TESTS[@]} failed: ${failed[*]}"
   exit 1

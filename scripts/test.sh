@@ -6,4 +6,6 @@ source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 dtif_build
 (cd "${DTIF_WS}" && catkin_make -j"${DTIF_JOBS}" "${DTIF_CMAKE_ARGS[@]}" tests)
 cd "${DTIF_WS}/build"
-ctest --output-on-failure --timeout 600 "$@"
+# DTIF_JOBS tests at a time: the gtests are plain processes (their scratch folders carry their
+# pid); the rostests run alone (RUN_SERIAL, test/CMakeLists.txt). -j1 as an argument overrides.
+ctest --output-on-failure --timeout 600 -j"${DTIF_JOBS}" "$@"
