@@ -146,22 +146,17 @@ void closeChecked(std::ofstream& os, const std::string& path) {
   if (!os) fail(path, "write failed");
 }
 
-}  // namespace
-
-Dataset readDataset(const std::string& dir) {
-  Dataset ds;
-  ds.root = dir;
-  if (!fs::is_directory(dir)) fail(dir, "not a dataset folder (no such directory)");
-
-  // submaps.csv (required)
-  const std::string submaps_path = (fs::path(dir) / "submaps.csv").string();
-  if (!fs::exists(submaps_path)) fail(submaps_path, "missing (required by DATASET.md)");
-  const CsvTable t = readCsv(submaps_path);
+// submaps.csv (required): every row checked, its point cloud present.
+std::vector<SubmapRecord> readSubmapsCsv(const std::string& dir) {
+  const std::string path = (fs::path(dir) / "submaps.csv").string();
+  if (!fs::exists(path)) fail(path, "missing (required by DATASET.md)");
+  const CsvTable t = readCsv(path);
   const int c_id = t.column("id"), c_robot = t.column("robot"), c_stamp = t.column("stamp"),
             c_file = t.column("file");
   const auto c_pose = poseColumns(t, "odom_");
   static const std::regex kRobotName("[A-Za-z0-9_]+");
   std::set<int64_t> ids;
+  std::vector<SubmapRecord> submaps;
   for (size_t i = 0; i < t.rows.size(); ++i) {
     SubmapRecord r;
     r.id = parseId(t, i, c_id);
@@ -171,54 +166,67 @@ Dataset readDataset(const std::string& dir) {
     r.T_O_S = parsePose(t, i, c_pose);
     const std::string where = "line " + std::to_string(t.line_numbers[i]);
     if (!std::regex_match(r.robot, kRobotName)) {
-      fail(submaps_path, where + ": robot name '" + r.robot + "' is not [A-Za-z0-9_]+");
+      fail(path, where + ": robot name '" + r.robot + "' is not [A-Za-z0-9_]+");
     }
-    if (!ids.insert(r.id).second) {
-      fail(submaps_path, where + ": duplicate id " + std::to_string(r.id));
-    }
-    if (r.file.empty()) fail(submaps_path, where + ": empty file name");
+    if (!ids.insert(r.id).second) fail(path, where + ": duplicate id " + std::to_string(r.id));
+    if (r.file.empty()) fail(path, where + ": empty file name");
     if (!fs::exists(fs::path(dir) / r.file)) {
-      fail(submaps_path, where + ": point cloud '" + r.file + "' does not exist");
+      fail(path, where + ": point cloud '" + r.file + "' does not exist");
     }
-    ds.submaps.push_back(std::move(r));
+    submaps.push_back(std::move(r));
   }
-  if (ds.submaps.empty()) fail(submaps_path, "no submaps listed");
+  if (submaps.empty()) fail(path, "no submaps listed");
+  return submaps;
+}
 
-  // ground_truth.csv (optional)
-  const std::string gt_path = (fs::path(dir) / "ground_truth.csv").string();
-  if (fs::exists(gt_path)) {
-    const CsvTable g = readCsv(gt_path);
-    const int c_gid = g.column("id");
-    const auto c_gpose = poseColumns(g, "");
-    for (size_t i = 0; i < g.rows.size(); ++i) {
-      const int64_t id = parseId(g, i, c_gid);
-      if (!ids.count(id)) {
-        fail(gt_path, "line " + std::to_string(g.line_numbers[i]) + ": id " + std::to_string(id) +
-                          " is not in submaps.csv");
-      }
-      if (!ds.T_W_S.emplace(id, parsePose(g, i, c_gpose)).second) {
-        fail(gt_path,
-             "line " + std::to_string(g.line_numbers[i]) + ": duplicate id " + std::to_string(id));
-      }
+// ground_truth.csv (optional) into ds->T_W_S: ids of ds->submaps only, each once.
+void readGroundTruthCsv(const std::string& dir, Dataset* ds) {
+  const std::string path = (fs::path(dir) / "ground_truth.csv").string();
+  if (!fs::exists(path)) return;
+  std::set<int64_t> ids;
+  for (const SubmapRecord& r : ds->submaps) ids.insert(r.id);
+  const CsvTable g = readCsv(path);
+  const int c_id = g.column("id");
+  const auto c_pose = poseColumns(g, "");
+  for (size_t i = 0; i < g.rows.size(); ++i) {
+    const int64_t id = parseId(g, i, c_id);
+    const std::string where = "line " + std::to_string(g.line_numbers[i]);
+    if (!ids.count(id)) fail(path, where + ": id " + std::to_string(id) + " is not in submaps.csv");
+    if (!ds->T_W_S.emplace(id, parsePose(g, i, c_pose)).second) {
+      fail(path, where + ": duplicate id " + std::to_string(id));
     }
   }
+}
 
-  // stems.csv (optional)
-  const std::string stems_path = (fs::path(dir) / "stems.csv").string();
-  if (fs::exists(stems_path)) {
-    const CsvTable s = readCsv(stems_path);
-    const int c_sid = s.column("stem_id"), c_x = s.column("x"), c_y = s.column("y"),
-              c_z = s.column("z_base"), c_d = s.column("dbh");
-    for (size_t i = 0; i < s.rows.size(); ++i) {
-      StemRecord st;
-      st.stem_id = parseId(s, i, c_sid);
-      st.x = parseDouble(s, i, c_x);
-      st.y = parseDouble(s, i, c_y);
-      st.z_base = parseDouble(s, i, c_z);
-      st.dbh = parseDouble(s, i, c_d);
-      ds.stems.push_back(st);
-    }
+// stems.csv (optional).
+std::vector<StemRecord> readStemsCsv(const std::string& dir) {
+  const std::string path = (fs::path(dir) / "stems.csv").string();
+  std::vector<StemRecord> stems;
+  if (!fs::exists(path)) return stems;
+  const CsvTable s = readCsv(path);
+  const int c_sid = s.column("stem_id"), c_x = s.column("x"), c_y = s.column("y"),
+            c_z = s.column("z_base"), c_d = s.column("dbh");
+  for (size_t i = 0; i < s.rows.size(); ++i) {
+    StemRecord st;
+    st.stem_id = parseId(s, i, c_sid);
+    st.x = parseDouble(s, i, c_x);
+    st.y = parseDouble(s, i, c_y);
+    st.z_base = parseDouble(s, i, c_z);
+    st.dbh = parseDouble(s, i, c_d);
+    stems.push_back(st);
   }
+  return stems;
+}
+
+}  // namespace
+
+Dataset readDataset(const std::string& dir) {
+  Dataset ds;
+  ds.root = dir;
+  if (!fs::is_directory(dir)) fail(dir, "not a dataset folder (no such directory)");
+  ds.submaps = readSubmapsCsv(dir);
+  readGroundTruthCsv(dir, &ds);
+  ds.stems = readStemsCsv(dir);
   return ds;
 }
 

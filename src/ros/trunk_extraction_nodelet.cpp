@@ -59,38 +59,8 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
  private:
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
-    ros::NodeHandle& pnh = getPrivateNodeHandle();
-    ros_glue::ParamReader reader(pnh);
     try {
-      reader.readSection("", &node_);
-      reader.readSection("", &assembler_params_);
-      reader.readSection("trunk_extraction", &extractor_params_);
-      reader.readSection("descriptor", &descriptor_params_);
-      reader.readSection("levelling", &levelling_params_);
-      reader.readSection("multi_submap", &multi_submap_params_);
-      reader.checkNoUnknownKeys();
-      std::string problems = assembler_params_.validate() + extractor_params_.validate() +
-                             descriptor_params_.validate() + levelling_params_.validate() +
-                             multi_submap_params_.validate();
-      if (node_.input != "odometry" && node_.input != "submap") {
-        problems += "input must be 'odometry' or 'submap', not '" + node_.input + "'\n";
-      }
-      if (node_.queue_size < 1) problems += "queue_size must be >= 1\n";
-      if (!node_.imu_topic.empty() && node_.input != "odometry") {
-        problems += "imu_topic needs input 'odometry' (the IMU is rotated by the odometry)\n";
-      }
-      if (node_.marker_history < 0) problems += "marker_history must be >= 0\n";
-      if (!(node_.marker_period_s >= 0.0)) problems += "marker_period_s must be >= 0\n";
-      if (!(node_.input_timeout_s >= 0.0)) problems += "input_timeout_s must be >= 0\n";
-      if (node_.robot.empty()) {
-        const std::string ns = nh.getNamespace();
-        node_.robot = ns.substr(ns.find_last_of('/') + 1);
-      }
-      if (!std::regex_match(node_.robot, std::regex("[A-Za-z0-9_]+"))) {
-        problems += "robot name '" + node_.robot +
-                    "' is not [A-Za-z0-9_]+ (set ~robot or run in the robot's namespace)\n";
-      }
-      if (!problems.empty()) throw ParamError(pnh.getNamespace() + ": " + problems);
+      readParams(nh, getPrivateNodeHandle());
     } catch (const ParamError& e) {
       NODELET_FATAL("%s", e.what());
       throw;
@@ -107,27 +77,8 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
     setUpAccumulator();
     recent_markers_ =
         std::make_unique<ros_glue::RecentMarkers>(static_cast<size_t>(node_.marker_history));
-    descriptor_pub_ = nh.advertise<dtif::TrunkDescriptor>("descriptor", 10);
-    // Earlier submaps described again with their successors' stems (multi_submap/
-    // forward_submaps): the loop-closure nodelet replaces their database entries.
-    update_pub_ = nh.advertise<dtif::TrunkDescriptor>("descriptor_updates", 10);
-    trunks_pub_ = nh.advertise<visualization_msgs::MarkerArray>("trunks", 2);
-    if (node_.publish_submap_cloud) {
-      cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("submap_cloud", 2);
-    }
-    if (node_.input == "odometry") {
-      odom_sub_ = nh.subscribe("Odometry", 200, &TrunkExtractionNodelet::onOdometry, this);
-      cloud_sub_ = nh.subscribe("cloud_registered", 20, &TrunkExtractionNodelet::onCloud, this);
-      if (!node_.imu_topic.empty()) {
-        imu_sub_ = nh.subscribe(node_.imu_topic, 2000, &TrunkExtractionNodelet::onImu, this);
-      }
-    } else {
-      if (!node_.odom_frame.empty()) {
-        tf_buffer_ = std::make_unique<tf2_ros::Buffer>();
-        tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh);
-      }
-      submap_sub_ = nh.subscribe("submap", 4, &TrunkExtractionNodelet::onSubmap, this);
-    }
+    advertise(nh);
+    subscribe(nh);
     if (node_.marker_period_s > 0.0 && node_.marker_history > 0) {
       marker_timer_ =
           nh.createWallTimer(ros::WallDuration(node_.marker_period_s),
@@ -137,6 +88,72 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
     worker_ = std::thread(&TrunkExtractionNodelet::work, this);
     NODELET_INFO("robot '%s', input '%s', window %.1f s", node_.robot.c_str(), node_.input.c_str(),
                  assembler_params_.window_s);
+  }
+
+  // Every parameter section, validated; a ParamError lists every problem at once.
+  void readParams(const ros::NodeHandle& nh, const ros::NodeHandle& pnh) {
+    ros_glue::ParamReader reader(pnh);
+    reader.readSection("", &node_);
+    reader.readSection("", &assembler_params_);
+    reader.readSection("trunk_extraction", &extractor_params_);
+    reader.readSection("descriptor", &descriptor_params_);
+    reader.readSection("levelling", &levelling_params_);
+    reader.readSection("multi_submap", &multi_submap_params_);
+    reader.checkNoUnknownKeys();
+    if (node_.robot.empty()) {  // the robot's namespace names it
+      const std::string ns = nh.getNamespace();
+      node_.robot = ns.substr(ns.find_last_of('/') + 1);
+    }
+    const std::string problems = assembler_params_.validate() + extractor_params_.validate() +
+                                 descriptor_params_.validate() + levelling_params_.validate() +
+                                 multi_submap_params_.validate() + nodeProblems();
+    if (!problems.empty()) throw ParamError(pnh.getNamespace() + ": " + problems);
+  }
+
+  std::string nodeProblems() const {
+    std::string problems;
+    if (node_.input != "odometry" && node_.input != "submap") {
+      problems += "input must be 'odometry' or 'submap', not '" + node_.input + "'\n";
+    }
+    if (node_.queue_size < 1) problems += "queue_size must be >= 1\n";
+    if (!node_.imu_topic.empty() && node_.input != "odometry") {
+      problems += "imu_topic needs input 'odometry' (the IMU is rotated by the odometry)\n";
+    }
+    if (node_.marker_history < 0) problems += "marker_history must be >= 0\n";
+    if (!(node_.marker_period_s >= 0.0)) problems += "marker_period_s must be >= 0\n";
+    if (!(node_.input_timeout_s >= 0.0)) problems += "input_timeout_s must be >= 0\n";
+    if (!std::regex_match(node_.robot, std::regex("[A-Za-z0-9_]+"))) {
+      problems += "robot name '" + node_.robot +
+                  "' is not [A-Za-z0-9_]+ (set ~robot or run in the robot's namespace)\n";
+    }
+    return problems;
+  }
+
+  void advertise(ros::NodeHandle& nh) {
+    descriptor_pub_ = nh.advertise<dtif::TrunkDescriptor>("descriptor", 10);
+    // Earlier submaps described again with their successors' stems (multi_submap/
+    // forward_submaps): the loop-closure nodelet replaces their database entries.
+    update_pub_ = nh.advertise<dtif::TrunkDescriptor>("descriptor_updates", 10);
+    trunks_pub_ = nh.advertise<visualization_msgs::MarkerArray>("trunks", 2);
+    if (node_.publish_submap_cloud) {
+      cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("submap_cloud", 2);
+    }
+  }
+
+  void subscribe(ros::NodeHandle& nh) {
+    if (node_.input == "odometry") {
+      odom_sub_ = nh.subscribe("Odometry", 200, &TrunkExtractionNodelet::onOdometry, this);
+      cloud_sub_ = nh.subscribe("cloud_registered", 20, &TrunkExtractionNodelet::onCloud, this);
+      if (!node_.imu_topic.empty()) {
+        imu_sub_ = nh.subscribe(node_.imu_topic, 2000, &TrunkExtractionNodelet::onImu, this);
+      }
+      return;
+    }
+    if (!node_.odom_frame.empty()) {
+      tf_buffer_ = std::make_unique<tf2_ros::Buffer>();
+      tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh);
+    }
+    submap_sub_ = nh.subscribe("submap", 4, &TrunkExtractionNodelet::onSubmap, this);
   }
 
   // A periodic warning, naming the resolved topic, while an input stays silent (wall time: a

@@ -39,32 +39,25 @@ std::string fmtStats(const Stats& s) {
   return buf;
 }
 
-}  // namespace
+using Names = std::map<int64_t, std::string>;  // dataset submap id -> robot
 
-int runScore(const ScoreArgs& a) {
-  const DtifParams params = loadParams(a.configs);
-  const Dataset ds = readDataset(a.dataset);
-  const std::vector<LoopLogRow> log = readLoopLog(a.loops);
-  std::vector<std::string> unmatched;
-  const EvalResult res =
-      scoreLoopLog(ds, log, params.loop.database.exclude_recent_s, EvalParams{}, &unmatched);
-  const std::string table = formatTable(res.summary, "dtif (ROS nodelets)");
-  writeEvalFiles(a.out, res, table, params);
+// "?" for an id the dataset does not hold (an --eval folder of another dataset).
+const char* nameOf(const Names& names, int64_t id) {
+  const auto it = names.find(id);
+  return it == names.end() ? "?" : it->second.c_str();
+}
 
-  std::map<int64_t, int64_t> offline;
-  if (!a.eval.empty()) offline = readAcceptedLoops(a.eval + "/results.csv");
-  std::map<int64_t, std::string> name;  // dataset id -> robot
-  for (const SubmapRecord& r : ds.submaps) name[r.id] = r.robot;
-
-  std::cout << "online loop closures (" << a.loops << ") against ground truth of " << ds.root
-            << ":\n";
+// One line per online loop, with what dtif eval found for its query when given (`offline`:
+// query -> candidate). Returns how many have eval's candidate.
+size_t printOnlineLoops(const EvalResult& res, const Names& name, const ScoreArgs& a,
+                        const std::map<int64_t, int64_t>& offline) {
   size_t same = 0;
   for (const EvalRow& r : res.rows) {
     if (!r.accepted) continue;
     char buf[256];
     std::snprintf(buf, sizeof(buf),
                   "  %s %ld -> %s %ld: rot %.3f deg, trans %.3f m, overlap %.2f, %s",
-                  name[r.query].c_str(), static_cast<long>(r.query), name[*r.candidate].c_str(),
+                  nameOf(name, r.query), static_cast<long>(r.query), nameOf(name, *r.candidate),
                   static_cast<long>(*r.candidate), r.err->rot_deg, r.err->trans_m, r.overlap,
                   r.true_positive ? "true positive" : "FALSE POSITIVE");
     std::cout << buf;
@@ -81,26 +74,30 @@ int runScore(const ScoreArgs& a) {
     }
     std::cout << "\n";
   }
-  for (const std::string& u : unmatched) std::cout << "  not in the dataset: " << u << "\n";
-  std::cout << "(submap ids of the dataset; the nodelets number each robot's submaps apart)\n"
-            << table;
-  if (!a.eval.empty()) {
-    std::map<int64_t, const EvalRow*> online;
-    for (const EvalRow& r : res.rows) online[r.query] = &r;
-    std::ostringstream missed;
-    size_t n_missed = 0;
-    for (const auto& [q, c] : offline) {
-      const auto it = online.find(q);
-      if (it != online.end() && it->second->accepted) continue;
-      missed << (n_missed ? ", " : " ") << name[q] << " " << q << " -> " << name[c] << " " << c;
-      ++n_missed;
-    }
-    std::cout << "same loops as dtif eval: " << same << " of " << res.summary.accepted
-              << " online loops have eval's candidate; of eval's " << offline.size() << " loops, "
-              << n_missed << " not found online" << (n_missed ? ":" : "") << missed.str() << "\n";
-  }
+  return same;
+}
 
-  // Lag: from a submap's last cloud to its result, in ROS time (the bag's clock in a replay).
+// eval's loops that the online run did not find.
+void printMissedOnline(const EvalResult& res, const Names& name,
+                       const std::map<int64_t, int64_t>& offline, size_t same) {
+  std::map<int64_t, const EvalRow*> online;
+  for (const EvalRow& r : res.rows) online[r.query] = &r;
+  std::ostringstream missed;
+  size_t n_missed = 0;
+  for (const auto& [q, c] : offline) {
+    const auto it = online.find(q);
+    if (it != online.end() && it->second->accepted) continue;
+    missed << (n_missed ? ", " : " ") << nameOf(name, q) << " " << q << " -> " << nameOf(name, c)
+           << " " << c;
+    ++n_missed;
+  }
+  std::cout << "same loops as dtif eval: " << same << " of " << res.summary.accepted
+            << " online loops have eval's candidate; of eval's " << offline.size() << " loops, "
+            << n_missed << " not found online" << (n_missed ? ":" : "") << missed.str() << "\n";
+}
+
+// Lag: from a submap's last cloud to its result, in ROS time (the bag's clock in a replay).
+void printLag(const std::vector<LoopLogRow>& log) {
   std::vector<double> lag_all, lag_loops;
   for (const LoopLogRow& l : log) {
     lag_all.push_back(l.ros_time - l.query_data_end);
@@ -117,6 +114,33 @@ int runScore(const ScoreArgs& a) {
                   ros_span / wall_span);
     }
   }
+}
+
+}  // namespace
+
+int runScore(const ScoreArgs& a) {
+  const DtifParams params = loadParams(a.configs);
+  const Dataset ds = readDataset(a.dataset);
+  const std::vector<LoopLogRow> log = readLoopLog(a.loops);
+  std::vector<std::string> unmatched;
+  const EvalResult res =
+      scoreLoopLog(ds, log, params.loop.database.exclude_recent_s, EvalParams{}, &unmatched);
+  const std::string table = formatTable(res.summary, "dtif (ROS nodelets)");
+  writeEvalFiles(a.out, res, table, params);
+
+  std::map<int64_t, int64_t> offline;
+  if (!a.eval.empty()) offline = readAcceptedLoops(a.eval + "/results.csv");
+  Names name;
+  for (const SubmapRecord& r : ds.submaps) name[r.id] = r.robot;
+
+  std::cout << "online loop closures (" << a.loops << ") against ground truth of " << ds.root
+            << ":\n";
+  const size_t same = printOnlineLoops(res, name, a, offline);
+  for (const std::string& u : unmatched) std::cout << "  not in the dataset: " << u << "\n";
+  std::cout << "(submap ids of the dataset; the nodelets number each robot's submaps apart)\n"
+            << table;
+  if (!a.eval.empty()) printMissedOnline(res, name, offline, same);
+  printLag(log);
   return 0;
 }
 

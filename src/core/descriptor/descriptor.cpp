@@ -303,6 +303,49 @@ Descriptor buildDescriptor(const Trunks& input, const DescriptorParams& params) 
   return d;
 }
 
+namespace {
+
+// The trunks, then their base_seen bits.
+void putTrunks(const Trunks& trunks, Writer* w) {
+  // float32 keeps ~1 mm only within ~10 km of the origin: store offsets from a float64 origin.
+  double ox = 0, oy = 0, oz = 0;
+  if (!trunks.empty()) {
+    ox = trunks[0].x;
+    oy = trunks[0].y;
+    oz = trunks[0].z;
+  }
+  w->put<double>(ox);
+  w->put<double>(oy);
+  w->put<double>(oz);
+  w->put<uint16_t>(static_cast<uint16_t>(trunks.size()));
+  for (const TrunkLandmark& t : trunks) {
+    w->put<float>(static_cast<float>(t.x - ox));
+    w->put<float>(static_cast<float>(t.y - oy));
+    w->put<float>(static_cast<float>(t.z - oz));
+    w->put<float>(static_cast<float>(t.r));
+  }
+  for (size_t i = 0; i < trunks.size(); i += 8) {
+    uint8_t bits = 0;
+    for (size_t b = 0; b < 8 && i + b < trunks.size(); ++b)
+      bits |= static_cast<uint8_t>(trunks[i + b].base_seen ? 1u << b : 0u);
+    w->put<uint8_t>(bits);
+  }
+}
+
+void putFootprint(const Footprint& f, Writer* w) {
+  const bool has_footprint = f.wellFormed();
+  w->put<float>(has_footprint ? static_cast<float>(f.cell_m) : 0.0f);
+  if (has_footprint) {
+    w->put<int32_t>(f.x0);
+    w->put<int32_t>(f.y0);
+    w->put<uint16_t>(static_cast<uint16_t>(f.width));
+    w->put<uint16_t>(static_cast<uint16_t>(f.height));
+    for (uint8_t b : f.bits) w->put<uint8_t>(b);
+  }
+}
+
+}  // namespace
+
 // Layout (little endian):
 //   u32 magic, u16 version, u16 flags(bit0 valid), u32 payload bytes, u32 FNV-1a of payload
 //   payload: str robot, i64 submap_id, f64 stamp, str invalid_reason,
@@ -327,29 +370,7 @@ std::vector<uint8_t> encodeDescriptor(const Descriptor& d) {
   w.put<int64_t>(d.submap_id);
   w.put<double>(d.stamp);
   w.putString(d.invalid_reason);
-  // float32 keeps ~1 mm only within ~10 km of the origin: store offsets from a float64 origin.
-  double ox = 0, oy = 0, oz = 0;
-  if (!d.trunks.empty()) {
-    ox = d.trunks[0].x;
-    oy = d.trunks[0].y;
-    oz = d.trunks[0].z;
-  }
-  w.put<double>(ox);
-  w.put<double>(oy);
-  w.put<double>(oz);
-  w.put<uint16_t>(static_cast<uint16_t>(d.trunks.size()));
-  for (const TrunkLandmark& t : d.trunks) {
-    w.put<float>(static_cast<float>(t.x - ox));
-    w.put<float>(static_cast<float>(t.y - oy));
-    w.put<float>(static_cast<float>(t.z - oz));
-    w.put<float>(static_cast<float>(t.r));
-  }
-  for (size_t i = 0; i < d.trunks.size(); i += 8) {
-    uint8_t bits = 0;
-    for (size_t b = 0; b < 8 && i + b < d.trunks.size(); ++b)
-      bits |= static_cast<uint8_t>(d.trunks[i + b].base_seen ? 1u << b : 0u);
-    w.put<uint8_t>(bits);
-  }
+  putTrunks(d.trunks, &w);
   w.put<uint32_t>(static_cast<uint32_t>(d.triangles.size()));
   for (const Triangle& t : d.triangles) {
     for (int i = 0; i < 3; ++i) w.put<uint16_t>(static_cast<uint16_t>(t.v[i]));
@@ -360,16 +381,7 @@ std::vector<uint8_t> encodeDescriptor(const Descriptor& d) {
       w.put<uint8_t>(static_cast<uint8_t>(std::lround(std::clamp(x, 0.0f, 1.0f) * 255.0f)));
     }
   }
-  const Footprint& f = d.footprint;
-  const bool has_footprint = f.wellFormed();
-  w.put<float>(has_footprint ? static_cast<float>(f.cell_m) : 0.0f);
-  if (has_footprint) {
-    w.put<int32_t>(f.x0);
-    w.put<int32_t>(f.y0);
-    w.put<uint16_t>(static_cast<uint16_t>(f.width));
-    w.put<uint16_t>(static_cast<uint16_t>(f.height));
-    for (uint8_t b : f.bits) w.put<uint8_t>(b);
-  }
+  putFootprint(d.footprint, &w);
   const std::vector<uint8_t> ground = encodeGroundMap(d.ground_map);
   w.put<uint32_t>(static_cast<uint32_t>(ground.size()));
   w.putBytes(ground);

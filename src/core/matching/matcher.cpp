@@ -216,46 +216,40 @@ int keyTrunk(uint64_t key, int slot) {
   return static_cast<int>((key >> ((2 - slot) * kKeyBits)) & (kMaxKeyTrunks - 1));
 }
 
-}  // namespace
+// Scratch reused between matchTriangles calls: a database load computes them for every entry.
+struct TriangleScratch {
+  std::vector<uint64_t> keys;
+  std::vector<int> by_x;
+  std::vector<std::pair<double, int>> near;
+  std::vector<double> heap;
+  std::vector<std::pair<float, uint32_t>> order;
+  std::vector<MatchTriangle> kept;
+};
 
-/// Computed from the trunks on both sides, so nothing extra crosses the radio link.
-std::vector<MatchTriangle> matchTriangles(const Descriptor& d, int k) {
+// The Delaunay faces alone, sorted by longest edge like the general case (matching searches
+// them by it).
+std::vector<MatchTriangle> facesOnly(const Descriptor& d) {
   std::vector<MatchTriangle> out;
-  // (More trunks than a key holds: far beyond kMaxDescriptorTrunks, never a valid descriptor.)
-  if (k <= 0 || d.trunks.size() < 3 || d.trunks.size() >= static_cast<size_t>(kMaxKeyTrunks)) {
-    for (const Triangle& t : d.triangles) out.push_back({t, true});
-    // Sorted by longest edge like the general case: matching searches them by it.
-    std::stable_sort(out.begin(), out.end(), [](const MatchTriangle& a, const MatchTriangle& b) {
-      return a.t.len[0] < b.t.len[0];
-    });
-    return out;
+  for (const Triangle& t : d.triangles) out.push_back({t, true});
+  std::stable_sort(out.begin(), out.end(), [](const MatchTriangle& a, const MatchTriangle& b) {
+    return a.t.len[0] < b.t.len[0];
+  });
+  return out;
+}
+
+// Into s->keys, every triangle's key shifted left by one, its low bit set for a Delaunay face
+// (after sorting, a triangle's copies are adjacent and the face copy, if any, comes last): the
+// faces, then each trunk with every two of its kk nearest neighbours.
+void triangleKeys(const Descriptor& d, int kk, TriangleScratch* s) {
+  s->keys.clear();
+  for (const Triangle& t : d.triangles) {
+    s->keys.push_back(sortedKey(t.v[0], t.v[1], t.v[2]) << 1 | 1);
   }
-  const int n = static_cast<int>(d.trunks.size());
-  const int kk = std::min(k, n - 1);
-  // Scratch reused between calls: a database load computes these for every entry.
-  struct Scratch {
-    std::vector<uint64_t> keys;
-    std::vector<int> by_x;
-    std::vector<std::pair<double, int>> near;
-    std::vector<double> heap;
-    std::vector<std::pair<float, uint32_t>> order;
-    std::vector<MatchTriangle> kept;
-  };
-  thread_local Scratch scratch;  // one TLS lookup per call, not one per use
-  std::vector<uint64_t>& keys = scratch.keys;
-  std::vector<int>& by_x = scratch.by_x;
-  std::vector<std::pair<double, int>>& near = scratch.near;
-  std::vector<double>& heap = scratch.heap;
-  std::vector<std::pair<float, uint32_t>>& order = scratch.order;
-  std::vector<MatchTriangle>& kept = scratch.kept;
-  keys.clear();
-  // Each key shifted left by one, its low bit set for a Delaunay face: after sorting, a
-  // triangle's copies are adjacent and the face copy, if any, comes last.
-  for (const Triangle& t : d.triangles) keys.push_back(sortedKey(t.v[0], t.v[1], t.v[2]) << 1 | 1);
   // Trunks with a non-finite centre (never in a validated descriptor) take no part in the
   // neighbour triangles.
+  std::vector<int>& by_x = s->by_x;
   by_x.clear();
-  for (int i = 0; i < n; ++i) {
+  for (int i = 0; i < static_cast<int>(d.trunks.size()); ++i) {
     if (std::isfinite(d.trunks[static_cast<size_t>(i)].x) &&
         std::isfinite(d.trunks[static_cast<size_t>(i)].y))
       by_x.push_back(i);
@@ -264,9 +258,10 @@ std::vector<MatchTriangle> matchTriangles(const Descriptor& d, int k) {
     return d.trunks[static_cast<size_t>(a)].x < d.trunks[static_cast<size_t>(b)].x;
   });
   const int m = std::min(kk, static_cast<int>(by_x.size()) - 1);
+  std::vector<std::pair<double, int>>& near = s->near;
   for (int pos = 0; m >= 2 && pos < static_cast<int>(by_x.size()); ++pos) {
     const int i = by_x[static_cast<size_t>(pos)];
-    nearestCandidates(d.trunks, by_x, pos, m, &near, &heap);
+    nearestCandidates(d.trunks, by_x, pos, m, &near, &s->heap);
     // The m nearest by (hypot, index), hypot only for the candidates, and only when there are
     // more than m (near-ties at the bound): the pairs below do not depend on the order.
     if (static_cast<int>(near.size()) > m) {
@@ -279,11 +274,16 @@ std::vector<MatchTriangle> matchTriangles(const Descriptor& d, int k) {
     }
     for (int a = 0; a < m; ++a)
       for (int b = a + 1; b < m; ++b)
-        keys.push_back(sortedKey(i, near[a].second, near[b].second) << 1);
+        s->keys.push_back(sortedKey(i, near[a].second, near[b].second) << 1);
   }
-  std::sort(keys.begin(), keys.end());
-  kept.clear();
-  order.clear();
+}
+
+// The distinct triangles of the sorted keys as canonical triangles, without degenerate ones and
+// (unless a face) thin slivers, by longest edge, ties in key order.
+std::vector<MatchTriangle> keptTriangles(const Descriptor& d, TriangleScratch* s) {
+  const std::vector<uint64_t>& keys = s->keys;
+  s->kept.clear();
+  s->order.clear();
   for (size_t j = 0; j < keys.size(); ++j) {
     const uint64_t t = keys[j] >> 1;
     if (j + 1 < keys.size() && keys[j + 1] >> 1 == t) continue;  // the last copy: the face
@@ -292,17 +292,32 @@ std::vector<MatchTriangle> matchTriangles(const Descriptor& d, int k) {
         makeCanonicalTriangle(d.trunks, keyTrunk(t, 0), keyTrunk(t, 1), keyTrunk(t, 2));
     if (tri.len[2] <= 1e-3) continue;  // collinear or duplicate trunks
     // Thin slivers: their shortest edge tells nothing reliable about the correspondence.
-    const double s = 0.5 * (tri.len[0] + tri.len[1] + tri.len[2]);
-    const double area2 = s * (s - tri.len[0]) * (s - tri.len[1]) * (s - tri.len[2]);
+    const double sp = 0.5 * (tri.len[0] + tri.len[1] + tri.len[2]);
+    const double area2 = sp * (sp - tri.len[0]) * (sp - tri.len[1]) * (sp - tri.len[2]);
     if (!face && (area2 <= 0.0 || std::sqrt(area2) < 0.05 * tri.len[0] * tri.len[0])) continue;
-    order.emplace_back(tri.len[0], static_cast<uint32_t>(kept.size()));
-    kept.push_back({tri, face});
+    s->order.emplace_back(tri.len[0], static_cast<uint32_t>(s->kept.size()));
+    s->kept.push_back({tri, face});
   }
-  // By longest edge, ties in key order (a stable sort of kept, without moving triangles).
-  std::sort(order.begin(), order.end());
-  out.reserve(kept.size());
-  for (const auto& o : order) out.push_back(kept[o.second]);
+  // A stable sort of kept by longest edge, without moving triangles.
+  std::sort(s->order.begin(), s->order.end());
+  std::vector<MatchTriangle> out;
+  out.reserve(s->kept.size());
+  for (const auto& o : s->order) out.push_back(s->kept[o.second]);
   return out;
+}
+
+}  // namespace
+
+/// Computed from the trunks on both sides, so nothing extra crosses the radio link.
+std::vector<MatchTriangle> matchTriangles(const Descriptor& d, int k) {
+  // (More trunks than a key holds: far beyond kMaxDescriptorTrunks, never a valid descriptor.)
+  if (k <= 0 || d.trunks.size() < 3 || d.trunks.size() >= static_cast<size_t>(kMaxKeyTrunks)) {
+    return facesOnly(d);
+  }
+  thread_local TriangleScratch scratch;  // one TLS lookup per call, not one per use
+  triangleKeys(d, std::min(k, static_cast<int>(d.trunks.size()) - 1), &scratch);
+  std::sort(scratch.keys.begin(), scratch.keys.end());
+  return keptTriangles(d, &scratch);
 }
 
 std::string MatcherParams::validate() const {
