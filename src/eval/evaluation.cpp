@@ -69,58 +69,88 @@ std::unordered_set<int64_t> overlapCells(const Cloud& cloud_S, const Pose& T_W_S
   return cells;
 }
 
+namespace {
+
+bool finitePoint(const pcl::PointXYZ& p) {
+  return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
+}
+
+// The true stems near a submap, in its frame S, bucketed in 1 m cells; each counts the submap's
+// points on its trunk (how visible it was).
+class StemsInS {
+ public:
+  struct Stem {
+    Eigen::Vector3d base;
+    double r;
+    size_t hits = 0;
+  };
+
+  // Stems within 1 m of the extent [minx, maxx] x [miny, maxy] of the submap's points.
+  StemsInS(const std::vector<StemRecord>& stems, const Pose& T_S_W, float minx, float maxx,
+           float miny, float maxy) {
+    for (const StemRecord& st : stems) {
+      const Eigen::Vector3d b = T_S_W * Eigen::Vector3d(st.x, st.y, st.z_base);
+      if (b.x() < minx - 1 || b.x() > maxx + 1 || b.y() < miny - 1 || b.y() > maxy + 1) continue;
+      grid_[packCell(cellIndex(b.x()), cellIndex(b.y()))].push_back(static_cast<int>(s_.size()));
+      s_.push_back({b, 0.5 * st.dbh});
+    }
+  }
+
+  std::vector<Stem>& stems() { return s_; }
+
+  // Calls f(k) for every stem k in the 3 x 3 cells around (x, y).
+  template <class F>
+  void near(double x, double y, F&& f) const {
+    for (int64_t dx = -1; dx <= 1; ++dx)
+      for (int64_t dy = -1; dy <= 1; ++dy) {
+        const auto it = grid_.find(packCell(cellIndex(x) + dx, cellIndex(y) + dy));
+        if (it != grid_.end())
+          for (int k : it->second) f(k);
+      }
+  }
+
+  // Points within `shell_m` of a stem's surface, `low_m`-`high_m` above its base, as its hits.
+  void countHits(const Cloud& cloud_S, double shell_m, double low_m, double high_m) {
+    for (const auto& p : cloud_S) {
+      if (!finitePoint(p)) continue;
+      near(p.x, p.y, [&](int k) {
+        Stem& s = s_[static_cast<size_t>(k)];
+        const double h = p.z - s.base.z();
+        if (h < low_m || h > high_m) return;
+        if (std::hypot(p.x - s.base.x(), p.y - s.base.y()) <= s.r + shell_m) ++s.hits;
+      });
+    }
+  }
+
+ private:
+  std::vector<Stem> s_;
+  std::unordered_map<int64_t, std::vector<int>> grid_;
+};
+
+}  // namespace
+
 DetectionRow trunkDetection(const Cloud& cloud_S, const Pose& T_W_S, const Trunks& trunks,
                             const std::vector<StemRecord>& stems) {
   constexpr double kMatchM = 0.5, kShellM = 0.05, kLowM = 0.5, kHighM = 2.5;
   constexpr size_t kMinVisiblePoints = 10;
   DetectionRow row;
   row.trunks = trunks.size();
-  // Stems in S, bucketed in 1 m cells around where the submap has points.
-  const Pose T_S_W = T_W_S.inverse();
   float minx = std::numeric_limits<float>::infinity(), maxx = -minx, miny = minx, maxy = -minx;
   for (const auto& p : cloud_S) {
-    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) continue;
+    if (!finitePoint(p)) continue;
     ++row.points;
     minx = std::min(minx, p.x), maxx = std::max(maxx, p.x);
     miny = std::min(miny, p.y), maxy = std::max(maxy, p.y);
   }
-  struct S {
-    Eigen::Vector3d base;
-    double r;
-    size_t hits = 0;
-  };
-  std::vector<S> local;
-  std::unordered_map<int64_t, std::vector<int>> grid;
-  auto cellOf = [](double v) { return cellIndex(v); };
-  for (const StemRecord& st : stems) {
-    const Eigen::Vector3d b = T_S_W * Eigen::Vector3d(st.x, st.y, st.z_base);
-    if (b.x() < minx - 1 || b.x() > maxx + 1 || b.y() < miny - 1 || b.y() > maxy + 1) continue;
-    grid[packCell(cellOf(b.x()), cellOf(b.y()))].push_back(static_cast<int>(local.size()));
-    local.push_back({b, 0.5 * st.dbh});
-  }
-  auto near = [&](double x, double y, const std::function<void(int)>& f) {
-    for (int64_t dx = -1; dx <= 1; ++dx)
-      for (int64_t dy = -1; dy <= 1; ++dy) {
-        const auto it = grid.find(packCell(cellOf(x) + dx, cellOf(y) + dy));
-        if (it != grid.end())
-          for (int k : it->second) f(k);
-      }
-  };
-  for (const auto& p : cloud_S) {
-    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) continue;
-    near(p.x, p.y, [&](int k) {
-      S& s = local[k];
-      const double h = p.z - s.base.z();
-      if (h < kLowM || h > kHighM) return;
-      if (std::hypot(p.x - s.base.x(), p.y - s.base.y()) <= s.r + kShellM) ++s.hits;
-    });
-  }
+  StemsInS near_stems(stems, T_W_S.inverse(), minx, maxx, miny, maxy);
+  near_stems.countHits(cloud_S, kShellM, kLowM, kHighM);
+  std::vector<StemsInS::Stem>& local = near_stems.stems();
   std::vector<char> found(local.size(), 0);
   double sum_r = 0.0, sum_z = 0.0;
   for (const TrunkLandmark& t : trunks) {
     int best = -1;
     double bd = kMatchM;
-    near(t.x, t.y, [&](int k) {
+    near_stems.near(t.x, t.y, [&](int k) {
       const double d = std::hypot(t.x - local[k].base.x(), t.y - local[k].base.y());
       if (d < bd) bd = d, best = k;
     });
@@ -457,73 +487,91 @@ std::string formatLevelling(const std::vector<LevellingSummary>& s) {
   return os.str();
 }
 
+namespace {
+
+// What runEvaluation carries from query to query.
+struct EvalRun {
+  CellSets cells;
+  std::vector<std::shared_ptr<const Descriptor>> descs;  // every submap's, for explainMiss
+  double bytes_sum = 0.0;
+  size_t bytes_max = 0;
+  size_t inter_robot_extra = 0, inter_robot_extra_true = 0;
+};
+
+// A query's row before scoring: its descriptor, extraction and times.
+EvalRow describedRow(const SubmapRecord& rec, const FrontEndStep& step, bool levelling) {
+  EvalRow row;
+  row.query = rec.id;
+  row.described_trunks = step.desc->trunks.size();
+  row.described_submaps = step.accumulated.submaps;
+  row.t_desc_ms = step.descMs(levelling);
+  row.trunks = step.extraction.trunks.size();
+  row.invalid_reason = step.desc->invalid_reason;
+  row.t_loop_ms = step.loop_ms;
+  row.t_solver_ms = step.query.solver_ms;
+  return row;
+}
+
+// Scores query i's loop (and the inter-robot loop beside it) against ground truth; a missed
+// true loop gets its explanation.
+void scoreQuery(const Dataset& ds, const DtifParams& params, const EvalParams& eval, size_t i,
+                const FrontEndStep& step, EvalRun* run, EvalRow* row, EvalResult* result) {
+  row->has_loop = hasTrueLoop(ds, run->cells, i, params.loop.database.exclude_recent_s, eval);
+  if (step.loop) {
+    const Loop& loop = *step.loop;
+    row->inliers = loop.inliers;
+    row->score = loop.score;
+    scoreAccepted(ds, run->cells, i, submapIndex(ds, i, loop.candidate_id), loop.T_c_q, eval, row);
+  }
+  run->descs.push_back(step.desc);
+  if (row->has_loop && !row->true_positive) {
+    result->misses.push_back(explainMiss(ds, run->cells, run->descs, i, step.query, params.loop));
+  }
+  if (step.inter_robot_loop) {
+    EvalRow extra;
+    scoreAccepted(ds, run->cells, i, submapIndex(ds, i, step.inter_robot_loop->candidate_id),
+                  step.inter_robot_loop->T_c_q, eval, &extra);
+    ++run->inter_robot_extra;
+    run->inter_robot_extra_true += extra.true_positive;
+  }
+}
+
+}  // namespace
+
 EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const EvalParams& eval,
                          const std::function<void(size_t, size_t)>& progress,
                          const QueryObserver& on_query) {
   checkGroundTruth(ds);
   EvalResult result;
   SequentialFrontEnd front_end(params);
-  CellSets cells;
-  cells.reserve(ds.submaps.size());
-  std::vector<std::shared_ptr<const Descriptor>> descs;  // every submap's, for explainMiss
-  double bytes_sum = 0.0;
-  size_t bytes_max = 0;
-  size_t inter_robot_extra = 0, inter_robot_extra_true = 0;
+  EvalRun run;
+  run.cells.reserve(ds.submaps.size());
   const size_t n = ds.submaps.size();
-
   for (size_t i = 0; i < n; ++i) {
     const SubmapRecord& rec = ds.submaps[i];
     const Pose& T_W_q = ds.T_W_S.at(rec.id);
     const Cloud::Ptr cloud = loadSubmapCloud(ds, rec);
-    cells.push_back(overlapCells(*cloud, T_W_q));
+    run.cells.push_back(overlapCells(*cloud, T_W_q));
 
     // 1.-3. Descriptor (timed: desc, levelling included), query against all earlier
     // descriptors (timed: loop; solver alone: solver).
     const FrontEndStep step = front_end.describeAndQuery(rec, *cloud);
-    const Descriptor& desc = *step.desc;
     if (front_end.levelling()) result.levelling.push_back(levellingRow(rec, step.level, T_W_q));
-    EvalRow row;
-    row.query = rec.id;
-    row.described_trunks = desc.trunks.size();
-    row.described_submaps = step.accumulated.submaps;
-    row.t_desc_ms = step.descMs(front_end.levelling());
-    row.trunks = step.extraction.trunks.size();
+    EvalRow row = describedRow(rec, step, front_end.levelling());
     if (!ds.stems.empty()) {
       result.detection.push_back(
           levelledDetection(*cloud, step.level.R_L_S, T_W_q, step.extraction.trunks, ds.stems));
       result.detection.back().submap = rec.id;
     }
-    row.invalid_reason = desc.invalid_reason;
-    const size_t bytes = encodeDescriptor(desc).size();
-    bytes_sum += static_cast<double>(bytes);
-    bytes_max = std::max(bytes_max, bytes);
-    row.t_loop_ms = step.loop_ms;
-    row.t_solver_ms = step.query.solver_ms;
-
-    row.has_loop = hasTrueLoop(ds, cells, i, params.loop.database.exclude_recent_s, eval);
-    if (step.loop) {
-      const Loop& loop = *step.loop;
-      row.inliers = loop.inliers;
-      row.score = loop.score;
-      scoreAccepted(ds, cells, i, submapIndex(ds, i, loop.candidate_id), loop.T_c_q, eval, &row);
-    }
-    descs.push_back(step.desc);
-    if (row.has_loop && !row.true_positive) {
-      result.misses.push_back(explainMiss(ds, cells, descs, i, step.query, params.loop));
-    }
-
-    if (step.inter_robot_loop) {
-      EvalRow extra;
-      scoreAccepted(ds, cells, i, submapIndex(ds, i, step.inter_robot_loop->candidate_id),
-                    step.inter_robot_loop->T_c_q, eval, &extra);
-      ++inter_robot_extra;
-      inter_robot_extra_true += extra.true_positive;
-    }
-    if (on_query) on_query(desc, step.loop, step.inter_robot_loop);
+    const size_t bytes = encodeDescriptor(*step.desc).size();
+    run.bytes_sum += static_cast<double>(bytes);
+    run.bytes_max = std::max(run.bytes_max, bytes);
+    scoreQuery(ds, params, eval, i, step, &run, &row, &result);
+    if (on_query) on_query(*step.desc, step.loop, step.inter_robot_loop);
 
     // 4. Insert q (and replace the entries it extended forward, here too).
     front_end.insert(step);
-    for (const auto& u : step.updates) descs[submapIndex(ds, i, u->submap_id)] = u;
+    for (const auto& u : step.updates) run.descs[submapIndex(ds, i, u->submap_id)] = u;
     row.forward_updates = step.updates.size();
     result.rows.push_back(std::move(row));
     if (progress) progress(i + 1, n);
@@ -531,30 +579,67 @@ EvalResult runEvaluation(const Dataset& ds, const DtifParams& params, const Eval
 
   result.summary = summarize(result.rows);
   result.summary.dataset = ds.root;
-  if (n > 0) result.summary.descriptor_bytes_mean = bytes_sum / static_cast<double>(n);
-  result.summary.descriptor_bytes_max = bytes_max;
-  result.summary.inter_robot_extra = inter_robot_extra;
-  result.summary.inter_robot_extra_true = inter_robot_extra_true;
+  if (n > 0) result.summary.descriptor_bytes_mean = run.bytes_sum / static_cast<double>(n);
+  result.summary.descriptor_bytes_max = run.bytes_max;
+  result.summary.inter_robot_extra = run.inter_robot_extra;
+  result.summary.inter_robot_extra_true = run.inter_robot_extra_true;
   return result;
 }
+
+namespace {
+
+// The dataset index of a robot's submap by its stamp (the nodelets number submaps their own way).
+std::optional<size_t> submapAt(const Dataset& ds, const std::string& robot, double stamp) {
+  constexpr double kStampTolS = 1e-3;
+  for (size_t i = 0; i < ds.submaps.size(); ++i) {
+    const SubmapRecord& r = ds.submaps[i];
+    if (r.robot == robot && std::fabs(r.stamp - stamp) <= kStampTolS) return i;
+  }
+  return std::nullopt;
+}
+
+std::string describeSubmap(const std::string& robot, int64_t id, double stamp) {
+  std::ostringstream os;
+  os << robot << "/" << id << " (stamp " << std::fixed << std::setprecision(3) << stamp << ")";
+  return os.str();
+}
+
+// Scores one row of the loop log into result->rows; logged marks the queries seen. Returns
+// false, with the reason in `unmatched`, for a row that names no submap of the dataset or
+// repeats a query.
+bool scoreLogRow(const Dataset& ds, const CellSets& cells, const LoopLogRow& l,
+                 const EvalParams& eval, std::vector<char>* logged, EvalResult* result,
+                 std::vector<std::string>* unmatched) {
+  const auto reject = [&](const std::string& why) {
+    if (unmatched) unmatched->push_back(why);
+    return false;
+  };
+  const std::string query = describeSubmap(l.query_robot, l.query_id, l.query_stamp);
+  const std::optional<size_t> i = submapAt(ds, l.query_robot, l.query_stamp);
+  if (!i) return reject("query " + query);
+  if ((*logged)[*i]) return reject("repeated query " + query);
+  (*logged)[*i] = 1;
+  EvalRow& row = result->rows[*i];
+  row.t_loop_ms = l.t_loop_ms;
+  if (!l.accepted) return true;
+  const std::optional<size_t> j = submapAt(ds, l.candidate_robot, l.candidate_stamp);
+  if (!j) {
+    reject("candidate " + describeSubmap(l.candidate_robot, l.candidate_id, l.candidate_stamp) +
+           " of query " + query);
+    return true;  // the query itself was logged
+  }
+  row.inliers = l.inliers;
+  row.score = l.score;
+  scoreAccepted(ds, cells, *i, *j, l.T_c_q, eval, &row);
+  return true;
+}
+
+}  // namespace
 
 EvalResult scoreLoopLog(const Dataset& ds, const std::vector<LoopLogRow>& log,
                         double exclude_recent_s, const EvalParams& eval,
                         std::vector<std::string>* unmatched) {
   checkGroundTruth(ds);
-  constexpr double kStampTolS = 1e-3;
-  auto find = [&](const std::string& robot, double stamp) -> std::optional<size_t> {
-    for (size_t i = 0; i < ds.submaps.size(); ++i) {
-      const SubmapRecord& r = ds.submaps[i];
-      if (r.robot == robot && std::fabs(r.stamp - stamp) <= kStampTolS) return i;
-    }
-    return std::nullopt;
-  };
-  auto describe = [](const std::string& robot, int64_t id, double stamp) {
-    std::ostringstream os;
-    os << robot << "/" << id << " (stamp " << std::fixed << std::setprecision(3) << stamp << ")";
-    return os.str();
-  };
   CellSets cells;
   cells.reserve(ds.submaps.size());
   for (const SubmapRecord& rec : ds.submaps) {
@@ -566,36 +651,9 @@ EvalResult scoreLoopLog(const Dataset& ds, const std::vector<LoopLogRow>& log,
   double t_loop_sum = 0.0;
   size_t queried = 0;
   for (const LoopLogRow& l : log) {
-    const std::optional<size_t> i = find(l.query_robot, l.query_stamp);
-    if (!i) {
-      if (unmatched)
-        unmatched->push_back("query " + describe(l.query_robot, l.query_id, l.query_stamp));
-      continue;
-    }
-    if (logged[*i]) {
-      if (unmatched)
-        unmatched->push_back("repeated query " +
-                             describe(l.query_robot, l.query_id, l.query_stamp));
-      continue;
-    }
-    logged[*i] = 1;
+    if (!scoreLogRow(ds, cells, l, eval, &logged, &result, unmatched)) continue;
     ++queried;
     t_loop_sum += l.t_loop_ms;
-    EvalRow& row = result.rows[*i];
-    row.t_loop_ms = l.t_loop_ms;
-    if (!l.accepted) continue;
-    const std::optional<size_t> j = find(l.candidate_robot, l.candidate_stamp);
-    if (!j) {
-      if (unmatched) {
-        unmatched->push_back("candidate " +
-                             describe(l.candidate_robot, l.candidate_id, l.candidate_stamp) +
-                             " of query " + describe(l.query_robot, l.query_id, l.query_stamp));
-      }
-      continue;
-    }
-    row.inliers = l.inliers;
-    row.score = l.score;
-    scoreAccepted(ds, cells, *i, *j, l.T_c_q, eval, &row);
   }
   for (size_t i = 0; i < ds.submaps.size(); ++i) {
     result.rows[i].query = ds.submaps[i].id;
