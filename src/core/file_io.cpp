@@ -80,23 +80,52 @@ std::vector<uint8_t> readRegularFile(const std::string& path, uint64_t max_bytes
   return buf;
 }
 
-void writeFileAtomically(const std::string& path, const std::vector<uint8_t>& bytes) {
-  const std::string tmp = path + ".tmp";
+namespace {
+
+void writeTemporary(const std::string& tmp, const uint8_t* data, size_t size) {
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0) throw std::runtime_error(tmp + ": cannot open for writing: " + errnoText());
-  const bool ok = writeAll(fd, bytes.data(), bytes.size()) && ::fsync(fd) == 0;
+  const bool ok = writeAll(fd, data, size) && ::fsync(fd) == 0;
   const std::string why = errnoText();
   if (::close(fd) != 0 || !ok) {
     std::remove(tmp.c_str());
     throw std::runtime_error(tmp + ": write failed: " + why);
   }
-  // rename() is atomic on POSIX: readers see the old or the new file, never half of one.
+}
+
+// rename() is atomic on POSIX: readers see the old or the new file, never half of one.
+void renameIntoPlace(const std::string& tmp, const std::string& path) {
   if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    const std::string rwhy = errnoText();
+    const std::string why = errnoText();
     std::remove(tmp.c_str());
-    throw std::runtime_error(path + ": cannot rename " + tmp + " into place: " + rwhy);
+    throw std::runtime_error(path + ": cannot rename " + tmp + " into place: " + why);
   }
   fsyncFolder(path);
+}
+
+}  // namespace
+
+void writeFileAtomically(const std::string& path, const std::vector<uint8_t>& bytes) {
+  writeTemporary(path + ".tmp", bytes.data(), bytes.size());
+  renameIntoPlace(path + ".tmp", path);
+}
+
+void writeFileAtomically(const std::string& path, const std::string& text) {
+  writeTemporary(path + ".tmp", reinterpret_cast<const uint8_t*>(text.data()), text.size());
+  renameIntoPlace(path + ".tmp", path);
+}
+
+void replaceWithTemporary(const std::string& path) {
+  const std::string tmp = path + ".tmp";
+  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CLOEXEC);
+  const bool ok = fd >= 0 && ::fsync(fd) == 0;
+  const std::string why = errnoText();
+  if (fd >= 0) ::close(fd);
+  if (!ok) {
+    std::remove(tmp.c_str());
+    throw std::runtime_error(tmp + ": cannot sync: " + why);
+  }
+  renameIntoPlace(tmp, path);
 }
 
 bool removeStaleTemporary(const std::string& path) {

@@ -9,6 +9,7 @@
 #include <set>
 #include <sstream>
 
+#include "dtif/core/file_io.h"
 #include "dtif/io/csv.h"
 #include "dtif/io/dataset.h"
 
@@ -75,22 +76,12 @@ StemMapColumns stemMapColumns(const std::string& path, const std::vector<std::st
   return c;
 }
 
-/// Writes `text` to path.tmp and renames it over `path`, so that the file is never half-written.
+/// writeFileAtomically, its failure as a DatasetError.
 void writeAtomically(const std::string& path, const std::string& text) {
-  const std::string tmp = path + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) fail(path, "cannot open " + tmp + " for writing");
-    out << text;
-    out.flush();
-    if (!out) {
-      std::remove(tmp.c_str());
-      fail(path, "write error on " + tmp);
-    }
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    std::remove(tmp.c_str());
-    fail(path, "cannot rename " + tmp + " to it");
+  try {
+    writeFileAtomically(path, text);
+  } catch (const std::runtime_error& e) {
+    throw DatasetError(e.what());
   }
 }
 

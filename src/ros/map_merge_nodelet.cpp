@@ -32,6 +32,7 @@
 #include "dtif/core/cloud.h"
 #include "dtif/core/database/loop_detector.h"
 #include "dtif/core/descriptor/validation.h"
+#include "dtif/core/file_io.h"
 #include "dtif/core/merge/map_merger.h"
 #include "dtif/core/merge/slice_store.h"
 #include "dtif/core/timing.h"
@@ -779,36 +780,15 @@ class MapMergeNodelet : public nodelet::Nodelet {
       out << p.id << ',' << p.robot << ',' << k.first << ',' << k.second << ','
           << snap.stamps.at(p.id) << '\n';
     }
-    writeTextAtomically(path, out.str());
-  }
-
-  static void writeTextAtomically(const std::string& path, const std::string& text) {
-    const std::string tmp = path + ".tmp";
-    {
-      std::ofstream f(tmp, std::ios::trunc);
-      f << text;
-      f.flush();
-      if (!f) {
-        std::remove(tmp.c_str());
-        throw std::runtime_error(tmp + ": write failed");
-      }
-    }
-    if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-      std::remove(tmp.c_str());
-      throw std::runtime_error(path + ": cannot rename " + tmp + " into place");
-    }
+    writeFileAtomically(path, out.str());
   }
 
   static void writePcdAtomically(const std::string& path, const Cloud& cloud) {
-    const std::string tmp = path + ".tmp";
-    if (pcl::io::savePCDFileBinaryCompressed(tmp, cloud) != 0) {
-      std::remove(tmp.c_str());
-      throw std::runtime_error(tmp + ": cannot write");
+    if (pcl::io::savePCDFileBinaryCompressed(path + ".tmp", cloud) != 0) {
+      std::remove((path + ".tmp").c_str());
+      throw std::runtime_error(path + ".tmp: cannot write");
     }
-    if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-      std::remove(tmp.c_str());
-      throw std::runtime_error(path + ": cannot rename " + tmp + " into place");
-    }
+    replaceWithTemporary(path);
   }
 
   ros_glue::MapMergeNodeParams node_;

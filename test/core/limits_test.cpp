@@ -9,6 +9,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <stdexcept>
 
 #include "core/loop_test_utils.h"
@@ -91,6 +92,40 @@ TEST(Limits, SaveLeavesNoTemporaryAndStaleOnesAreRemoved) {
   LoopDetector other{LoopDetectorParams{}};
   other.load(path);
   EXPECT_EQ(other.size(), 1u);
+}
+
+// The text and library-written (PCD) forms of an atomic save: the old content stays whole when
+// the new one cannot be put in place, and no temporary is left either way.
+TEST(Limits, TextAndLibraryWrittenFilesReplaceTheOldOneWholeOrNotAtAll) {
+  const fs::path dir = test::freshTempDir("dtif_limits_text");
+  const std::string path = (dir / "ids.csv").string();
+  const auto content = [](const std::string& p) {
+    std::ifstream f(p);
+    return std::string(std::istreambuf_iterator<char>(f), {});
+  };
+  writeFileAtomically(path, std::string("old\n"));
+  writeFileAtomically(path, std::string("id,chain\n1,a\n"));
+  EXPECT_EQ(content(path), "id,chain\n1,a\n");
+  EXPECT_FALSE(fs::exists(path + ".tmp"));
+
+  { std::ofstream(path + ".tmp") << "written by a library\n"; }
+  replaceWithTemporary(path);
+  EXPECT_EQ(content(path), "written by a library\n");
+  EXPECT_FALSE(fs::exists(path + ".tmp"));
+  // Nothing written: the old file stays and the error names the temporary.
+  try {
+    replaceWithTemporary(path);
+    ADD_FAILURE() << "no temporary, yet replaced";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find(path + ".tmp"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(content(path), "written by a library\n");
+  // A folder in the way of the rename: the old content stays, the temporary goes.
+  const std::string blocked = (dir / "sub").string();
+  fs::create_directories(fs::path(blocked) / "child");
+  EXPECT_THROW(writeFileAtomically(blocked, std::string("x")), std::runtime_error);
+  EXPECT_TRUE(fs::is_directory(blocked));
+  EXPECT_FALSE(fs::exists(blocked + ".tmp"));
 }
 
 TEST(Limits, InsertStopsAtMaxDatabaseEntries) {

@@ -23,6 +23,13 @@ std::vector<uint8_t> readRegularFile(const std::string& path, uint64_t max_bytes
 /// after a crash `path` holds the old or the new content, never part of one. Throws
 /// std::runtime_error naming the file; the temporary is removed on failure.
 void writeFileAtomically(const std::string& path, const std::vector<uint8_t>& bytes);
+/// The same for a text.
+void writeFileAtomically(const std::string& path, const std::string& text);
+
+/// For files that a library writes itself (a PCD): path + ".tmp", written and closed by the
+/// caller, fsynced and renamed over `path`, then the folder fsynced. Throws std::runtime_error
+/// naming the file; the temporary is removed on failure.
+void replaceWithTemporary(const std::string& path);
 
 /// Removes path + ".tmp" left by a save that a crash interrupted; true when one was removed.
 bool removeStaleTemporary(const std::string& path);
