@@ -40,6 +40,7 @@
 #include "dtif/io/dataset.h"
 #include "dtif/io/merge_files.h"
 #include "dtif/ros/conversions.h"
+#include "dtif/ros/fleet_map.h"
 #include "dtif/ros/map_frames.h"
 #include "dtif/ros/merge_outputs.h"
 #include "dtif/ros/merge_params.h"
@@ -63,15 +64,6 @@ class MapMergeNodelet : public nodelet::Nodelet {
   }
 
  private:
-  using Key = std::pair<std::string, int64_t>;  // (robot, the robot's own submap id)
-
-  // One robot chain of the merger: a live robot, or an earlier run's submaps from a database
-  // (merger robot name "<robot>@database": its own chain, its odometry frame no longer live).
-  struct Chain {
-    std::string odom_frame;
-    bool live = true;
-  };
-
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
@@ -135,8 +127,7 @@ class MapMergeNodelet : public nodelet::Nodelet {
       NODELET_FATAL("%s", e.what());
       throw;
     }
-    merger_ = newMerger();
-    slice_store_ = SlicePointStore(merge_params_.stems);
+    fleet_ = std::make_unique<ros_glue::FleetMap>(merge_params_, field_, node_.cloud_voxel_m);
   }
 
   // The field stem map (stem_map_file), once at start-up: a file that cannot be read is a
@@ -156,16 +147,10 @@ class MapMergeNodelet : public nodelet::Nodelet {
                  node_.stem_map_file.c_str(), field_.size(), node_.map_frame.c_str());
   }
 
-  MapMerger newMerger() const {
-    MapMerger m(merge_params_);
-    if (!field_.empty()) m.setStemMap(field_);
-    return m;
-  }
-
   // Logs when component 0 registers to the field stem map, or stops registering (merge_mutex_).
   void reportStemMap() {
     if (field_.empty()) return;
-    const StemMapRegistration r = merger_.stemMapRegistration();
+    const StemMapRegistration r = fleet_->merger().stemMapRegistration();
     if (r.ok == stem_map_registered_) return;
     stem_map_registered_ = r.ok;
     if (r.ok) {
@@ -249,12 +234,12 @@ class MapMergeNodelet : public nodelet::Nodelet {
     });
     bool changed = false;
     for (const auto& d : ds) changed |= addSubmap(*d);
-    for (const auto& l : ls) pending_loops_.push_back(l);
-    changed |= addPendingLoops();
+    for (const auto& l : ls) addLoop(*l);
+    changed |= addWaitingLoops();
     // The inventory so far, for the clouds' DBH points (stems a submap saw but did not extract).
     const std::vector<MergedStem> known = cs.empty() || !merge_params_.stems.dbh_from_points
                                               ? std::vector<MergedStem>()
-                                              : merger_.stems();
+                                              : fleet_->merger().stems();
     for (const auto& c : cs) addCloud(c.first, *c.second, known);
     if (!changed && !dirty_) {
       releaseFreedMemory(true);  // idle: whatever the last solve freed goes back now
@@ -262,15 +247,16 @@ class MapMergeNodelet : public nodelet::Nodelet {
     }
     dirty_ = false;
     const auto t0 = std::chrono::steady_clock::now();
-    const MergeSolveStats st = merger_.solve();
+    MapMerger& merger = fleet_->merger();
+    const MergeSolveStats st = merger.solve();
     last_solve_ms_ = msSince(t0);
     max_solve_ms_ = std::max(max_solve_ms_, last_solve_ms_);
     ++solves_;
     loops_used_ = st.loops_used;
     loops_rejected_ = st.loops_rejected;
     NODELET_DEBUG("re-solve: %zu submaps, %zu loops used, %zu rejected, %.1f ms",
-                  merger_.submapCount(), st.loops_used, st.loops_rejected, last_solve_ms_);
-    for (const MergeEvent& e : merger_.takeEvents()) NODELET_INFO("%s", e.text.c_str());
+                  merger.submapCount(), st.loops_used, st.loops_rejected, last_solve_ms_);
+    for (const MergeEvent& e : merger.takeEvents()) NODELET_INFO("%s", e.text.c_str());
     reportStemMap();
     assignFrames();
     publishOutputs();
@@ -307,150 +293,62 @@ class MapMergeNodelet : public nodelet::Nodelet {
                             static_cast<long>(msg.submap_id), error.c_str());
       return false;
     }
-    if (msg.header.frame_id.empty()) {
-      NODELET_WARN_THROTTLE(5.0, "descriptor %s/%ld without frame_id: dropped", msg.robot.c_str(),
-                            static_cast<long>(msg.submap_id));
+    error = fleet_->addSubmap(d, msg.header.frame_id, msg.header.stamp.toSec(), T_O_S);
+    if (!error.empty()) {
+      NODELET_WARN_THROTTLE(5.0, "descriptor %s/%ld: %s: dropped", msg.robot.c_str(),
+                            static_cast<long>(msg.submap_id), error.c_str());
       return false;
-    }
-    Chain& chain = chains_[msg.robot];
-    if (!chain.odom_frame.empty() && chain.odom_frame != msg.header.frame_id) {
-      NODELET_WARN_THROTTLE(5.0, "descriptor %s/%ld in frame %s, the robot's is %s: dropped",
-                            msg.robot.c_str(), static_cast<long>(msg.submap_id),
-                            msg.header.frame_id.c_str(), chain.odom_frame.c_str());
-      return false;
-    }
-    chain.odom_frame = msg.header.frame_id;
-    // A tilted odometry frame (stock FAST-LIO2): the robot's latest levelling keeps map z up.
-    if (d.levelled()) {
-      merger_.setLevelling(msg.robot, levellingInOdom(d.level_rotation.toRotationMatrix(), T_O_S));
-    }
-    const Trunks trunks_S = mergeSubmapOf(d, T_O_S).trunks;
-    if (!addToMerger(msg.robot, msg.robot, d.submap_id, msg.header.stamp.toSec(), T_O_S, trunks_S))
-      return false;
-    if (merge_params_.stems.dbh_from_points) {
-      slice_store_.addTrunks(next_global_id_ - 1, trunks_S,
-                             d.level_rotation.normalized().toRotationMatrix());
     }
     return true;
   }
 
-  // addSubmap of the merger under a global id; false (logged) on a duplicate or bad pose.
-  bool addToMerger(const std::string& chain, const std::string& robot, int64_t id, double stamp,
-                   const Pose& T_O_S, const Trunks& trunks) {
-    const Key key(robot, id);
-    if (global_id_.count(key)) {
-      NODELET_WARN_THROTTLE(5.0, "submap %s/%ld already merged: dropped", robot.c_str(),
-                            static_cast<long>(id));
-      return false;
+  void addLoop(const dtif::LoopClosure& msg) {
+    Loop lc;
+    std::string error;
+    if (ros_glue::fromMsg(msg, &lc, &error)) {
+      fleet_->addLoop(lc);
+    } else {
+      NODELET_WARN_THROTTLE(5.0, "loop closure: %s: dropped", error.c_str());
     }
-    MergeSubmap s;
-    s.robot = chain;
-    s.id = next_global_id_;
-    s.stamp = stamp;
-    s.T_O_S = T_O_S;
-    s.trunks = trunks;
-    try {
-      merger_.addSubmap(s);
-    } catch (const std::exception& e) {
-      NODELET_WARN_THROTTLE(5.0, "submap %s/%ld: %s: dropped", robot.c_str(), static_cast<long>(id),
-                            e.what());
-      return false;
-    }
-    global_id_[key] = next_global_id_;
-    stamp_index_[{robot, stamp}] = next_global_id_;
-    stamp_of_[next_global_id_] = stamp;
-    odom_of_[next_global_id_] = T_O_S;
-    ++next_global_id_;
-    return true;
   }
 
   // Loops whose submaps are both merged go in; the others wait (their descriptor may come
   // later than the loop). True when one went in.
-  bool addPendingLoops() {
-    bool added = false;
-    for (auto it = pending_loops_.begin(); it != pending_loops_.end();) {
-      Loop lc;
-      std::string error;
-      if (!ros_glue::fromMsg(**it, &lc, &error)) {
-        NODELET_WARN_THROTTLE(5.0, "loop closure: %s: dropped", error.c_str());
-        it = pending_loops_.erase(it);
-        continue;
-      }
-      auto q = global_id_.find({lc.query_robot, lc.query_id});
-      auto c = global_id_.find({lc.candidate_robot, lc.candidate_id});
-      if (q == global_id_.end() || c == global_id_.end()) {
-        ++it;
-        continue;
-      }
-      lc.query_id = q->second;
-      lc.candidate_id = c->second;
-      if (merger_.addLoop(lc)) {
-        added = true;
-      } else {
-        NODELET_WARN_THROTTLE(5.0, "loop %s -> %s refused by the merge back end",
-                              lc.query_robot.c_str(), lc.candidate_robot.c_str());
-      }
-      it = pending_loops_.erase(it);
+  bool addWaitingLoops() {
+    std::vector<Loop> refused;
+    bool dropped = false;
+    const bool added =
+        fleet_->addPendingLoops(static_cast<size_t>(node_.queue_size), &refused, &dropped);
+    for (const Loop& l : refused) {
+      NODELET_WARN_THROTTLE(5.0, "loop %s -> %s refused by the merge back end",
+                            l.query_robot.c_str(), l.candidate_robot.c_str());
     }
-    if (pending_loops_.size() > static_cast<size_t>(node_.queue_size)) {
-      NODELET_WARN_THROTTLE(5.0, "loops whose submaps never came: dropping the oldest");
-      pending_loops_.pop_front();
-    }
+    if (dropped) NODELET_WARN_THROTTLE(5.0, "loops whose submaps never came: dropping the oldest");
     return added;
   }
 
-  // The robot whose descriptors come in `frame` ("" when none does yet).
-  std::string robotOfFrame(const std::string& frame) const {
-    for (const auto& [robot, chain] : chains_) {
-      if (chain.odom_frame == frame) return robot;
-    }
-    return "";
-  }
-
   // A submap cloud (odometry frame, stamped with the submap's anchor time: the extraction
-  // nodelet's submap_cloud), kept voxel-downsampled in its submap frame S, and its
-  // full-resolution points near its trunks for the DBH refit at save_map.
+  // nodelet's submap_cloud); on the cloud topic shared by all robots, its frame names the robot.
   void addCloud(const std::string& topic_robot, const sensor_msgs::PointCloud2& msg,
                 const std::vector<MergedStem>& known) {
-    const std::string robot = topic_robot.empty() ? robotOfFrame(msg.header.frame_id) : topic_robot;
-    auto it = stamp_index_.find({robot, msg.header.stamp.toSec()});
-    if (it == stamp_index_.end()) {
-      NODELET_WARN_THROTTLE(5.0, "submap cloud of %s at %.3f matches no submap: dropped",
-                            robot.c_str(), msg.header.stamp.toSec());
-      return;
-    }
+    const std::string robot =
+        topic_robot.empty() ? fleet_->robotOfFrame(msg.header.frame_id) : topic_robot;
     Cloud cloud;
     std::string error;
-    if (!ros_glue::fromMsg(msg, &cloud, nullptr, &error)) {
-      NODELET_WARN_THROTTLE(5.0, "submap cloud of %s: %s: dropped", robot.c_str(), error.c_str());
-      return;
+    if (ros_glue::fromMsg(msg, &cloud, nullptr, &error)) {
+      error = fleet_->addCloud(robot, msg.header.stamp.toSec(), cloud, known);
     }
-    // O -> S with the submap's own odometry pose.
-    const Pose T_S_O = odom_of_.at(it->second).inverse();
-    Cloud::Ptr in_s(new Cloud);
-    pcl::transformPointCloud(cloud, *in_s, T_S_O.matrix().cast<float>());
-    clouds_[it->second] = voxelDown(in_s);
-    if (merge_params_.stems.dbh_from_points) {
-      const std::optional<Pose> T_M_S = merger_.pose(it->second);
-      slice_store_.addCloud(it->second, *in_s, known, T_M_S ? merger_.component(robot) : -1,
-                            T_M_S.value_or(Pose::Identity()));
+    if (!error.empty()) {
+      NODELET_WARN_THROTTLE(5.0, "submap cloud of %s at %.3f: %s: dropped", robot.c_str(),
+                            msg.header.stamp.toSec(), error.c_str());
     }
-  }
-
-  // The core's centroid voxel filter (as the submaps' own downsampling).
-  Cloud::Ptr voxelDown(const Cloud::ConstPtr& in) const {
-    VoxelCentroidGrid grid(node_.cloud_voxel_m);
-    for (const auto& p : *in) grid.add(p.getVector3fMap());
-    Cloud::Ptr out(new Cloud);
-    for (const Eigen::Vector3f& c : grid.centroids())
-      out->push_back(pcl::PointXYZ(c.x(), c.y(), c.z()));
-    return out;
   }
 
   // Map frames per component (merge_mutex_); robots that change frame are logged.
   void assignFrames() {
     std::map<int, std::set<std::string>> comps;
-    for (const std::string& r : merger_.robots()) comps[merger_.component(r)].insert(r);
+    const MapMerger& merger = fleet_->merger();
+    for (const std::string& r : merger.robots()) comps[merger.component(r)].insert(r);
     std::vector<std::set<std::string>> list;
     for (auto& c : comps) list.push_back(c.second);
     for (const auto& ch : frames_.assign(list)) {
@@ -462,8 +360,8 @@ class MapMergeNodelet : public nodelet::Nodelet {
       }
     }
     component_frame_.clear();
-    for (const std::string& r : merger_.robots()) {
-      component_frame_[merger_.component(r)] = frames_.frameOf(r);
+    for (const std::string& r : merger.robots()) {
+      component_frame_[merger.component(r)] = frames_.frameOf(r);
     }
   }
 
@@ -475,13 +373,15 @@ class MapMergeNodelet : public nodelet::Nodelet {
   // Paths, stems, markers and the TF snapshot from the latest solve (merge_mutex_ held).
   void publishOutputs() {
     const ros::Time now = ros::Time::now();
-    const std::vector<MergedPose> poses = merger_.poses();
+    const MapMerger& merger = fleet_->merger();
+    const std::vector<MergedPose> poses = merger.poses();
     std::map<std::string, std::vector<std::pair<double, Pose>>> per_robot;
-    for (const MergedPose& p : poses) per_robot[p.robot].emplace_back(stamp_of_[p.id], p.T_M_S);
+    for (const MergedPose& p : poses)
+      per_robot[p.robot].emplace_back(fleet_->stampOf(p.id), p.T_M_S);
     std::vector<geometry_msgs::TransformStamped> tfs;
-    for (const auto& [robot, chain] : chains_) {
+    for (const auto& [robot, chain] : fleet_->chains()) {
       if (!chain.live) continue;
-      const std::optional<Pose> T_M_O = merger_.mapFromOdom(robot);
+      const std::optional<Pose> T_M_O = merger.mapFromOdom(robot);
       if (!T_M_O) continue;
       geometry_msgs::TransformStamped t;
       t.header.frame_id = frames_.frameOf(robot);
@@ -499,14 +399,14 @@ class MapMergeNodelet : public nodelet::Nodelet {
       tf_changed_ = true;
     }
     publishTf();
-    const std::vector<MergedStem> stems = merger_.stems();
+    const std::vector<MergedStem> stems = merger.stems();
     stems_count_ = stems.size();
     const int map_component = componentOfFrame(node_.map_frame);
     if (map_component >= 0) {
       stems_pub_.publish(ros_glue::stemInventoryMsg(stems, map_component, node_.map_frame, now));
     }
     markers_pub_.publish(ros_glue::mergedMapMarkers(
-        poses, merger_.loops(), stems, [this](int c) { return frameOfComponent(c); }, now));
+        poses, merger.loops(), stems, [this](int c) { return frameOfComponent(c); }, now));
   }
 
   int componentOfFrame(const std::string& frame) const {
@@ -551,50 +451,22 @@ class MapMergeNodelet : public nodelet::Nodelet {
     }
     std::lock_guard<std::mutex> lock(merge_mutex_);
     resetMap();
-    size_t added = 0, unknown = 0;
-    for (size_t i : entriesInStampOrder(db)) {
-      const Descriptor& d = *db.entries()[i];
-      const EntryOdometry& o = db.odometry(i);
-      if (!o.known()) {
-        ++unknown;
-        continue;
-      }
-      const std::string chain = d.robot + "@database";
-      chains_[chain] = Chain{o.odom_frame, false};
-      added += addToMerger(chain, d.robot, d.submap_id, d.stamp, o.T_O_S, d.trunks);
-    }
-    // The earlier run's loops rebuild its map, so the new run lands in that map.
-    size_t loops = 0;
-    for (Loop lc : db.loops()) {
-      auto q = global_id_.find({lc.query_robot, lc.query_id});
-      auto c = global_id_.find({lc.candidate_robot, lc.candidate_id});
-      if (q == global_id_.end() || c == global_id_.end()) continue;
-      lc.query_id = q->second;
-      lc.candidate_id = c->second;
-      loops += merger_.addLoop(lc);
-    }
+    const ros_glue::FleetMap::Loaded n = fleet_->loadDatabase(db);
     dirty_ = true;
-    *message = "map: " + std::to_string(added) + " submaps and " + std::to_string(loops) +
+    *message = "map: " + std::to_string(n.submaps) + " submaps and " + std::to_string(n.loops) +
                " loops of an earlier run from " + path +
-               (unknown ? " (" + std::to_string(unknown) + " without odometry pose skipped)" : "");
+               (n.without_odometry
+                    ? " (" + std::to_string(n.without_odometry) + " without odometry pose skipped)"
+                    : "");
     return true;
   }
 
   void resetMap() {
     ++generation_;
-    merger_ = newMerger();
+    fleet_->reset();
     stem_map_registered_ = false;
     frames_ = ros_glue::MapFrames(node_.map_frame);
-    chains_.clear();
-    global_id_.clear();
-    stamp_index_.clear();
-    stamp_of_.clear();
-    odom_of_.clear();
-    clouds_.clear();
-    slice_store_ = SlicePointStore(merge_params_.stems);
-    pending_loops_.clear();
     component_frame_.clear();
-    next_global_id_ = 0;
   }
 
   bool onLoad(dtif::LoadDatabase::Request& req, dtif::LoadDatabase::Response& res) {
@@ -605,7 +477,7 @@ class MapMergeNodelet : public nodelet::Nodelet {
       NODELET_ERROR("%s", res.message.c_str());
     }
     std::lock_guard<std::mutex> lock(merge_mutex_);
-    res.size = merger_.submapCount();
+    res.size = fleet_->merger().submapCount();
     cv_.notify_one();
     return true;
   }
@@ -615,8 +487,8 @@ class MapMergeNodelet : public nodelet::Nodelet {
   bool onInfo(dtif::GetMapInfo::Request&, dtif::GetMapInfo::Response& res) {
     std::lock_guard<std::mutex> lock(merge_mutex_);
     std::map<std::string, uint32_t> count;
-    for (const MergedPose& p : merger_.poses()) ++count[p.robot];
-    for (const auto& [robot, chain] : chains_) {
+    for (const MergedPose& p : fleet_->merger().poses()) ++count[p.robot];
+    for (const auto& [robot, chain] : fleet_->chains()) {
       res.robots.push_back(robot);
       res.map_frames.push_back(frames_.frameOf(robot));
       res.odom_frames.push_back(chain.odom_frame);
@@ -628,38 +500,21 @@ class MapMergeNodelet : public nodelet::Nodelet {
     res.solves = static_cast<uint32_t>(solves_);
     res.last_solve_ms = last_solve_ms_;
     res.max_solve_ms = max_solve_ms_;
-    res.slice_submaps = static_cast<uint32_t>(slice_store_.submapsWithPoints());
-    res.slice_bytes = slice_store_.bytes();
+    res.slice_submaps = static_cast<uint32_t>(fleet_->slices().submapsWithPoints());
+    res.slice_bytes = fleet_->slices().bytes();
     res.stems_dbh_from_points = static_cast<uint32_t>(stems_dbh_from_points_);
     {
       std::lock_guard<std::mutex> qlock(queue_mutex_);
       res.up_to_date = !dirty_ && descriptors_.empty() && loops_in_.empty() &&
-                       pending_loops_.empty() && solves_ > 0;
+                       fleet_->waitingLoops() == 0 && solves_ > 0;
     }
     return true;
-  }
-
-  // The merged cloud of a component in its frame from the given poses; null when no clouds.
-  Cloud::Ptr mergedCloud(const std::vector<MergedPose>& poses,
-                         const std::map<int64_t, Cloud::Ptr>& clouds, int component) const {
-    Cloud::Ptr all(new Cloud);
-    std::map<int64_t, const MergedPose*> by_id;
-    for (const MergedPose& p : poses) by_id[p.id] = &p;
-    for (const auto& [id, cloud] : clouds) {
-      auto p = by_id.find(id);
-      if (p == by_id.end() || p->second->component != component) continue;
-      Cloud moved;
-      pcl::transformPointCloud(*cloud, moved, p->second->T_M_S.matrix().cast<float>());
-      *all += moved;
-    }
-    if (all->empty()) return nullptr;
-    return voxelDown(all);
   }
 
   bool onPublishCloud(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
     std::lock_guard<std::mutex> lock(merge_mutex_);
     const int c = componentOfFrame(node_.map_frame);
-    Cloud::Ptr cloud = c >= 0 ? mergedCloud(merger_.poses(), clouds_, c) : nullptr;
+    Cloud::Ptr cloud = c >= 0 ? fleet_->mergedCloud(fleet_->merger().poses(), c) : nullptr;
     if (!cloud) {
       res.success = false;
       res.message = "no submap clouds in " + node_.map_frame +
@@ -680,21 +535,14 @@ class MapMergeNodelet : public nodelet::Nodelet {
   // seconds on a large map (2.4 s on the soak test's 712 submaps), and the worker goes on
   // merging meanwhile.
   struct SaveSnapshot {
-    MapMerger merger;
+    ros_glue::FleetMap map;  // a copy: submap clouds are shared, never modified
     uint64_t generation = 0;
-    int component = -1;                    // the component in node_.map_frame
-    std::map<int64_t, Cloud::Ptr> clouds;  // submap clouds are replaced, never modified
-    std::map<int64_t, Key> own;            // merger id -> (robot, own submap id)
-    std::map<int64_t, double> stamps;      // merger id -> anchor stamp
-    SlicePointStore slices;                // shares the kept clouds
+    int component = -1;  // the component in node_.map_frame
   };
 
   SaveSnapshot saveSnapshot() {
     std::lock_guard<std::mutex> lock(merge_mutex_);
-    SaveSnapshot snap{merger_,   generation_, componentOfFrame(node_.map_frame), clouds_, {},
-                      stamp_of_, slice_store_};
-    for (const auto& [key, id] : global_id_) snap.own[id] = key;
-    return snap;
+    return SaveSnapshot{*fleet_, generation_, componentOfFrame(node_.map_frame)};
   }
 
   bool onSaveMap(dtif::SaveMap::Request& req, dtif::SaveMap::Response& res) {
@@ -705,17 +553,17 @@ class MapMergeNodelet : public nodelet::Nodelet {
       const fs::path dir(req.directory);
       SaveSnapshot snap = saveSnapshot();
       // The saved map is the landmark-refined one (too costly for every re-solve).
-      const MergeSolveStats st = snap.merger.refine();
+      const MergeSolveStats st = snap.map.merger().refine();
       NODELET_INFO("save_map: landmark refinement %.1f ms (%zu landmarks)", st.landmark_ms,
                    st.landmarks);
-      const std::vector<MergedPose> poses = snap.merger.poses();
+      const std::vector<MergedPose> poses = snap.map.merger().poses();
       writeMergedPosesCsv((dir / "merged_poses.csv").string(), poses);
       writeMergedStemsCsv((dir / "merged_stems.csv").string(), savedStems(snap, poses));
-      writeG2o((dir / "pose_graph.g2o").string(), poses, snap.merger.graphEdges());
-      writeSubmapIds((dir / "submap_ids.csv").string(), poses, snap);
+      writeG2o((dir / "pose_graph.g2o").string(), poses, snap.map.merger().graphEdges());
+      snap.map.writeSubmapIds((dir / "submap_ids.csv").string(), poses);
       res.files = {"merged_poses.csv", "merged_stems.csv", "pose_graph.g2o", "submap_ids.csv"};
       if (Cloud::Ptr cloud =
-              snap.component >= 0 ? mergedCloud(poses, snap.clouds, snap.component) : nullptr) {
+              snap.component >= 0 ? snap.map.mergedCloud(poses, snap.component) : nullptr) {
         writePcdAtomically((dir / "merged_cloud.pcd").string(), *cloud);
         res.files.push_back("merged_cloud.pcd");
       }
@@ -734,19 +582,20 @@ class MapMergeNodelet : public nodelet::Nodelet {
   // clouds kept (SlicePointStore), as dtif merge measures it on the dataset's clouds.
   std::vector<MergedStem> savedStems(const SaveSnapshot& snap,
                                      const std::vector<MergedPose>& poses) {
-    std::vector<MergedStem> stems = snap.merger.stems();
+    std::vector<MergedStem> stems = snap.map.merger().stems();
     if (!merge_params_.stems.dbh_from_points) return stems;
     const auto t0 = std::chrono::steady_clock::now();
     StemSliceStats st;
-    stems = snap.slices.refit(stems, poses, &st);
-    const size_t n = snap.slices.submapsWithPoints();
+    const SlicePointStore& slices = snap.map.slices();
+    stems = slices.refit(stems, poses, &st);
+    const size_t n = slices.submapsWithPoints();
     NODELET_INFO(
         "save_map: DBH from the points on %zu of %zu stems (%zu too few, %zu one-sided, %zu "
         "shrunk, %zu no fit; %zu slice points from %zu submap views), %.1f ms; kept %zu points of "
         "%zu submaps, %zu bytes (%zu per submap)",
         st.refitted, st.stems, st.too_few, st.one_sided, st.shrunk, st.no_fit, st.points,
-        st.submap_views, msSince(t0), snap.slices.points(), n, snap.slices.bytes(),
-        n ? snap.slices.bytes() / n : size_t{0});
+        st.submap_views, msSince(t0), slices.points(), n, slices.bytes(),
+        n ? slices.bytes() / n : size_t{0});
     std::lock_guard<std::mutex> lock(merge_mutex_);
     stems_dbh_from_points_ = st.refitted;
     return stems;
@@ -762,25 +611,11 @@ class MapMergeNodelet : public nodelet::Nodelet {
           "was when save_map was called");
       return;
     }
-    merger_ = std::move(snap->merger);
+    fleet_->merger() = std::move(snap->map.merger());
     // A component joined by its stem inventory (refine) is logged and moves into its frame.
-    for (const MergeEvent& e : merger_.takeEvents()) NODELET_INFO("%s", e.text.c_str());
+    for (const MergeEvent& e : fleet_->merger().takeEvents()) NODELET_INFO("%s", e.text.c_str());
     assignFrames();
     publishOutputs();
-  }
-
-  // submap_ids.csv: the merged map's ids (merged_poses.csv, pose_graph.g2o) as the robots' own
-  // submap ids and anchor stamps; chain is the merger's robot ("<robot>@database": loaded).
-  static void writeSubmapIds(const std::string& path, const std::vector<MergedPose>& poses,
-                             const SaveSnapshot& snap) {
-    std::ostringstream out;
-    out << "id,chain,robot,submap_id,stamp\n" << std::setprecision(17);
-    for (const MergedPose& p : poses) {
-      const Key& k = snap.own.at(p.id);
-      out << p.id << ',' << p.robot << ',' << k.first << ',' << k.second << ','
-          << snap.stamps.at(p.id) << '\n';
-    }
-    writeFileAtomically(path, out.str());
   }
 
   static void writePcdAtomically(const std::string& path, const Cloud& cloud) {
@@ -800,22 +635,13 @@ class MapMergeNodelet : public nodelet::Nodelet {
   // This nodelet builds no descriptors: it keeps each one's trunks as its sender sent them.
   const DescriptorParams receiver_params_ = loosestDescriptorParams();
 
-  std::mutex merge_mutex_;  // everything down to out_mutex_
-  MapMerger merger_;
+  std::mutex merge_mutex_;                     // everything down to out_mutex_
+  std::unique_ptr<ros_glue::FleetMap> fleet_;  // built once the parameters are read
   ros_glue::MapFrames frames_;
-  std::map<std::string, Chain> chains_;                            // merger robot name -> chain
-  std::map<Key, int64_t> global_id_;                               // (robot, own id) -> merger id
-  std::map<std::pair<std::string, double>, int64_t> stamp_index_;  // (robot, stamp) -> id
-  std::map<int64_t, double> stamp_of_;                             // merger id -> anchor stamp
-  std::map<int64_t, Pose> odom_of_;                                // merger id -> T_O_S
-  std::map<int64_t, Cloud::Ptr> clouds_;                           // merger id -> cloud in S
-  SlicePointStore slice_store_;       // merger id -> points near its trunks, in S
   size_t stems_dbh_from_points_ = 0;  // the latest save_map's refitted stems
-  std::deque<dtif::LoopClosure::ConstPtr> pending_loops_;
   std::map<int, std::string> component_frame_;
-  int64_t next_global_id_ = 0;
   bool dirty_ = false;       // a database load wants a solve
-  uint64_t generation_ = 0;  // counts changes of merger_'s graph (save_map's snapshots)
+  uint64_t generation_ = 0;  // counts changes of the merged graph (save_map's snapshots)
   size_t loops_used_ = 0, loops_rejected_ = 0, stems_count_ = 0;
   size_t solves_ = 0;
   double last_solve_ms_ = 0.0, max_solve_ms_ = 0.0;

@@ -1,0 +1,195 @@
+#include "dtif/ros/fleet_map.h"
+
+#include <pcl/common/transforms.h>
+
+#include <iomanip>
+#include <sstream>
+
+#include "dtif/core/file_io.h"
+#include "dtif/core/voxel_grid.h"
+
+namespace dtif {
+namespace ros_glue {
+
+FleetMap::FleetMap(const MergeParams& params, std::vector<FieldStem> field, double cloud_voxel_m)
+    : params_(params), field_(std::move(field)), cloud_voxel_m_(cloud_voxel_m) {
+  reset();
+}
+
+void FleetMap::reset() {
+  merger_ = MapMerger(params_);
+  if (!field_.empty()) merger_.setStemMap(field_);
+  chains_.clear();
+  global_id_.clear();
+  stamp_index_.clear();
+  stamp_of_.clear();
+  odom_of_.clear();
+  clouds_.clear();
+  slices_ = SlicePointStore(params_.stems);
+  pending_.clear();
+  next_id_ = 0;
+}
+
+std::string FleetMap::addSubmap(const Descriptor& d, const std::string& odom_frame, double stamp,
+                                const Pose& T_O_S) {
+  if (odom_frame.empty()) return "no odometry frame (frame_id)";
+  Chain& chain = chains_[d.robot];
+  if (!chain.odom_frame.empty() && chain.odom_frame != odom_frame) {
+    return "in frame " + odom_frame + ", the robot's is " + chain.odom_frame;
+  }
+  chain.odom_frame = odom_frame;
+  // A tilted odometry frame (stock FAST-LIO2): the robot's latest levelling keeps map z up.
+  if (d.levelled()) {
+    merger_.setLevelling(d.robot, levellingInOdom(d.level_rotation.toRotationMatrix(), T_O_S));
+  }
+  const Trunks trunks_S = mergeSubmapOf(d, T_O_S).trunks;
+  const std::string why = addToMerger(d.robot, d.robot, d.submap_id, stamp, T_O_S, trunks_S);
+  if (!why.empty()) return why;
+  if (params_.stems.dbh_from_points) {
+    slices_.addTrunks(next_id_ - 1, trunks_S, d.level_rotation.normalized().toRotationMatrix());
+  }
+  return "";
+}
+
+std::string FleetMap::addToMerger(const std::string& chain, const std::string& robot, int64_t id,
+                                  double stamp, const Pose& T_O_S, const Trunks& trunks) {
+  const Key key(robot, id);
+  if (global_id_.count(key)) return "already merged";
+  MergeSubmap s;
+  s.robot = chain;
+  s.id = next_id_;
+  s.stamp = stamp;
+  s.T_O_S = T_O_S;
+  s.trunks = trunks;
+  try {
+    merger_.addSubmap(s);
+  } catch (const std::exception& e) {
+    return e.what();
+  }
+  global_id_[key] = next_id_;
+  stamp_index_[{robot, stamp}] = next_id_;
+  stamp_of_[next_id_] = stamp;
+  odom_of_[next_id_] = T_O_S;
+  ++next_id_;
+  return "";
+}
+
+bool FleetMap::addPendingLoops(size_t max_waiting, std::vector<Loop>* refused, bool* dropped) {
+  bool added = false;
+  for (auto it = pending_.begin(); it != pending_.end();) {
+    const auto q = global_id_.find({it->query_robot, it->query_id});
+    const auto c = global_id_.find({it->candidate_robot, it->candidate_id});
+    if (q == global_id_.end() || c == global_id_.end()) {  // a descriptor may come later
+      ++it;
+      continue;
+    }
+    Loop lc = *it;
+    lc.query_id = q->second;
+    lc.candidate_id = c->second;
+    if (merger_.addLoop(lc)) {
+      added = true;
+    } else if (refused) {
+      refused->push_back(*it);
+    }
+    it = pending_.erase(it);
+  }
+  *dropped = pending_.size() > max_waiting;
+  if (*dropped) pending_.pop_front();
+  return added;
+}
+
+std::string FleetMap::robotOfFrame(const std::string& frame) const {
+  for (const auto& [robot, chain] : chains_) {
+    if (chain.odom_frame == frame) return robot;
+  }
+  return "";
+}
+
+std::string FleetMap::addCloud(const std::string& robot, double stamp, const Cloud& cloud_O,
+                               const std::vector<MergedStem>& known) {
+  const auto it = stamp_index_.find({robot, stamp});
+  if (it == stamp_index_.end()) return "matches no submap";
+  // O -> S with the submap's own odometry pose.
+  const Pose T_S_O = odom_of_.at(it->second).inverse();
+  Cloud::Ptr in_s(new Cloud);
+  pcl::transformPointCloud(cloud_O, *in_s, T_S_O.matrix().cast<float>());
+  clouds_[it->second] = voxelDown(*in_s);
+  if (params_.stems.dbh_from_points) {
+    const std::optional<Pose> T_M_S = merger_.pose(it->second);
+    slices_.addCloud(it->second, *in_s, known, T_M_S ? merger_.component(robot) : -1,
+                     T_M_S.value_or(Pose::Identity()));
+  }
+  return "";
+}
+
+FleetMap::Loaded FleetMap::loadDatabase(const LoopDetector& db) {
+  reset();
+  Loaded n;
+  for (size_t i : entriesInStampOrder(db)) {
+    const Descriptor& d = *db.entries()[i];
+    const EntryOdometry& o = db.odometry(i);
+    if (!o.known()) {
+      ++n.without_odometry;
+      continue;
+    }
+    const std::string chain = d.robot + "@database";
+    chains_[chain] = Chain{o.odom_frame, false};
+    n.submaps += addToMerger(chain, d.robot, d.submap_id, d.stamp, o.T_O_S, d.trunks).empty();
+  }
+  // The earlier run's loops rebuild its map, so the new run lands in that map.
+  for (Loop lc : db.loops()) {
+    const auto q = global_id_.find({lc.query_robot, lc.query_id});
+    const auto c = global_id_.find({lc.candidate_robot, lc.candidate_id});
+    if (q == global_id_.end() || c == global_id_.end()) continue;
+    lc.query_id = q->second;
+    lc.candidate_id = c->second;
+    n.loops += merger_.addLoop(lc);
+  }
+  return n;
+}
+
+// The core's centroid voxel filter (as the submaps' own downsampling).
+Cloud::Ptr FleetMap::voxelDown(const Cloud& in) const {
+  VoxelCentroidGrid grid(cloud_voxel_m_);
+  for (const auto& p : in) grid.add(p.getVector3fMap());
+  Cloud::Ptr out(new Cloud);
+  for (const Eigen::Vector3f& c : grid.centroids())
+    out->push_back(pcl::PointXYZ(c.x(), c.y(), c.z()));
+  return out;
+}
+
+Cloud::Ptr FleetMap::mergedCloud(const std::vector<MergedPose>& poses, int component) const {
+  Cloud all;
+  std::map<int64_t, const MergedPose*> by_id;
+  for (const MergedPose& p : poses) by_id[p.id] = &p;
+  for (const auto& [id, cloud] : clouds_) {
+    const auto p = by_id.find(id);
+    if (p == by_id.end() || p->second->component != component) continue;
+    Cloud moved;
+    pcl::transformPointCloud(*cloud, moved, p->second->T_M_S.matrix().cast<float>());
+    all += moved;
+  }
+  if (all.empty()) return nullptr;
+  return voxelDown(all);
+}
+
+double FleetMap::stampOf(int64_t id) const {
+  const auto it = stamp_of_.find(id);
+  return it == stamp_of_.end() ? 0.0 : it->second;
+}
+
+void FleetMap::writeSubmapIds(const std::string& path, const std::vector<MergedPose>& poses) const {
+  std::map<int64_t, const Key*> own;
+  for (const auto& [key, id] : global_id_) own[id] = &key;
+  std::ostringstream out;
+  out << "id,chain,robot,submap_id,stamp\n" << std::setprecision(17);
+  for (const MergedPose& p : poses) {
+    const Key& k = *own.at(p.id);
+    out << p.id << ',' << p.robot << ',' << k.first << ',' << k.second << ',' << stamp_of_.at(p.id)
+        << '\n';
+  }
+  writeFileAtomically(path, out.str());
+}
+
+}  // namespace ros_glue
+}  // namespace dtif
