@@ -13,6 +13,7 @@
 #include <stdexcept>
 #include <unordered_map>
 
+#include "core/merge/merge_graph.h"
 #include "core/merge/pose_graph_cost.h"
 #include "dtif/core/merge/factor_cost.h"
 #include "dtif/core/merge/join_check.h"
@@ -23,11 +24,7 @@
 namespace dtif {
 namespace {
 
-using Vector6d = Eigen::Matrix<double, 6, 1>;
-
 bool finitePose(const Pose& T) { return T.matrix().allFinite(); }
-
-double rotationAngle(const Eigen::Matrix3d& R) { return Eigen::AngleAxisd(R).angle(); }
 
 Matrix6d diagonalSqrtInformation(const Vector6d& sigmas) {
   return sigmas.cwiseInverse().asDiagonal();
@@ -35,88 +32,9 @@ Matrix6d diagonalSqrtInformation(const Vector6d& sigmas) {
 
 }  // namespace
 
-struct MapMerger::Impl {
-  struct Node {
-    int64_t id = -1;
-    std::string robot;
-    double stamp = 0.0;
-    Pose T_O_S = Pose::Identity();
-    Trunks trunks;
-    double travelled = 0.0;  // along the robot's chain from its first submap [m]
-    Eigen::Quaterniond q = Eigen::Quaterniond::Identity();  // estimate of T_M_S
-    Eigen::Vector3d t = Eigen::Vector3d::Zero();
-    Pose pose() const {
-      Pose T = Pose::Identity();
-      T.linear() = q.toRotationMatrix();
-      T.translation() = t;
-      return T;
-    }
-    void setPose(const Pose& T) {
-      q = Eigen::Quaterniond(T.rotation()).normalized();
-      t = T.translation();
-    }
-  };
-  struct Robot {
-    std::vector<size_t> nodes;
-    Eigen::Matrix3d R_L_O = Eigen::Matrix3d::Identity();
-    int component = -1;
-    int64_t frame = -1;  // anchor submap id whose M the estimates are in (-1: none yet)
-    size_t order = 0;    // insertion order
-  };
-  /// A loop normalised to (a, b) with a on the group's first robot: T_a_b.
-  struct LoopRec {
-    Loop loop;
-    size_t a = 0, b = 0;
-    Pose T_a_b = Pose::Identity();
-    Vector6d sigmas = Vector6d::Ones();
-    bool used = true;
-    double residual_sigmas = 0.0;
-  };
-  struct Group {
-    std::vector<size_t> loops;
-    ConsistencyGraph adjacency;
-  };
-
-  MergeParams p;
-  std::vector<Node> nodes;
-  std::unordered_map<int64_t, size_t> index;
-  std::map<std::string, Robot> robots;
-  std::vector<LoopRec> loops;
-  std::map<std::pair<std::string, std::string>, Group> groups;
-  std::vector<MergeEvent> events;
-  std::vector<FieldStem> field;
-  StemMapRegistration registration;
-  std::vector<MergedStem> stems;
-  bool dirty = true;
-  bool refined = false;  // the landmark refinement ran on the current graph
-
-  explicit Impl(const MergeParams& params) : p(params) {}
-
-  // --- noise models --------------------------------------------------------------------------
-  Vector6d odomSigmas(double d) const {
-    Vector6d s;
-    const double xy = p.odom_sigma_xy_m + p.odom_sigma_xy_per_m * d;
-    const double z = p.odom_sigma_z_m + p.odom_sigma_z_per_m * d;
-    const double tilt = p.odom_sigma_tilt_rad + p.odom_sigma_tilt_per_m * d;
-    const double yaw = p.odom_sigma_rot_rad + p.odom_sigma_rot_per_m * d;
-    s << xy, xy, z, tilt, tilt, yaw;
-    return s;
-  }
-
-  Vector6d loopSigmas(const Matrix6d& cov) const {
-    const Vector6d floor =
-        (Vector6d() << p.loop_sigma_xy_min_m, p.loop_sigma_xy_min_m, p.loop_sigma_z_min_m,
-         p.loop_sigma_rot_min_rad, p.loop_sigma_rot_min_rad, p.loop_sigma_rot_min_rad)
-            .finished();
-    Vector6d s;
-    for (int i = 0; i < 6; ++i) {
-      const double v = cov(i, i);
-      s(i) = std::max(floor(i), std::isfinite(v) && v > 0.0 ? std::sqrt(v) : 0.0);
-    }
-    return s;
-  }
-
-  Pose odom(size_t from, size_t to) const { return nodes[from].T_O_S.inverse() * nodes[to].T_O_S; }
+// The merger's state (merge_graph.h) with the pieces that have no file of their own yet.
+struct MapMerger::Impl : MergeGraph {
+  using MergeGraph::MergeGraph;
 
   // --- PCM -----------------------------------------------------------------------------------
   /// Loops i and j of one group close a cycle with the two odometry chains; consistent when
@@ -292,18 +210,6 @@ struct MapMerger::Impl {
   }
 
   // --- components ----------------------------------------------------------------------------
-  /// Robots with submaps, in insertion order.
-  std::vector<std::string> robotOrder() const {
-    std::vector<std::string> out;
-    for (const auto& [name, r] : robots) {
-      if (!r.nodes.empty()) out.push_back(name);
-    }
-    std::sort(out.begin(), out.end(), [&](const std::string& a, const std::string& b) {
-      return robots.at(a).order < robots.at(b).order;
-    });
-    return out;
-  }
-
   /// Robots joined by used inter-robot loops, largest (by submaps) first; ties: earliest robot.
   std::vector<std::vector<std::string>> computeComponents() const {
     const std::vector<std::string> order = robotOrder();
@@ -515,14 +421,6 @@ struct MapMerger::Impl {
     return opt;
   }
 
-  int countComponents() const {
-    std::set<int> c;
-    for (const auto& [name, r] : robots) {
-      if (!r.nodes.empty()) c.insert(r.component);
-    }
-    return static_cast<int>(c.size());
-  }
-
   // --- landmarks -----------------------------------------------------------------------------
   /// The trunks of the submaps of one component, in insertion order, moved into M. A hidden
   /// base is a guess (the centre was fitted relative to it, up a leaning stem): such trunks
@@ -681,10 +579,6 @@ struct MapMerger::Impl {
   }
 
   // --- stems ---------------------------------------------------------------------------------
-  Pose outputTransform(int component) const {
-    return component == 0 && registration.ok ? registration.T_P_M : Pose::Identity();
-  }
-
   std::vector<MergedStem> fuseInventory(bool with_field_transform) const {
     std::vector<StemObservation> obs;
     std::vector<SensorPosition> sensors;
