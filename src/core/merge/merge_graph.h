@@ -94,4 +94,10 @@ struct MergeGraph {
   }
 };
 
+// Loop consistency, PCM (merge_consistency.cpp).
+/// Adds loop `loop_index` to its robot pair's group, checking it against the group's loops.
+void addToGroup(MergeGraph& m, size_t loop_index);
+/// Marks each loop used or rejected.
+void runPcm(MergeGraph& m);
+
 }  // namespace dtif
