@@ -36,132 +36,6 @@ Matrix6d diagonalSqrtInformation(const Vector6d& sigmas) {
 struct MapMerger::Impl : MergeGraph {
   using MergeGraph::MergeGraph;
 
-  // --- components ----------------------------------------------------------------------------
-  /// Robots joined by used inter-robot loops, largest (by submaps) first; ties: earliest robot.
-  std::vector<std::vector<std::string>> computeComponents() const {
-    const std::vector<std::string> order = robotOrder();
-    std::map<std::string, std::string> parent;
-    for (const auto& r : order) parent[r] = r;
-    auto find = [&](std::string r) {
-      while (parent[r] != r) r = parent[r] = parent[parent[r]];
-      return r;
-    };
-    for (const LoopRec& l : loops) {
-      if (!l.used) continue;
-      const std::string ra = find(nodes[l.a].robot), rb = find(nodes[l.b].robot);
-      if (ra == rb) continue;
-      // The earlier robot stays the root, so the component's anchor is its earliest robot.
-      if (robots.at(ra).order < robots.at(rb).order) {
-        parent[rb] = ra;
-      } else {
-        parent[ra] = rb;
-      }
-    }
-    std::map<std::string, std::vector<std::string>> by_root;
-    for (const auto& r : order) by_root[find(r)].push_back(r);
-    std::vector<std::vector<std::string>> comps;
-    for (auto& [root, members] : by_root) comps.push_back(members);
-    auto size = [&](const std::vector<std::string>& c) {
-      size_t n = 0;
-      for (const auto& r : c) n += robots.at(r).nodes.size();
-      return n;
-    };
-    std::sort(comps.begin(), comps.end(), [&](const auto& a, const auto& b) {
-      const size_t sa = size(a), sb = size(b);
-      if (sa != sb) return sa > sb;
-      return robots.at(a.front()).order < robots.at(b.front()).order;
-    });
-    return comps;
-  }
-
-  void rebase(const std::vector<std::string>& members, int64_t old_frame, const Pose& T_new_old) {
-    for (const auto& r : members) {
-      if (robots.at(r).frame != old_frame) continue;
-      for (size_t n : robots.at(r).nodes) nodes[n].setPose(T_new_old * nodes[n].pose());
-    }
-  }
-
-  /// Expresses every robot of a component in the M of its anchor (its earliest robot's first
-  /// submap, levelled): rebases the robots reached through loops from other frames.
-  void placeComponent(const std::vector<std::string>& members) {
-    Robot& first = robots.at(members.front());
-    Node& anchor = nodes[first.nodes.front()];
-    Pose target = Pose::Identity();
-    target.linear() = first.R_L_O * anchor.T_O_S.linear();
-    const Pose T_fix = target * anchor.pose().inverse();
-    if (first.frame != anchor.id || !T_fix.isApprox(Pose::Identity(), 1e-12)) {
-      const int64_t old = first.frame;
-      for (const auto& r : members) {
-        if (robots.at(r).frame == old) rebase({r}, old, T_fix);
-      }
-      for (const auto& r : members) {
-        if (robots.at(r).frame == old) robots.at(r).frame = anchor.id;
-      }
-    }
-    // Breadth first over used loops from the placed robots.
-    const std::set<std::string> in(members.begin(), members.end());
-    bool changed = true;
-    while (changed) {
-      changed = false;
-      for (const LoopRec& l : loops) {
-        if (!l.used) continue;
-        const std::string& ra = nodes[l.a].robot;
-        const std::string& rb = nodes[l.b].robot;
-        if (!in.count(ra) || !in.count(rb)) continue;
-        const bool pa = robots.at(ra).frame == anchor.id, pb = robots.at(rb).frame == anchor.id;
-        if (pa == pb) continue;
-        const size_t placed = pa ? l.a : l.b, other = pa ? l.b : l.a;
-        const Pose T_placed_other = pa ? l.T_a_b : l.T_a_b.inverse();
-        const Pose T_new_old =
-            nodes[placed].pose() * T_placed_other * nodes[other].pose().inverse();
-        const int64_t old = robots.at(nodes[other].robot).frame;
-        for (const auto& r : members) {
-          if (robots.at(r).frame != old) continue;
-          rebase({r}, old, T_new_old);
-          robots.at(r).frame = anchor.id;
-        }
-        changed = true;
-      }
-    }
-  }
-
-  void updateComponents() {
-    const auto comps = computeComponents();
-    for (size_t c = 0; c < comps.size(); ++c) {
-      const int64_t old_anchor_frame = robots.at(comps[c].front()).frame;
-      std::map<std::string, int64_t> old_frames;
-      for (const auto& r : comps[c]) old_frames[r] = robots.at(r).frame;
-      placeComponent(comps[c]);
-      (void)old_anchor_frame;
-      for (const auto& r : comps[c]) {
-        Robot& rob = robots.at(r);
-        const int cid = static_cast<int>(c);
-        if (rob.component == cid && old_frames[r] == rob.frame) continue;
-        MergeEvent ev;
-        ev.robot = r;
-        ev.from_component = rob.component;
-        ev.to_component = cid;
-        std::ostringstream os;
-        if (rob.component < 0) {
-          os << "robot " << r << " starts in component " << cid;
-        } else if (old_frames[r] == rob.frame) {
-          os << "robot " << r << " renumbered: component " << rob.component << " -> " << cid
-             << " (same map frame)";
-        } else {
-          os << "robot " << r << " moves from component " << rob.component << " to " << cid
-             << " (map frame of submap " << rob.frame << ")";
-        }
-        if (comps[c].size() > 1) {
-          os << " with";
-          for (const auto& o : comps[c]) os << " " << o;
-        }
-        ev.text = os.str();
-        rob.component = cid;
-        events.push_back(ev);
-      }
-    }
-  }
-
   // --- Ceres -------------------------------------------------------------------------------
   /// Every submap's pose, the odometry edges and the used loops (each with its loss wrapper in
   /// `losses`); each robot's anchor submap fixed.
@@ -689,7 +563,7 @@ MergeSolveStats MapMerger::solve() {
   if (m.dirty && !m.nodes.empty()) {
     const auto t0 = std::chrono::steady_clock::now();
     runPcm(m);
-    m.updateComponents();
+    updateComponents(m);
     st.pcm_ms = msSince(t0);
     const auto t1 = std::chrono::steady_clock::now();
     const MergeSolveStats g = m.solveGraph();

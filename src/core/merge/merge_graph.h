@@ -100,4 +100,9 @@ void addToGroup(MergeGraph& m, size_t loop_index);
 /// Marks each loop used or rejected.
 void runPcm(MergeGraph& m);
 
+// Components (merge_components.cpp).
+/// Numbers the components of robots joined by used loops, expresses each in its anchor's M and
+/// appends an event for every robot that changed component or frame.
+void updateComponents(MergeGraph& m);
+
 }  // namespace dtif
