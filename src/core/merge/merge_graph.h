@@ -105,4 +105,11 @@ void runPcm(MergeGraph& m);
 /// appends an event for every robot that changed component or frame.
 void updateComponents(MergeGraph& m);
 
+// The Ceres solve (merge_solve.cpp, the only file of the merger that includes Ceres).
+MergeSolveStats solveGraph(MergeGraph& m);
+/// landmark_rounds rounds of associating trunks and solving with them as landmarks.
+void refineWithLandmarks(MergeGraph& m, MergeSolveStats* st);
+/// Each loop's residual in sigmas under the current poses.
+void updateLoopResiduals(MergeGraph& m);
+
 }  // namespace dtif
