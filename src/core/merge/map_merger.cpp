@@ -1,19 +1,10 @@
 #include "dtif/core/merge/map_merger.h"
 
-#include <algorithm>
 #include <chrono>
-#include <cmath>
-#include <limits>
-#include <map>
-#include <numeric>
-#include <set>
 #include <sstream>
 #include <stdexcept>
-#include <unordered_map>
 
 #include "core/merge/merge_graph.h"
-#include "dtif/core/merge/join_check.h"
-#include "dtif/core/merge/pcm.h"
 #include "dtif/core/timing.h"
 
 namespace dtif {
@@ -23,159 +14,10 @@ bool finitePose(const Pose& T) { return T.matrix().allFinite(); }
 
 }  // namespace
 
-// The merger's state (merge_graph.h) with the pieces that have no file of their own yet.
+// The merger's state; its pieces are in merge_consistency.cpp (PCM), merge_components.cpp,
+// merge_solve.cpp (Ceres) and merge_inventory.cpp (stems and joins).
 struct MapMerger::Impl : MergeGraph {
   using MergeGraph::MergeGraph;
-
-  // --- stems ---------------------------------------------------------------------------------
-  std::vector<MergedStem> fuseInventory(bool with_field_transform) const {
-    std::vector<StemObservation> obs;
-    std::vector<SensorPosition> sensors;
-    std::map<std::string, int> robot_ids;
-    for (const Node& n : nodes) {
-      const int comp = robots.at(n.robot).component;
-      const Pose T = (with_field_transform ? outputTransform(comp) : Pose::Identity()) * n.pose();
-      // S's origin is the sensor at the submap's anchor time (DATASET.md).
-      const Eigen::Vector3d sensor = T.translation();
-      const int robot_id =
-          robot_ids.emplace(n.robot, static_cast<int>(robot_ids.size())).first->second;
-      sensors.push_back({comp, robot_id, sensor.x(), sensor.y(), sensor.z()});
-      for (const TrunkLandmark& tr : n.trunks) {
-        const Eigen::Vector3d pm = T * Eigen::Vector3d(tr.x, tr.y, tr.z);
-        StemObservation o;
-        o.submap = n.id;
-        o.component = comp;
-        o.x = pm.x();
-        o.y = pm.y();
-        o.z = pm.z();
-        o.r = tr.r;
-        o.base_seen = tr.base_seen;
-        obs.push_back(o);
-      }
-    }
-    return fuseStems(obs, p.stems, sensors);
-  }
-
-  // --- joining components by their inventories ---------------------------------------------
-  /// For each component c > 0 whose inventory registers to component 0's
-  /// (MergeParams::join_min_pairs): a loop from c's submap to component 0's submap nearest it
-  /// after registration, with the registration's pose (planar; the elevation from the paired
-  /// stems' bases). Appends one event per loop.
-  std::vector<Loop> inventoryJoins() {
-    std::vector<Loop> out;
-    if (p.join_min_pairs < 1 || countComponents() < 2) return out;
-    const std::vector<MergedStem> inv = fuseInventory(false);
-    std::vector<FieldStem> target;  // component 0's inventory, the map the others register to
-    std::vector<double> target_z;
-    for (const MergedStem& s : inv) {
-      if (s.component != 0) continue;
-      target.push_back({std::to_string(s.stem_id), s.x, s.y, s.dbh});
-      target_z.push_back(s.z_base);
-    }
-    for (int c = 1; c < countComponents(); ++c) {
-      Trunks stems;
-      for (const MergedStem& s : inv) {
-        if (s.component != c) continue;
-        TrunkLandmark t;
-        t.x = s.x, t.y = s.y, t.z = s.z_base, t.r = s.dbh / 2.0;
-        stems.push_back(t);
-      }
-      const StemMapRegistration reg = registerStemMap(stems, target, joinParams());
-      if (!reg.ok || reg.rms_m > p.join_max_rms_m) continue;
-      std::vector<double> dz;
-      for (const auto& [i, j] : reg.pairs) dz.push_back(target_z[j] - stems[i].z);
-      std::nth_element(dz.begin(), dz.begin() + dz.size() / 2, dz.end());
-      Pose T_0_c = reg.T_P_M;
-      T_0_c.translation().z() = dz[dz.size() / 2];
-      Loop l = joinLoop(c, T_0_c, reg);
-      // Once per submap pair: a join PCM rejected is not offered again at the next refine().
-      if (std::none_of(loops.begin(), loops.end(), [&](const LoopRec& r) {
-            return r.loop.query_id == l.query_id && r.loop.candidate_id == l.candidate_id;
-          })) {
-        logJoin(c, l, reg);
-        out.push_back(std::move(l));
-      }
-    }
-    return out;
-  }
-
-  StemMapParams joinParams() const {
-    StemMapParams s;
-    s.loop = LoopDetectorParams();  // two LiDAR inventories: the loop detector's tolerances
-    s.pair_radius_m = p.join_pair_radius_m;
-    s.min_pairs = p.join_min_pairs;
-    return s;
-  }
-
-  /// The loop that joins component c to 0: from c's submap to the one of component 0 nearest it
-  /// under T_0_c (horizontally).
-  Loop joinLoop(int c, const Pose& T_0_c, const StemMapRegistration& reg) {
-    size_t qa = 0, cb = 0;
-    double best = std::numeric_limits<double>::infinity();
-    for (size_t a = 0; a < nodes.size(); ++a) {
-      if (robots.at(nodes[a].robot).component != c) continue;
-      const Eigen::Vector3d pa = T_0_c * nodes[a].t;
-      for (size_t b = 0; b < nodes.size(); ++b) {
-        if (robots.at(nodes[b].robot).component != 0) continue;
-        const double d = (pa - nodes[b].t).head<2>().norm();
-        if (d < best) best = d, qa = a, cb = b;
-      }
-    }
-    Loop l;
-    l.query_robot = nodes[qa].robot;
-    l.query_id = nodes[qa].id;
-    l.candidate_robot = nodes[cb].robot;
-    l.candidate_id = nodes[cb].id;
-    l.T_c_q = nodes[cb].pose().inverse() * T_0_c * nodes[qa].pose();
-    Vector6d sd;
-    sd << reg.rms_m, reg.rms_m, 0.1, 0.005, 0.005, 0.005;  // z from the bases: a decimetre
-    l.covariance = sd.cwiseAbs2().asDiagonal();
-    l.inliers = static_cast<int>(reg.pairs.size());
-    return l;
-  }
-
-  void logJoin(int c, const Loop& l, const StemMapRegistration& reg) {
-    std::ostringstream e;
-    e << "component " << c << " (robot " << l.query_robot << ") registers to component 0 by its "
-      << "stem inventory: " << reg.pairs.size() << " stems paired, RMS " << reg.rms_m
-      << " m; join loop " << l.query_robot << "/" << l.query_id << " -> " << l.candidate_robot
-      << "/" << l.candidate_id;
-    events.push_back({l.query_robot, c, 0, e.str()});
-  }
-
-  void registerField() {
-    registration = StemMapRegistration{};
-    if (field.empty()) return;
-    Trunks comp0;
-    for (const MergedStem& s : fuseInventory(false)) {
-      if (s.component != 0) continue;
-      TrunkLandmark t;
-      t.x = s.x;
-      t.y = s.y;
-      t.z = s.z_base;
-      t.r = s.dbh / 2.0;
-      comp0.push_back(t);
-    }
-    registration = registerStemMap(comp0, field, p.stem_map);
-  }
-
-  void buildInventory() {
-    registerField();
-    stems = fuseInventory(true);
-    if (!registration.ok) return;
-    // The field ids of the paired stems (the inventory in P is registration's order, again).
-    for (MergedStem& s : stems) {
-      if (s.component != 0) continue;
-      double best = p.stem_map.pair_radius_m;
-      for (const FieldStem& f : field) {
-        const double d = std::hypot(s.x - f.x, s.y - f.y);
-        if (d < best) {
-          best = d;
-          s.field_id = f.id;
-        }
-      }
-    }
-  }
 };
 
 std::string MergeParams::validate() const {
@@ -321,7 +163,7 @@ MergeSolveStats MapMerger::solve() {
     st.initial_cost = g.initial_cost;
     st.final_cost = g.final_cost;
     updateLoopResiduals(m);
-    m.buildInventory();
+    buildInventory(m);
     m.dirty = false;
     m.refined = false;
   }
@@ -335,13 +177,13 @@ MergeSolveStats MapMerger::refine() {
   MergeSolveStats st = solve();
   if (m.refined || m.nodes.empty()) return st;
   bool joined = false;
-  for (const Loop& l : m.inventoryJoins()) joined = addLoop(l) || joined;
+  for (const Loop& l : inventoryJoins(m)) joined = addLoop(l) || joined;
   if (joined) st = solve();
   if (m.p.landmarks) {
     const auto t0 = std::chrono::steady_clock::now();
     refineWithLandmarks(m, &st);
     updateLoopResiduals(m);
-    m.buildInventory();
+    buildInventory(m);
     st.solve_ms += msSince(t0);
   }
   m.refined = true;

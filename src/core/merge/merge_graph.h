@@ -112,4 +112,11 @@ void refineWithLandmarks(MergeGraph& m, MergeSolveStats* st);
 /// Each loop's residual in sigmas under the current poses.
 void updateLoopResiduals(MergeGraph& m);
 
+// Stem inventory and joins (merge_inventory.cpp).
+/// Loops that join components to component 0 by registering their stem inventories (appends
+/// one event per loop).
+std::vector<Loop> inventoryJoins(MergeGraph& m);
+/// Registers the field stem map (if any) and fuses the merged inventory.
+void buildInventory(MergeGraph& m);
+
 }  // namespace dtif
