@@ -24,7 +24,7 @@ if [ ${#TESTS[@]} -eq 0 ]; then
     map_merger_test factor_cost_test stem_inventory_test stemmap_registration_test stem_map_anchor_test
     config_test dataset_test pcd_reader_test merge_files_test real_data_test evaluation_test
     fpfh_registration_test scan_context_test solvers_test cli_test
-    conversions_test fleet_map_test submap_assembler_test frame_lock_test frames_test map_frames_test
+    bounded_queue_test conversions_test fleet_map_test submap_assembler_test frame_lock_test frames_test map_frames_test
     params_test markers_test merge_cmd_test)
 fi
 dtif_san_build "${TESTS[@]}"

@@ -9,8 +9,6 @@
 
 #include <boost/bind/bind.hpp>
 #include <chrono>
-#include <condition_variable>
-#include <deque>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -26,6 +24,7 @@
 #include "dtif/core/file_io.h"
 #include "dtif/core/timing.h"
 #include "dtif/io/dataset.h"
+#include "dtif/ros/bounded_queue.h"
 #include "dtif/ros/conversions.h"
 #include "dtif/ros/frames.h"
 #include "dtif/ros/markers.h"
@@ -35,17 +34,13 @@
 
 namespace dtif {
 
-/// Thread-safety: descriptor callbacks only enqueue (queue_mutex_). One worker thread queries
+/// Thread-safety: descriptor callbacks only enqueue (queue_). One worker thread queries
 /// and inserts; it and the service callbacks serialise on db_mutex_ (the LoopDetector is not
 /// thread-safe). The TF timer reads links_ under db_mutex_. Worker joined on destruction.
 class LoopClosureNodelet : public nodelet::Nodelet {
  public:
   ~LoopClosureNodelet() override {
-    {
-      std::lock_guard<std::mutex> lock(queue_mutex_);
-      stop_ = true;
-    }
-    cv_.notify_all();
+    queue_.close();
     if (worker_.joinable()) worker_.join();
   }
 
@@ -61,6 +56,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
     detector_ = std::make_unique<LoopDetector>(readParams(pnh));
+    queue_.setCapacity(static_cast<size_t>(node_.queue_size));
     openLoopLog();
     // A save that a crash interrupted leaves its temporary; the file itself is whole.
     if (!node_.database_file.empty() && removeStaleTemporary(node_.database_file)) {
@@ -186,32 +182,18 @@ class LoopClosureNodelet : public nodelet::Nodelet {
   }
 
   void enqueue(const dtif::TrunkDescriptor::ConstPtr& msg, bool update) {
-    {
-      std::lock_guard<std::mutex> lock(queue_mutex_);
-      if (queue_.size() >= static_cast<size_t>(node_.queue_size)) {
-        NODELET_WARN_THROTTLE(5.0, "loop detection is behind: dropping a descriptor of '%s'",
-                              queue_.front().msg->robot.c_str());
-        queue_.pop_front();
-      }
-      queue_.push_back({msg, update});
+    if (const std::optional<Queued> dropped = queue_.push(Queued{msg, update})) {
+      NODELET_WARN_THROTTLE(5.0, "loop detection is behind: dropping a descriptor of '%s'",
+                            dropped->msg->robot.c_str());
     }
-    cv_.notify_one();
   }
 
   void work() {
-    while (true) {
-      Queued q;
-      {
-        std::unique_lock<std::mutex> lock(queue_mutex_);
-        cv_.wait(lock, [this] { return stop_ || !queue_.empty(); });
-        if (stop_) return;
-        q = queue_.front();
-        queue_.pop_front();
-      }
-      if (q.update) {
-        processUpdate(*q.msg);
+    while (std::optional<Queued> q = queue_.pop()) {
+      if (q->update) {
+        processUpdate(*q->msg);
       } else {
-        process(*q.msg);
+        process(*q->msg);
       }
     }
   }
@@ -504,14 +486,11 @@ class LoopClosureNodelet : public nodelet::Nodelet {
   std::map<Key, Meta> meta_;
   RobotLinks links_;  // odometry frames linked by inter-robot loops
 
-  std::mutex queue_mutex_;  // queue_, stop_
-  std::condition_variable cv_;
   struct Queued {
     dtif::TrunkDescriptor::ConstPtr msg;
     bool update = false;  ///< a forward update of a stored entry
   };
-  std::deque<Queued> queue_;
-  bool stop_ = false;
+  ros_glue::BoundedQueue<Queued> queue_;  // capacity node_.queue_size (onInit)
   std::thread worker_;
 
   std::unique_ptr<tf2_ros::TransformBroadcaster> tf_broadcaster_;

@@ -15,7 +15,6 @@
 
 #include <algorithm>
 #include <chrono>
-#include <condition_variable>
 #include <deque>
 #include <map>
 #include <memory>
@@ -31,6 +30,7 @@
 #include "dtif/core/extraction/point_bounds.h"
 #include "dtif/core/extraction/trunk_extractor.h"
 #include "dtif/core/timing.h"
+#include "dtif/ros/bounded_queue.h"
 #include "dtif/ros/conversions.h"
 #include "dtif/ros/frame_lock.h"
 #include "dtif/ros/frames.h"
@@ -48,11 +48,7 @@ namespace dtif {
 class TrunkExtractionNodelet : public nodelet::Nodelet {
  public:
   ~TrunkExtractionNodelet() override {
-    {
-      std::lock_guard<std::mutex> lock(queue_mutex_);
-      stop_ = true;
-    }
-    cv_.notify_all();
+    queue_.close();
     if (worker_.joinable()) worker_.join();
   }
 
@@ -65,6 +61,7 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
       NODELET_FATAL("%s", e.what());
       throw;
     }
+    queue_.setCapacity(static_cast<size_t>(node_.queue_size));
 
     // The voxel filter of assembled submaps runs on the worker, off the cloud callback.
     ros_glue::SubmapAssemblerParams in_callback = assembler_params_;
@@ -358,30 +355,14 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
 
   void enqueue(ros_glue::AssembledSubmap s, const std::string& frame,
                const ImuGravityWindow::Reading& imu = {}) {
-    {
-      std::lock_guard<std::mutex> lock(queue_mutex_);
-      if (queue_.size() >= static_cast<size_t>(node_.queue_size)) {
-        NODELET_WARN_THROTTLE(5.0, "extraction is behind: dropping submap %ld",
-                              static_cast<long>(queue_.front().submap.id));
-        queue_.pop_front();
-      }
-      queue_.push_back(Job{std::move(s), frame, imu});
+    if (const std::optional<Job> dropped = queue_.push(Job{std::move(s), frame, imu})) {
+      NODELET_WARN_THROTTLE(5.0, "extraction is behind: dropping submap %ld",
+                            static_cast<long>(dropped->submap.id));
     }
-    cv_.notify_one();
   }
 
   void work() {
-    while (true) {
-      Job job;
-      {
-        std::unique_lock<std::mutex> lock(queue_mutex_);
-        cv_.wait(lock, [this] { return stop_ || !queue_.empty(); });
-        if (stop_) return;
-        job = std::move(queue_.front());
-        queue_.pop_front();
-      }
-      process(job.submap, job.frame, job.imu);
-    }
+    while (std::optional<Job> job = queue_.pop()) process(job->submap, job->frame, job->imu);
   }
 
   void process(ros_glue::AssembledSubmap& s, const std::string& frame,
@@ -491,15 +472,12 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
   double last_submap_stamp_ = -1.0;
   int64_t next_submap_id_ = 0;
 
-  std::mutex queue_mutex_;  // queue_, stop_
-  std::condition_variable cv_;
   struct Job {
     ros_glue::AssembledSubmap submap;
     std::string frame;              // published odometry frame
     ImuGravityWindow::Reading imu;  // over the submap's window (imu_topic)
   };
-  std::deque<Job> queue_;
-  bool stop_ = false;
+  ros_glue::BoundedQueue<Job> queue_;  // capacity node_.queue_size (onInit)
   std::thread worker_;
   std::unique_ptr<VoxelCentroidGrid> voxel_grid_;  // worker thread only; null: no voxel filter
   std::unique_ptr<TrunkAccumulator> accumulator_;  // worker thread only (after onInit)
