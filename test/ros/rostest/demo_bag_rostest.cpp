@@ -37,21 +37,10 @@
 namespace dtif {
 namespace {
 
+using test::findSubmap;
 using test::Inbox;
 using test::waitFor;
 namespace fs = std::filesystem;
-
-constexpr double kStampTolS = 1e-3;
-
-// Dataset position of the submap of `robot` anchored at `stamp`, or -1.
-int findSubmap(const Dataset& ds, const std::string& robot, double stamp) {
-  for (size_t i = 0; i < ds.submaps.size(); ++i) {
-    if (ds.submaps[i].robot == robot && std::fabs(ds.submaps[i].stamp - stamp) <= kStampTolS) {
-      return static_cast<int>(i);
-    }
-  }
-  return -1;
-}
 
 sensor_msgs::PointCloud2 cloudMsg(const Cloud& c, double stamp, const std::string& frame) {
   sensor_msgs::PointCloud2 m;

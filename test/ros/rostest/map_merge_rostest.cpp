@@ -70,6 +70,109 @@ size_t countLines(const fs::path& p) {
   return n;
 }
 
+using Paths = std::map<std::string, test::Latest<nav_msgs::Path>>;
+
+// The submaps on the robots' latest paths in map: positions, ground truth and robot of each.
+struct PathPoints {
+  std::vector<Eigen::Vector3d> est, gt;
+  std::vector<std::string> robot_of;
+};
+
+PathPoints readPaths(const Dataset& ds, Paths* paths) {
+  PathPoints pts;
+  for (const std::string robot : {"alpha", "bravo"}) {
+    const auto path = (*paths)[robot].latest();
+    EXPECT_TRUE(path) << "no path of " << robot;
+    if (!path) continue;
+    EXPECT_EQ(path->header.frame_id, "map");
+    for (const auto& [id, T] : test::pathPoses(ds, robot, *path)) {
+      pts.est.push_back(T.translation());
+      pts.gt.push_back(ds.T_W_S.at(id).translation());
+      pts.robot_of.push_back(robot);
+    }
+  }
+  return pts;
+}
+
+// Each robot's odometry frame from get_map_info; every robot must be in `map`.
+std::map<std::string, std::string> odomFramesInMap(const dtif::GetMapInfo::Response& r) {
+  std::map<std::string, std::string> odom_frame;
+  for (size_t i = 0; i < r.robots.size(); ++i) {
+    EXPECT_EQ(r.map_frames[i], "map") << r.robots[i] << " is not joined to the map";
+    odom_frame[r.robots[i]] = r.odom_frames[i];
+  }
+  return odom_frame;
+}
+
+// The merged ATE of all robots (one alignment), printed per robot beside each robot's odometry
+// aligned alone (`odom_est`, `odom_gt`).
+double reportAte(const PathPoints& pts,
+                 const std::map<std::string, std::vector<Eigen::Vector3d>>& odom_est,
+                 const std::map<std::string, std::vector<Eigen::Vector3d>>& odom_gt) {
+  const std::vector<double> res = test::alignedResiduals(pts.est, pts.gt);
+  std::map<std::string, std::vector<double>> per_robot;
+  for (size_t i = 0; i < res.size(); ++i) per_robot[pts.robot_of[i]].push_back(res[i]);
+  for (const auto& p : per_robot) {
+    std::cout << "merged " << p.first << ": ATE " << test::rms(p.second) << " m over "
+              << p.second.size() << " submaps (odometry alone "
+              << test::rms(test::alignedResiduals(odom_est.at(p.first), odom_gt.at(p.first)))
+              << " m)\n";
+  }
+  return test::rms(res);
+}
+
+// TF map -> odometry frame (T_map_O per robot) places each robot's latest submap (where it is
+// now) within kTfTolM of ground truth, the map aligned to the world by T_W_map.
+void expectTfPlacesTheLatestSubmaps(const Dataset& ds,
+                                    const std::map<std::string, test::SeenSubmap>& latest,
+                                    const std::map<std::string, Pose>& T_map_O, const Pose& T_W_map,
+                                    const char* when) {
+  for (const auto& [robot, s] : latest) {
+    const Eigen::Vector3d p = T_W_map * (T_map_O.at(robot) * s.T_O_S).translation();
+    const double e = (p - ds.T_W_S.at(s.dataset_id).translation()).norm();
+    std::cout << "map TF of " << robot << when << ": latest submap " << e
+              << " m from ground truth\n";
+    EXPECT_LE(e, kTfTolM) << robot;
+  }
+}
+
+// TF map -> each robot's odometry frame, waited for.
+bool lookupMapTfs(const tf2_ros::Buffer& tf, const std::map<std::string, std::string>& odom_frame,
+                  std::map<std::string, Pose>* T_map_O, double timeout_s) {
+  return waitFor(
+      [&] {
+        for (const auto& f : odom_frame) {
+          if (!test::lookup(tf, "map", f.second, &(*T_map_O)[f.first])) return false;
+        }
+        return true;
+      },
+      timeout_s);
+}
+
+// save_map's files, and the DBH measured on the points the submap clouds kept (dtif merge on
+// this dataset: 53 of 89 stems, median DBH error 1.9 -> 1.0 cm).
+void expectTheSavedMap(const fs::path& map_dir, const Dataset& ds, ros::ServiceClient* info_srv,
+                       const Pose& T_W_map) {
+  // map_merge.test turns the submap clouds on, so the merged cloud is written too.
+  for (const char* f :
+       {"merged_poses.csv", "merged_stems.csv", "pose_graph.g2o", "merged_cloud.pcd"}) {
+    EXPECT_TRUE(fs::exists(map_dir / f)) << f;
+  }
+  EXPECT_EQ(countLines(map_dir / "merged_poses.csv"), ds.submaps.size() + 1);  // + header
+  EXPECT_GT(countLines(map_dir / "merged_stems.csv"), 10u);
+  dtif::GetMapInfo info;
+  ASSERT_TRUE(info_srv->call(info));
+  std::cout << "DBH from the points: " << info.response.stems_dbh_from_points << " stems, "
+            << info.response.slice_submaps << " submaps kept " << info.response.slice_bytes
+            << " bytes\n";
+  EXPECT_GE(info.response.slice_submaps, ds.submaps.size() / 2);
+  EXPECT_GE(info.response.stems_dbh_from_points, 20u);
+  const double dbh_err =
+      medianDbhError(readMergedStemsCsv((map_dir / "merged_stems.csv").string()), ds, T_W_map);
+  std::cout << "saved stems: median DBH error " << 100.0 * dbh_err << " cm\n";
+  EXPECT_LE(dbh_err, kDbhTolM);
+}
+
 TEST(MapMergeRostest, EveryRobotsMapTfMatchesGroundTruth) {
   ros::NodeHandle nh, pnh("~");
   ros::AsyncSpinner spinner(2);
@@ -92,7 +195,7 @@ TEST(MapMergeRostest, EveryRobotsMapTfMatchesGroundTruth) {
   ros::Subscriber db =
       nh.subscribe("/bravo/descriptor", 50, &Inbox<dtif::TrunkDescriptor>::cb, &descriptors);
   ros::Subscriber ls = nh.subscribe("/loop_closures", 50, &Inbox<dtif::LoopClosure>::cb, &loops);
-  std::map<std::string, test::Latest<nav_msgs::Path>> paths;
+  Paths paths;
   std::vector<ros::Subscriber> path_subs;
   for (const std::string robot : {"alpha", "bravo"}) {
     path_subs.push_back(nh.subscribe("/map_merge/path/" + robot, 2,
@@ -123,30 +226,14 @@ TEST(MapMergeRostest, EveryRobotsMapTfMatchesGroundTruth) {
   ASSERT_TRUE(waitFor(merged, 60.0))
       << descriptors.size() << " descriptors, " << loops.size() << " loops";
   ASSERT_GE(loops.size(), 3u);
-
-  // Each robot's map frame from the service, and TF map -> odometry frame.
   const auto& r = info.response;
   ASSERT_EQ(r.robots.size(), 2u);
-  std::map<std::string, std::string> odom_frame;
-  for (size_t i = 0; i < r.robots.size(); ++i) {
-    EXPECT_EQ(r.map_frames[i], "map") << r.robots[i] << " is not joined to the map";
-    odom_frame[r.robots[i]] = r.odom_frames[i];
-  }
+  std::map<std::string, std::string> odom_frame = odomFramesInMap(r);
   std::map<std::string, Pose> T_map_O;
-  ASSERT_TRUE(waitFor(
-      [&] {
-        for (const auto& f : odom_frame) {
-          if (!test::lookup(tf, "map", f.second, &T_map_O[f.first])) return false;
-        }
-        return true;
-      },
-      10.0))
-      << "no TF map -> odometry frames";
+  ASSERT_TRUE(lookupMapTfs(tf, odom_frame, &T_map_O, 10.0)) << "no TF map -> odometry frames";
 
   // The merged submap poses (each robot's path in map) against ground truth, all robots
   // aligned together (DATASET.md's ATE); each robot's own odometry aligned alone beside it.
-  std::vector<Eigen::Vector3d> est, gt;
-  std::vector<std::string> robot_of;
   std::map<std::string, std::vector<Eigen::Vector3d>> odom_est, odom_gt;
   std::map<std::string, test::SeenSubmap> latest;  // each robot's latest submap
   for (const test::SeenSubmap& s : test::seenSubmaps(ds, descriptors.all())) {
@@ -163,45 +250,14 @@ TEST(MapMergeRostest, EveryRobotsMapTfMatchesGroundTruth) {
       },
       10.0))
       << "the paths do not hold every submap";
-  // The robots' latest paths in map: positions, ground truth and robot of every submap.
-  auto readPaths = [&](std::vector<Eigen::Vector3d>* est, std::vector<Eigen::Vector3d>* gt,
-                       std::vector<std::string>* robot_of) {
-    for (const std::string robot : {"alpha", "bravo"}) {
-      const auto path = paths[robot].latest();
-      ASSERT_TRUE(path) << "no path of " << robot;
-      EXPECT_EQ(path->header.frame_id, "map");
-      for (const auto& [id, T] : test::pathPoses(ds, robot, *path)) {
-        est->push_back(T.translation());
-        gt->push_back(ds.T_W_S.at(id).translation());
-        robot_of->push_back(robot);
-      }
-    }
-  };
-  readPaths(&est, &gt, &robot_of);
-  ASSERT_EQ(est.size(), ds.submaps.size()) << "a submap is missing from the paths";
-  const std::vector<double> res = test::alignedResiduals(est, gt);
-  std::map<std::string, std::vector<double>> per_robot;
-  for (size_t i = 0; i < res.size(); ++i) per_robot[robot_of[i]].push_back(res[i]);
-  for (const auto& p : per_robot) {
-    std::cout << "merged " << p.first << ": ATE " << test::rms(p.second) << " m over "
-              << p.second.size() << " submaps (odometry alone "
-              << test::rms(test::alignedResiduals(odom_est[p.first], odom_gt[p.first])) << " m)\n";
-  }
-  std::cout << "merged, all robots: ATE " << test::rms(res) << " m; " << r.loops_used
-            << " loops used, " << r.loops_rejected << " rejected, " << r.solves
-            << " solves, latest " << r.last_solve_ms << " ms, longest " << r.max_solve_ms
-            << " ms\n";
-  EXPECT_LE(test::rms(res), kAteTolM);
-
-  // TF map -> odometry frame places each robot's latest submap (where it is now) in the map,
-  // within the tolerance of ground truth (map aligned to the world as above).
-  const Pose T_W_map = test::alignPositions(est, gt);
-  for (const auto& [robot, s] : latest) {
-    const Eigen::Vector3d p = T_W_map * (T_map_O[robot] * s.T_O_S).translation();
-    const double e = (p - ds.T_W_S.at(s.dataset_id).translation()).norm();
-    std::cout << "map TF of " << robot << ": latest submap " << e << " m from ground truth\n";
-    EXPECT_LE(e, kTfTolM) << robot;
-  }
+  const PathPoints pts = readPaths(ds, &paths);
+  ASSERT_EQ(pts.est.size(), ds.submaps.size()) << "a submap is missing from the paths";
+  const double ate = reportAte(pts, odom_est, odom_gt);
+  std::cout << "merged, all robots: ATE " << ate << " m; " << r.loops_used << " loops used, "
+            << r.loops_rejected << " rejected, " << r.solves << " solves, latest "
+            << r.last_solve_ms << " ms, longest " << r.max_solve_ms << " ms\n";
+  EXPECT_LE(ate, kAteTolM);
+  expectTfPlacesTheLatestSubmaps(ds, latest, T_map_O, test::alignPositions(pts.est, pts.gt), "");
 
   // save_map writes the merged map's files, and the map the nodelet publishes is then the
   // landmark-refined one: new paths, within the same tolerances.
@@ -216,45 +272,18 @@ TEST(MapMergeRostest, EveryRobotsMapTfMatchesGroundTruth) {
       },
       10.0))
       << "no paths published after save_map";
-  std::vector<Eigen::Vector3d> est_saved, gt_saved;
-  std::vector<std::string> robot_of_saved;
-  readPaths(&est_saved, &gt_saved, &robot_of_saved);
-  ASSERT_EQ(est_saved.size(), ds.submaps.size());
-  const double ate_saved = test::rms(test::alignedResiduals(est_saved, gt_saved));
+  const PathPoints saved = readPaths(ds, &paths);
+  ASSERT_EQ(saved.est.size(), ds.submaps.size());
+  const double ate_saved = test::rms(test::alignedResiduals(saved.est, saved.gt));
   std::cout << "after save_map (landmark-refined), all robots: ATE " << ate_saved << " m\n";
   EXPECT_LE(ate_saved, kAteTolM);
-  const Pose T_W_map_saved = test::alignPositions(est_saved, gt_saved);
+  const Pose T_W_map_saved = test::alignPositions(saved.est, saved.gt);
   ros::WallDuration(1.0).sleep();  // the TF timer sends the refined map's transforms (wall time:
                                    // the bag's clock has stopped)
-  for (const auto& [robot, s] : latest) {
-    Pose T;
-    const std::string frame = odom_frame[robot];  // clang's C++17 captures no structured binding
-    ASSERT_TRUE(waitFor([&] { return test::lookup(tf, "map", frame, &T); }, 5.0));
-    const Eigen::Vector3d p = T_W_map_saved * (T * s.T_O_S).translation();
-    const double e = (p - ds.T_W_S.at(s.dataset_id).translation()).norm();
-    std::cout << "map TF of " << robot << " after save_map: latest submap " << e
-              << " m from ground truth\n";
-    EXPECT_LE(e, kTfTolM) << robot;
-  }
-  // map_merge.test turns the submap clouds on, so the merged cloud is written too.
-  for (const char* f :
-       {"merged_poses.csv", "merged_stems.csv", "pose_graph.g2o", "merged_cloud.pcd"}) {
-    EXPECT_TRUE(fs::exists(dir / "map" / f)) << f;
-  }
-  EXPECT_EQ(countLines(dir / "map" / "merged_poses.csv"), ds.submaps.size() + 1);  // + header
-  EXPECT_GT(countLines(dir / "map" / "merged_stems.csv"), 10u);
-  // The clouds kept their points near their trunks, and save_map measured the DBH on them (dtif
-  // merge on this dataset: 53 of 89 stems, median DBH error 1.9 -> 1.0 cm).
-  ASSERT_TRUE(info_srv.call(info));
-  std::cout << "DBH from the points: " << info.response.stems_dbh_from_points << " stems, "
-            << info.response.slice_submaps << " submaps kept " << info.response.slice_bytes
-            << " bytes\n";
-  EXPECT_GE(info.response.slice_submaps, ds.submaps.size() / 2);
-  EXPECT_GE(info.response.stems_dbh_from_points, 20u);
-  const double dbh_err = medianDbhError(
-      readMergedStemsCsv((dir / "map" / "merged_stems.csv").string()), ds, T_W_map_saved);
-  std::cout << "saved stems: median DBH error " << 100.0 * dbh_err << " cm\n";
-  EXPECT_LE(dbh_err, kDbhTolM);
+  std::map<std::string, Pose> T_map_O_saved;
+  ASSERT_TRUE(lookupMapTfs(tf, odom_frame, &T_map_O_saved, 5.0));
+  expectTfPlacesTheLatestSubmaps(ds, latest, T_map_O_saved, T_W_map_saved, " after save_map");
+  expectTheSavedMap(dir / "map", ds, &info_srv, T_W_map_saved);
   if (!std::getenv("DTIF_KEEP_TEST_OUTPUT")) {
     fs::remove_all(dir);
   }

@@ -5,6 +5,7 @@
 #include <ros/ros.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -13,9 +14,21 @@
 #include <string>
 #include <vector>
 
+#include "dtif/io/dataset.h"
 #include "dtif_test/test_config.h"
 
 namespace dtif::test {
+
+/// Dataset position of the submap of `robot` anchored at `stamp` (within 1 ms), or -1: the
+/// nodelets number each robot's submaps their own way, the stamps are the dataset's.
+inline int findSubmap(const Dataset& ds, const std::string& robot, double stamp) {
+  for (size_t i = 0; i < ds.submaps.size(); ++i) {
+    if (ds.submaps[i].robot == robot && std::fabs(ds.submaps[i].stamp - stamp) <= 1e-3) {
+      return static_cast<int>(i);
+    }
+  }
+  return -1;
+}
 
 /// This node's folder under ROS_HOME (else /tmp), named after the test and the process, empty.
 inline std::filesystem::path scratchDir(const std::string& name) {
