@@ -13,7 +13,7 @@
 #include <utility>
 #include <vector>
 
-#include "dtif/core/merge/map_merger.h"
+#include "dtif/core/merge/merge_types.h"
 #include "dtif/core/merge/pcm.h"
 
 namespace dtif {
