@@ -5,7 +5,6 @@
 #include <geometry_msgs/TransformStamped.h>
 #include <malloc.h>
 #include <nodelet/nodelet.h>
-#include <pcl/common/transforms.h>
 #include <pcl/io/pcd_io.h>
 #include <pcl_conversions/pcl_conversions.h>
 #include <ros/ros.h>
@@ -19,14 +18,11 @@
 #include <cstdio>
 #include <deque>
 #include <filesystem>
-#include <fstream>
-#include <iomanip>
 #include <map>
 #include <memory>
 #include <mutex>
 #include <pluginlib/class_list_macros.hpp>
 #include <set>
-#include <sstream>
 #include <thread>
 
 #include "dtif/core/cloud.h"
@@ -36,7 +32,6 @@
 #include "dtif/core/merge/map_merger.h"
 #include "dtif/core/merge/slice_store.h"
 #include "dtif/core/timing.h"
-#include "dtif/core/voxel_grid.h"
 #include "dtif/io/dataset.h"
 #include "dtif/io/merge_files.h"
 #include "dtif/ros/conversions.h"
@@ -450,8 +445,8 @@ class MapMergeNodelet : public nodelet::Nodelet {
       return false;
     }
     std::lock_guard<std::mutex> lock(merge_mutex_);
-    resetMap();
-    const ros_glue::FleetMap::Loaded n = fleet_->loadDatabase(db);
+    const ros_glue::FleetMap::Loaded n = fleet_->loadDatabase(db);  // replaces the whole map
+    resetFrames();
     dirty_ = true;
     *message = "map: " + std::to_string(n.submaps) + " submaps and " + std::to_string(n.loops) +
                " loops of an earlier run from " + path +
@@ -461,9 +456,9 @@ class MapMergeNodelet : public nodelet::Nodelet {
     return true;
   }
 
-  void resetMap() {
+  // A new map (a database loaded): its frames, stem map registration and generation start over.
+  void resetFrames() {
     ++generation_;
-    fleet_->reset();
     stem_map_registered_ = false;
     frames_ = ros_glue::MapFrames(node_.map_frame);
     component_frame_.clear();

@@ -72,9 +72,6 @@ class FleetMap {
   /// place the new robots in that map.
   Loaded loadDatabase(const LoopDetector& db);
 
-  /// Everything dropped: a new merger (with the field stem map), no chains.
-  void reset();
-
   /// Component `component`'s submap clouds in its map frame under `poses`, voxel-downsampled;
   /// null when it has none.
   Cloud::Ptr mergedCloud(const std::vector<MergedPose>& poses, int component) const;
@@ -83,7 +80,6 @@ class FleetMap {
   const MapMerger& merger() const { return merger_; }
   const std::map<std::string, Chain>& chains() const { return chains_; }
   const SlicePointStore& slices() const { return slices_; }
-  bool hasField() const { return !field_.empty(); }
   /// The anchor stamp of merger id `id` (0 when unknown).
   double stampOf(int64_t id) const;
   /// submap_ids.csv of save_map: the merger's ids (merged_poses.csv, pose_graph.g2o) as the
@@ -92,6 +88,8 @@ class FleetMap {
   void writeSubmapIds(const std::string& path, const std::vector<MergedPose>& poses) const;
 
  private:
+  // Everything dropped: a new merger (with the field stem map), no chains.
+  void reset();
   // The merger's addSubmap under the next id; "" or why not.
   std::string addToMerger(const std::string& chain, const std::string& robot, int64_t id,
                           double stamp, const Pose& T_O_S, const Trunks& trunks);
