@@ -2,6 +2,8 @@
 // submaps in file order, overlap ground truth from occupied 1 m cells, paper-style errors.
 #include "dtif/eval/evaluation.h"
 
+#include <pcl/common/point_tests.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -71,10 +73,6 @@ std::unordered_set<int64_t> overlapCells(const Cloud& cloud_S, const Pose& T_W_S
 
 namespace {
 
-bool finitePoint(const pcl::PointXYZ& p) {
-  return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
-}
-
 // The true stems near a submap, in its frame S, bucketed in 1 m cells; each counts the submap's
 // points on its trunk (how visible it was).
 class StemsInS {
@@ -112,7 +110,7 @@ class StemsInS {
   // Points within `shell_m` of a stem's surface, `low_m`-`high_m` above its base, as its hits.
   void countHits(const Cloud& cloud_S, double shell_m, double low_m, double high_m) {
     for (const auto& p : cloud_S) {
-      if (!finitePoint(p)) continue;
+      if (!pcl::isFinite(p)) continue;
       near(p.x, p.y, [&](int k) {
         Stem& s = s_[static_cast<size_t>(k)];
         const double h = p.z - s.base.z();
@@ -137,7 +135,7 @@ DetectionRow trunkDetection(const Cloud& cloud_S, const Pose& T_W_S, const Trunk
   row.trunks = trunks.size();
   float minx = std::numeric_limits<float>::infinity(), maxx = -minx, miny = minx, maxy = -minx;
   for (const auto& p : cloud_S) {
-    if (!finitePoint(p)) continue;
+    if (!pcl::isFinite(p)) continue;
     ++row.points;
     minx = std::min(minx, p.x), maxx = std::max(maxx, p.x);
     miny = std::min(miny, p.y), maxy = std::max(maxy, p.y);

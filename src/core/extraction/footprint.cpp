@@ -1,6 +1,8 @@
 // Occupied-cell footprint of a submap and the overlap of two aligned footprints.
 #include "dtif/core/extraction/footprint.h"
 
+#include <pcl/common/point_tests.h>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -20,10 +22,6 @@ constexpr int kWindowTiles = 1;      // 6 m window = the tile and one tile on ea
 constexpr double kGroundPct = 0.05;  // 5th percentile
 constexpr double kMinAboveM = 0.3;   // counted band above the local ground
 constexpr double kMaxAboveM = 3.0;
-
-bool finite(const pcl::PointXYZ& p) {
-  return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
-}
 
 // cellIndex without libm's floor call (not inlined on baseline x86-64; this runs several times
 // per point): the same value for every argument.
@@ -115,7 +113,7 @@ void takeSamples(const Cloud& cloud, size_t stride, HeightCellsPrepass* pre) {
   pre->stride = stride;
   size_t skip = 0;
   for (const auto& p : cloud) {
-    if (!finite(p)) continue;
+    if (!pcl::isFinite(p)) continue;
     if (skip != 0) {
       --skip;
       continue;
@@ -226,7 +224,7 @@ std::vector<std::pair<int64_t, int64_t>> trunkHeightCells(const Cloud& cloud_S, 
                                                           size_t max_ground_samples) {
   HeightCellsPrepass pre;
   for (const auto& p : cloud_S) {
-    if (!finite(p)) continue;
+    if (!pcl::isFinite(p)) continue;
     if (pre.finite++ == 0) pre.minx = pre.maxx = p.x, pre.miny = pre.maxy = p.y;
     pre.minx = std::min(pre.minx, p.x), pre.maxx = std::max(pre.maxx, p.x);
     pre.miny = std::min(pre.miny, p.y), pre.maxy = std::max(pre.maxy, p.y);
@@ -253,7 +251,7 @@ std::vector<std::pair<int64_t, int64_t>> heightCells(const Cloud& cloud_S, const
   const bool identity = T_F_S.matrix() == Eigen::Matrix4d::Identity();
   const Divisor by_cell(cell_m);
   for (const auto& p : cloud_S) {
-    if (!finite(p)) continue;
+    if (!pcl::isFinite(p)) continue;
     const int id = tiles.pointIndex(p.x, p.y);
     // No samples in the window (only when subsampling): no ground to measure from.
     if (id < 0 || !std::isfinite(ground[id])) continue;

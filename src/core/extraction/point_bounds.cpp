@@ -1,6 +1,8 @@
 // The region of a submap that extraction keeps (point_bounds.h).
 #include "dtif/core/extraction/point_bounds.h"
 
+#include <pcl/common/point_tests.h>
+
 #include <algorithm>
 #include <cmath>
 #include <sstream>
@@ -8,10 +10,6 @@
 
 namespace dtif {
 namespace {
-
-bool finite(const pcl::PointXYZ& p) {
-  return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
-}
 
 double median(std::vector<float>* v) {
   const auto mid = v->begin() + static_cast<std::ptrdiff_t>(v->size() / 2);
@@ -29,7 +27,7 @@ PointBounds pointBounds(const Cloud& cloud, double max_range_m) {
   std::vector<float> x, y, z;
   for (size_t i = 0; i < cloud.size(); i += stride) {
     const pcl::PointXYZ& p = cloud[i];
-    if (!finite(p)) continue;
+    if (!pcl::isFinite(p)) continue;
     x.push_back(p.x), y.push_back(p.y), z.push_back(p.z);
   }
   if (x.empty()) return b;
@@ -42,7 +40,7 @@ Cloud pointsInside(const Cloud& cloud, const PointBounds& b, size_t* dropped) {
   out.reserve(cloud.size());
   *dropped = 0;
   for (const pcl::PointXYZ& p : cloud) {
-    if (!finite(p)) continue;
+    if (!pcl::isFinite(p)) continue;
     if (b.inside(p)) {
       out.push_back(p);
     } else {
