@@ -78,6 +78,29 @@ bool levelRotationFromMsg(const geometry_msgs::Quaternion& m, Eigen::Quaterniond
   return true;
 }
 
+std::vector<dtif::Trunk> trunksToMsg(const Trunks& trunks) {
+  std::vector<dtif::Trunk> out;
+  out.reserve(trunks.size());
+  for (const TrunkLandmark& t : trunks) {
+    dtif::Trunk mt;
+    mt.x = static_cast<float>(t.x);
+    mt.y = static_cast<float>(t.y);
+    mt.z = static_cast<float>(t.z);
+    mt.r = static_cast<float>(t.r);
+    mt.base_seen = t.base_seen;
+    out.push_back(mt);
+  }
+  return out;
+}
+
+Trunks trunksFromMsg(const std::vector<dtif::Trunk>& msg) {
+  Trunks out;
+  out.reserve(msg.size());
+  for (const dtif::Trunk& t : msg)
+    out.push_back(TrunkLandmark{t.x, t.y, t.z, t.r, t.base_seen != 0});
+  return out;
+}
+
 }  // namespace
 
 dtif::TrunkDescriptor toMsg(const Descriptor& d, const Pose& T_O_S, const std::string& odom_frame) {
@@ -92,16 +115,9 @@ dtif::TrunkDescriptor toMsg(const Descriptor& d, const Pose& T_O_S, const std::s
   m.level_rotation.y = q.y();
   m.level_rotation.z = q.z();
   m.level_rotation.w = q.w();
-  m.trunks.reserve(d.trunks.size());
-  for (const TrunkLandmark& t : d.trunks) {
-    dtif::Trunk mt;
-    mt.x = static_cast<float>(t.x);
-    mt.y = static_cast<float>(t.y);
-    mt.z = static_cast<float>(t.z);
-    mt.r = static_cast<float>(t.r);
-    mt.base_seen = t.base_seen;
-    m.trunks.push_back(mt);
-  }
+  m.trunks = trunksToMsg(d.trunks);
+  m.accumulated = d.accumulated;
+  if (d.accumulated) m.own_trunks = trunksToMsg(d.own_trunks);
   m.faces.reserve(3 * d.triangles.size());
   for (const Triangle& tri : d.triangles) {
     for (int i : tri.v) m.faces.push_back(static_cast<uint16_t>(i));
@@ -129,10 +145,9 @@ bool fromMsg(const dtif::TrunkDescriptor& msg, const DescriptorParams& params, D
   out.robot = msg.robot;
   out.submap_id = msg.submap_id;
   out.stamp = msg.header.stamp.toSec();
-  out.trunks.reserve(msg.trunks.size());
-  for (const dtif::Trunk& t : msg.trunks) {
-    out.trunks.push_back(TrunkLandmark{t.x, t.y, t.z, t.r, t.base_seen != 0});
-  }
+  out.trunks = trunksFromMsg(msg.trunks);
+  out.accumulated = msg.accumulated;
+  if (out.accumulated) out.own_trunks = trunksFromMsg(msg.own_trunks);
   if (msg.faces.size() % 3 != 0) return fail(error, "faces is not a list of triples");
   out.triangles.resize(msg.faces.size() / 3);
   for (size_t f = 0; f < out.triangles.size(); ++f) {

@@ -6,6 +6,9 @@
 #include <cmath>
 #include <random>
 
+#include "dtif/core/descriptor/trunk_accumulator.h"
+#include "dtif/core/descriptor/validation.h"
+
 namespace dtif {
 namespace {
 
@@ -122,6 +125,83 @@ TEST(DescribeCloud, GroundMapOnlyBuiltWhenTheBudgetKeepsIt) {
     cases_without_map += !fits;
   }
   EXPECT_EQ(cases_without_map, 3);  // budgets rest_bytes, rest_bytes - 1, 100
+}
+
+bool sameTrunks(const Trunks& a, const Trunks& b) {
+  if (a.size() != b.size()) return false;
+  for (size_t i = 0; i < a.size(); ++i) {
+    if (a[i].x != b[i].x || a[i].y != b[i].y || a[i].z != b[i].z || a[i].r != b[i].r ||
+        a[i].base_seen != b[i].base_seen) {
+      return false;
+    }
+  }
+  return true;
+}
+
+bool holds(const Trunks& trunks, const Eigen::Vector3d& stem) {
+  for (const TrunkLandmark& t : trunks) {
+    if (std::hypot(t.x - stem.x(), t.y - stem.y()) < 0.1) return true;
+  }
+  return false;
+}
+
+// A descriptor of accumulated trunks keeps the submap's own beside them, through the wire
+// format too: a back end must not take a predecessor's stem, carried in by odometry, for this
+// submap's sighting (as a landmark it would tie the two submaps along the odometry's drift).
+TEST(DescribeCloudAccumulated, ExtendedDescriptorsKeepTheSubmapsOwnTrunks) {
+  MultiSubmapParams mp;
+  mp.min_trunks = 100;  // every submap with a predecessor is extended
+  mp.open_stand_share = 0.0;
+  mp.forward_submaps = 1;
+  TrunkAccumulator acc(mp);
+  const TrunkExtractorParams ep;
+  const DescriptorParams dp;
+  // Submaps 0 and 1 see the six stems; submap 2 the first four and a new one. One frame.
+  std::vector<Eigen::Vector3d> third(kStems.begin(), kStems.begin() + 4);
+  const Eigen::Vector3d fresh(7.0, -7.0, 0.2);
+  third.push_back(fresh);
+  const std::vector<Cloud> clouds{plot(kStems, 11), plot(kStems, 12), plot(third, 13)};
+  std::vector<Descriptor> d, updates;
+  std::vector<TrunkExtractionResult> ext(3);
+  for (int k = 0; k < 3; ++k) {
+    std::vector<Descriptor> u;
+    d.push_back(describeCloudAccumulated(clouds[k], {"a", k, 10.0 * k}, Pose::Identity(), &acc, ep,
+                                         dp, nullptr, &ext[k], nullptr, &u));
+    updates.insert(updates.end(), u.begin(), u.end());
+  }
+  // The first submap has no predecessor: its own trunks, nothing beside them.
+  EXPECT_FALSE(d[0].accumulated);
+  EXPECT_TRUE(d[0].own_trunks.empty());
+  EXPECT_TRUE(sameTrunks(d[0].observedTrunks(), d[0].trunks));
+  // The third: the stems of 0 and 1 it did not see are carried in, its new one (seen once) is
+  // left out; what it observed is exactly its extraction.
+  ASSERT_EQ(ext[2].trunks.size(), 5u);
+  ASSERT_TRUE(d[2].accumulated);
+  EXPECT_TRUE(holds(d[2].trunks, kStems[5]));
+  EXPECT_FALSE(holds(d[2].trunks, fresh));
+  EXPECT_TRUE(sameTrunks(d[2].own_trunks, ext[2].trunks));
+  EXPECT_TRUE(sameTrunks(d[2].observedTrunks(), ext[2].trunks));
+  // Forward updates of submaps 0 and 1 carry their own trunks too.
+  ASSERT_FALSE(updates.empty());
+  for (const Descriptor& u : updates) {
+    ASSERT_TRUE(u.accumulated) << u.submap_id;
+    EXPECT_TRUE(sameTrunks(u.own_trunks, ext.at(u.submap_id).trunks)) << u.submap_id;
+  }
+  // The wire format keeps both sets and the flag.
+  const Descriptor back = decodeDescriptor(encodeDescriptor(d[2]), dp);
+  EXPECT_TRUE(back.accumulated);
+  ASSERT_EQ(back.own_trunks.size(), d[2].own_trunks.size());
+  ASSERT_EQ(back.trunks.size(), d[2].trunks.size());
+  for (size_t i = 0; i < back.own_trunks.size(); ++i) {
+    EXPECT_NEAR(back.own_trunks[i].x, d[2].own_trunks[i].x, 1e-5);
+    EXPECT_NEAR(back.own_trunks[i].r, d[2].own_trunks[i].r, 1e-6);
+    EXPECT_EQ(back.own_trunks[i].base_seen, d[2].own_trunks[i].base_seen);
+  }
+  EXPECT_FALSE(decodeDescriptor(encodeDescriptor(d[0]), dp).accumulated);
+  // A non-finite own trunk is refused like a non-finite trunk.
+  Descriptor bad = d[2];
+  bad.own_trunks[1].y = std::nan("");
+  EXPECT_NE(checkDescriptor(bad).find("own trunks"), std::string::npos) << checkDescriptor(bad);
 }
 
 // extractTrunks asks `wanted` once, with the trunks and footprint found, before the map.

@@ -107,6 +107,27 @@ TEST(DescriptorConversion, RoundTripRebuildsTriangles) {
   EXPECT_EQ(back.footprint.bits, d.footprint.bits);
   EXPECT_TRUE(back.footprint.occupied(7, 9));
 
+  EXPECT_FALSE(back.accumulated);
+  EXPECT_TRUE(back.own_trunks.empty());
+
+  // An accumulated descriptor's own trunks travel beside its trunks.
+  d.accumulated = true;
+  d.own_trunks = {TrunkLandmark{3.0, -2.0, 0.4, 0.15, true},
+                  TrunkLandmark{8.0, 1.0, 0.1, 0.3, false}};
+  ASSERT_TRUE(fromMsg(toMsg(d, T_O_S, "alpha/odom"), DescriptorParams(), &back, &T_back, &error))
+      << error;
+  EXPECT_TRUE(back.accumulated);
+  ASSERT_EQ(back.own_trunks.size(), 2u);
+  EXPECT_NEAR(back.own_trunks[1].x, 8.0, 1e-6);
+  EXPECT_NEAR(back.own_trunks[0].r, 0.15, 1e-6);
+  EXPECT_TRUE(back.own_trunks[0].base_seen);
+  EXPECT_FALSE(back.own_trunks[1].base_seen);
+  EXPECT_EQ(back.trunks.size(), d.trunks.size());
+  dtif::TrunkDescriptor nan_own = toMsg(d, T_O_S, "alpha/odom");
+  nan_own.own_trunks[0].r = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_FALSE(fromMsg(nan_own, DescriptorParams(), &back, &T_back, &error));
+  EXPECT_NE(error.find("own trunks"), std::string::npos) << error;
+
   // A bitmap that does not fit its size is rejected, not read past its end.
   dtif::TrunkDescriptor bad = m;
   bad.footprint_bits.pop_back();

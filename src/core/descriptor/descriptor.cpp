@@ -355,12 +355,14 @@ void putFootprint(const Footprint& f, Writer* w) {
 //            u8 n_edge_bins, bins x u8; u8 n_radius_bins, bins x u8  (value * 255, rounded);
 //            f32 footprint cell (0: none) [, i32 x0, y0; u16 width, height; ceil(w h / 8) bytes];
 //            u32 ground map bytes (0: none), encodeGroundMap's bytes;
-//            only with flags bit1: f32 qx, qy, qz, qw of the level rotation R_L_S
-//   (bit1 is new in version 3: files without it, older or level, read as before)
+//            only with flags bit1: f32 qx, qy, qz, qw of the level rotation R_L_S;
+//            only with flags bit2 (accumulated): the own trunks, laid out as the trunks
+//   (bits 1 and 2 are new in version 3: files without them, older, level or with a
+//   submap's own trunks, read as before)
 std::vector<uint8_t> encodeDescriptor(const Descriptor& d) {
   // Beyond the bounds a receiver refuses is never written (docs/limits.md: a database file with
   // 300 bins saved and then failed to load).
-  if (d.trunks.size() > kMaxDescriptorTrunks ||
+  if (d.trunks.size() > kMaxDescriptorTrunks || d.own_trunks.size() > kMaxDescriptorTrunks ||
       d.triangles.size() > kMaxFacesPerTrunk * d.trunks.size() ||
       d.edge_hist.size() > kMaxHistogramBins || d.radius_hist.size() > kMaxHistogramBins) {
     throw std::runtime_error("descriptor not encodable: " + checkDescriptor(d));
@@ -389,10 +391,12 @@ std::vector<uint8_t> encodeDescriptor(const Descriptor& d) {
     const Eigen::Quaterniond q = d.level_rotation.normalized();
     for (double c : {q.x(), q.y(), q.z(), q.w()}) w.put<float>(static_cast<float>(c));
   }
+  if (d.accumulated) putTrunks(d.own_trunks, &w);
   Writer out;
   out.put<uint32_t>(kMagic);
   out.put<uint16_t>(kVersion);
-  out.put<uint16_t>(static_cast<uint16_t>((d.valid ? 1 : 0) | (d.levelled() ? 2 : 0)));
+  out.put<uint16_t>(
+      static_cast<uint16_t>((d.valid ? 1 : 0) | (d.levelled() ? 2 : 0) | (d.accumulated ? 4 : 0)));
   out.put<uint32_t>(static_cast<uint32_t>(w.bytes.size()));
   out.put<uint32_t>(fnv1a(w.bytes.data(), w.bytes.size()));
   out.putBytes(w.bytes);
@@ -512,6 +516,8 @@ Descriptor decodeDescriptor(const std::vector<uint8_t>& bytes, const DescriptorP
   readFootprint(r, &d.footprint);
   readGroundMap(r, &d.ground_map);
   if (flags & 2) d.level_rotation = readLevelRotation(r);
+  d.accumulated = (flags & 4) != 0;
+  if (d.accumulated) readTrunks(r, &d.own_trunks);
   if (r.remaining() != 0) throw std::runtime_error("descriptor has trailing bytes");
   d.valid = (flags & 1) != 0;
   const std::string problem = acceptReceivedDescriptor(&d, params);

@@ -320,6 +320,12 @@ GroundMap groundMapOfCloud(const Cloud& cloud_S, const Trunks& own, const TrunkE
                                p);
 }
 
+// A description other than the submap's own trunks keeps those beside it (what it observed).
+void markAccumulated(const AccumulatedTrunks& acc, const Trunks& own, Descriptor* d) {
+  d->accumulated = acc.submaps > 1 || acc.open_stand;
+  if (d->accumulated) d->own_trunks = own;
+}
+
 // What a forward update needs of the newest submap besides trunks: d without trunks and faces,
 // with the ground map an extended description carries (from its own cloud).
 std::shared_ptr<const Descriptor> forwardFrame(const Descriptor& d, const Cloud& cloud_S,
@@ -327,6 +333,7 @@ std::shared_ptr<const Descriptor> forwardFrame(const Descriptor& d, const Cloud&
                                                const TrunkExtractorParams& extractor_params) {
   auto frame = std::make_shared<Descriptor>();
   frame->robot = d.robot, frame->submap_id = d.submap_id, frame->stamp = d.stamp;
+  frame->own_trunks = own;
   frame->footprint = d.footprint;
   frame->ground_map = d.ground_map;
   if (frame->ground_map.empty()) {
@@ -341,7 +348,7 @@ void describeUpdates(const TrunkAccumulator& accumulator, const std::vector<Forw
                      const DescriptorParams& descriptor_params, std::vector<Descriptor>* out) {
   for (const ForwardUpdate& f : u) {
     const std::shared_ptr<const Descriptor> frame = accumulator.frameOf(f.stamp);
-    if (frame) out->push_back(describeForwardUpdate(*frame, f.trunks.trunks, descriptor_params));
+    if (frame) out->push_back(describeForwardUpdate(*frame, f.trunks, descriptor_params));
   }
 }
 
@@ -354,6 +361,7 @@ Descriptor accumulatedDescriptor(const TrunkExtractionResult& ext, const SubmapK
                                  std::vector<ForwardUpdate>* forward) {
   *acc = accumulator->add(key.stamp, T_O_S, ext.trunks, forward);
   Descriptor d = buildDescriptor(acc->trunks, descriptor_params);
+  markAccumulated(*acc, ext.trunks, &d);
   d.footprint = ext.footprint;
   d.robot = key.robot;
   d.submap_id = key.submap_id;
@@ -410,9 +418,10 @@ Descriptor describeAccumulatedUnfitted(const Cloud& cloud_S, const SubmapKey& ke
 
 }  // namespace
 
-Descriptor describeForwardUpdate(const Descriptor& frame, const Trunks& trunks,
+Descriptor describeForwardUpdate(const Descriptor& frame, const AccumulatedTrunks& trunks,
                                  const DescriptorParams& descriptor_params) {
-  Descriptor d = buildDescriptor(trunks, descriptor_params);
+  Descriptor d = buildDescriptor(trunks.trunks, descriptor_params);
+  markAccumulated(trunks, frame.own_trunks, &d);
   d.robot = frame.robot, d.submap_id = frame.submap_id, d.stamp = frame.stamp;
   d.footprint = frame.footprint;
   d.ground_map = frame.ground_map;

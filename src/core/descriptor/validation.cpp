@@ -64,6 +64,10 @@ bool finiteTrunk(const TrunkLandmark& t) {
 
 std::string checkDescriptor(const Descriptor& d) {
   std::string problem = checkTrunks(d.trunks);
+  if (problem.empty() && !d.own_trunks.empty()) {
+    problem = checkTrunks(d.own_trunks);
+    if (!problem.empty()) problem = "own trunks: " + problem;
+  }
   if (problem.empty()) problem = checkFaces(d.triangles, d.trunks.size());
   if (problem.empty()) problem = checkHistogram(d.edge_hist, "edge");
   if (problem.empty()) problem = checkHistogram(d.radius_hist, "radius");

@@ -81,6 +81,16 @@ struct Descriptor {
   bool levelled() const {
     return level_rotation.coeffs() != Eigen::Quaterniond::Identity().coeffs();
   }
+  /// Whether `trunks` were accumulated over several submaps (multi_submap: predecessors'
+  /// stems brought in by odometry, one-off fits left out) rather than this submap's own.
+  bool accumulated = false;
+  /// When accumulated: the submap's own trunks as extraction found them (same frame as
+  /// `trunks`). A back end observes trees through them: a predecessor's sighting carried here
+  /// by odometry is not this submap's, and as a landmark observation it would tie the submap
+  /// to that predecessor along the odometry's drift.
+  Trunks own_trunks;
+  /// The trunks this submap itself saw: own_trunks when accumulated, else trunks.
+  const Trunks& observedTrunks() const { return accumulated ? own_trunks : trunks; }
 };
 
 /// Encodes one face canonically from trunk centres (Eq. 3.2) and radii (Eq. 3.3).

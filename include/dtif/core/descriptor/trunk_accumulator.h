@@ -223,9 +223,9 @@ Descriptor describeLevelledCloudAccumulated(
     TrunkExtractionResult* extraction = nullptr, AccumulatedTrunks* accumulated = nullptr,
     std::vector<Descriptor>* updates = nullptr);
 
-/// The descriptor of `frame`'s submap (identity, footprint, ground map, levelling as there)
-/// with the trunks of a forward update, fitted to max_bytes.
-Descriptor describeForwardUpdate(const Descriptor& frame, const Trunks& trunks,
+/// The descriptor of `frame`'s submap (identity, footprint, ground map, levelling and own
+/// trunks as there) with the trunks of a forward update, fitted to max_bytes.
+Descriptor describeForwardUpdate(const Descriptor& frame, const AccumulatedTrunks& trunks,
                                  const DescriptorParams& descriptor_params);
 
 }  // namespace dtif
