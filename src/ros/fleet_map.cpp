@@ -42,8 +42,10 @@ std::string FleetMap::addSubmap(const Descriptor& d, const std::string& odom_fra
   if (d.levelled()) {
     merger_.setLevelling(d.robot, levellingInOdom(d.level_rotation.toRotationMatrix(), T_O_S));
   }
-  const Trunks trunks_S = mergeSubmapOf(d, T_O_S).trunks;
-  const std::string why = addToMerger(d.robot, d.robot, d.submap_id, stamp, T_O_S, trunks_S);
+  MergeSubmap s = mergeSubmapOf(d, T_O_S);
+  s.stamp = stamp;
+  const Trunks trunks_S = s.trunks;
+  const std::string why = addToMerger(d.robot, std::move(s));
   if (!why.empty()) return why;
   if (params_.stems.dbh_from_points) {
     slices_.addTrunks(next_id_ - 1, trunks_S, d.level_rotation.normalized().toRotationMatrix());
@@ -51,16 +53,13 @@ std::string FleetMap::addSubmap(const Descriptor& d, const std::string& odom_fra
   return "";
 }
 
-std::string FleetMap::addToMerger(const std::string& chain, const std::string& robot, int64_t id,
-                                  double stamp, const Pose& T_O_S, const Trunks& trunks) {
-  const Key key(robot, id);
+std::string FleetMap::addToMerger(const std::string& chain, MergeSubmap s) {
+  const Key key(s.robot, s.id);
   if (global_id_.count(key)) return "already merged";
-  MergeSubmap s;
+  const std::string robot = s.robot;
+  const double stamp = s.stamp;
   s.robot = chain;
   s.id = next_id_;
-  s.stamp = stamp;
-  s.T_O_S = T_O_S;
-  s.trunks = trunks;
   try {
     merger_.addSubmap(s);
   } catch (const std::exception& e) {
@@ -69,7 +68,7 @@ std::string FleetMap::addToMerger(const std::string& chain, const std::string& r
   global_id_[key] = next_id_;
   stamp_index_[{robot, stamp}] = next_id_;
   stamp_of_[next_id_] = stamp;
-  odom_of_[next_id_] = T_O_S;
+  odom_of_[next_id_] = s.T_O_S;
   ++next_id_;
   return "";
 }
@@ -134,7 +133,7 @@ FleetMap::Loaded FleetMap::loadDatabase(const LoopDetector& db) {
     }
     const std::string chain = d.robot + "@database";
     chains_[chain] = Chain{o.odom_frame, false};
-    n.submaps += addToMerger(chain, d.robot, d.submap_id, d.stamp, o.T_O_S, d.trunks).empty();
+    n.submaps += addToMerger(chain, mergeSubmapOf(d, o.T_O_S)).empty();
   }
   // The earlier run's loops rebuild its map, so the new run lands in that map.
   for (Loop lc : db.loops()) {

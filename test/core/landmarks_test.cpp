@@ -44,6 +44,26 @@ TEST(AssociateLandmarks, AmbiguousObservationsJoinNothing) {
   EXPECT_EQ(groups[0], (std::vector<size_t>{0, 3}));
 }
 
+// A submap in an open stand associates within the wider open_gate_m: its poses are looser, its
+// trees far apart. Its own observations only: a dense stand's next to it keeps gate_m.
+TEST(AssociateLandmarks, OpenStandObservationsUseTheWiderGate) {
+  LandmarkObservation far = obs(1, 0.6, 0.0, 0.2);  // 0.6 m from the tree seen by submap 0
+  const std::vector<LandmarkObservation> dense = {obs(0, 0.0, 0.0, 0.2), far};
+  EXPECT_TRUE(associateLandmarks(dense, {}).empty());  // two trees of one sighting each
+  far.open_stand = true;
+  const auto groups = associateLandmarks({obs(0, 0.0, 0.0, 0.2), far}, {});
+  ASSERT_EQ(groups.size(), 1u);
+  EXPECT_EQ(groups[0], (std::vector<size_t>{0, 1}));
+  far.p_M.x() = 0.9;  // beyond open_gate_m (0.8 m) too
+  EXPECT_TRUE(associateLandmarks({obs(0, 0.0, 0.0, 0.2), far}, {}).empty());
+  // Still unambiguous only: a second tree within the wider gate leaves it out.
+  far.p_M.x() = 0.6;
+  const auto two = associateLandmarks(
+      {obs(0, 0.0, 0.0, 0.2), obs(0, 1.3, 0.0, 0.2), far, obs(2, 0.0, 0.0, 0.2)}, {});
+  ASSERT_EQ(two.size(), 1u);
+  EXPECT_EQ(two[0], (std::vector<size_t>{0, 3}));
+}
+
 /// Trees on a jittered 4 m grid over 60 m x 20 m (jitter 0 and one radius: a plantation).
 std::vector<Eigen::Vector4d> forest(unsigned seed = 3, double jitter_m = 1.0) {
   std::mt19937 rng(seed);
@@ -178,6 +198,12 @@ TEST(LandmarkRefinement, CappedObservationsStillTieTheRobots) {
   }
   p.landmark_max_observations = 1;  // a landmark needs two observations to tie anything
   EXPECT_NE(p.validate().find("landmark_max_observations"), std::string::npos);
+  MergeParams q;
+  q.landmark_open_rounds = 0;
+  EXPECT_NE(q.validate().find("landmark_open_rounds"), std::string::npos);
+  q = MergeParams();
+  q.landmark_open_gate_m = 0.0;
+  EXPECT_NE(q.validate().find("landmark gate"), std::string::npos);
 }
 
 MapMerger mergeWithoutLoop(const SideBySide& sc, int join_min_pairs) {

@@ -432,6 +432,36 @@ TEST(MapMerger, LevellingOfTheLatestSubmapLevelsTheAnchorOfItsTurnedFrame) {
   }
 }
 
+// A descriptor of accumulated trunks (open stands) gives the merger what its submap observed,
+// back in S: a predecessor's stem carried in by odometry is no sighting of this submap.
+TEST(MergeSubmapOf, TakesTheSubmapsOwnTrunksBackInS) {
+  Descriptor d;
+  d.robot = "a";
+  d.submap_id = 4;
+  d.stamp = 12.5;
+  d.level_rotation = Eigen::Quaterniond(Eigen::AngleAxisd(0.1, Eigen::Vector3d::UnitX()));
+  d.trunks = {TrunkLandmark{1.0, 2.0, 0.0, 0.2, true}, TrunkLandmark{-4.0, 3.0, 0.5, 0.3, false}};
+  const Pose T_O_S = Pose::Identity();
+  MergeSubmap own_only = mergeSubmapOf(d, T_O_S);
+  ASSERT_EQ(own_only.trunks.size(), 2u);  // not accumulated: its trunks are its own
+
+  d.accumulated = true;
+  d.own_trunks = {TrunkLandmark{5.0, -1.0, 0.2, 0.25, true}};
+  const MergeSubmap s = mergeSubmapOf(d, T_O_S);
+  EXPECT_EQ(s.robot, "a");
+  EXPECT_EQ(s.id, 4);
+  ASSERT_EQ(s.trunks.size(), 1u);
+  const Eigen::Vector3d p_S =
+      d.level_rotation.conjugate() * Eigen::Vector3d(5.0, -1.0, 0.2);  // L back to S
+  EXPECT_NEAR(s.trunks[0].x, p_S.x(), 1e-9);
+  EXPECT_NEAR(s.trunks[0].y, p_S.y(), 1e-9);
+  EXPECT_NEAR(s.trunks[0].z, p_S.z(), 1e-9);
+  EXPECT_EQ(s.trunks[0].r, 0.25);
+
+  d.own_trunks.clear();  // accumulated, and the submap saw nothing itself
+  EXPECT_TRUE(mergeSubmapOf(d, T_O_S).trunks.empty());
+}
+
 TEST(Pcm, MaximumCliqueIsExactAndDeterministic) {
   // 0-1-2 a triangle, 3-4-5-6 a 4-clique, 7 alone.
   ConsistencyGraph g(8, std::vector<bool>(8, false));

@@ -90,9 +90,9 @@ class FleetMap {
  private:
   // Everything dropped: a new merger (with the field stem map), no chains.
   void reset();
-  // The merger's addSubmap under the next id; "" or why not.
-  std::string addToMerger(const std::string& chain, const std::string& robot, int64_t id,
-                          double stamp, const Pose& T_O_S, const Trunks& trunks);
+  // The merger's addSubmap of s (its robot's own name and id) as a submap of `chain` under the
+  // next id; "" or why not.
+  std::string addToMerger(const std::string& chain, MergeSubmap s);
   Cloud::Ptr voxelDown(const Cloud& in) const;
 
   MergeParams params_;

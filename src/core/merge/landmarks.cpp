@@ -66,9 +66,10 @@ bool similarRadius(double r, double r_landmark, const LandmarkAssociationParams&
 Nearest nearestLandmark(const LandmarkObservation& o, const std::vector<Landmark>& landmarks,
                         const LandmarkGrid& grid, const LandmarkAssociationParams& p) {
   Nearest best;
+  const double gate = o.open_stand ? p.open_gate_m : p.gate_m;
   grid.forNear(o.p_M.head<2>(), [&](size_t l) {
     const double d = (landmarks[l].centre() - o.p_M.head<2>()).norm();
-    if (d > p.gate_m) return;
+    if (d > gate) return;
     ++best.within;
     if (!similarRadius(o.r, landmarks[l].radius(), p)) return;
     if (d < best.distance || (d == best.distance && l < best.landmark)) {
@@ -124,7 +125,11 @@ void associateSubmap(const std::vector<LandmarkObservation>& obs, size_t begin, 
 std::vector<std::vector<size_t>> associateLandmarks(
     const std::vector<LandmarkObservation>& observations, const LandmarkAssociationParams& params) {
   std::vector<Landmark> landmarks;
-  LandmarkGrid grid(params.gate_m);
+  double cell = params.gate_m;  // the widest gate any observation uses
+  for (const LandmarkObservation& o : observations) {
+    if (o.open_stand) cell = std::max(cell, params.open_gate_m);
+  }
+  LandmarkGrid grid(cell);
   for (size_t begin = 0; begin < observations.size();) {
     size_t end = begin + 1;
     while (end < observations.size() && observations[end].submap == observations[begin].submap) {

@@ -36,12 +36,15 @@ std::string MergeParams::validate() const {
   if (!(landmark_hidden_base_sigma_xy_m >= 0.0)) {
     e << "merge landmark_hidden_base_sigma_xy_m must be >= 0; ";
   }
-  for (double v : {landmark_gate_m, landmark_sigma_xy_m, landmark_sigma_z_m, landmark_loss_scale}) {
+  for (double v : {landmark_gate_m, landmark_open_gate_m, landmark_sigma_xy_m, landmark_sigma_z_m,
+                   landmark_loss_scale}) {
     if (!(v > 0.0)) e << "merge landmark gate, sigmas and loss scale must be > 0; ";
   }
   if (!(landmark_radius_tol_m >= 0.0)) e << "merge landmark_radius_tol_m must be >= 0; ";
   if (landmark_min_observations < 2) e << "merge landmark_min_observations must be >= 2; ";
-  if (landmark_rounds < 1) e << "merge landmark_rounds must be >= 1; ";
+  if (landmark_rounds < 1 || landmark_open_rounds < 1) {
+    e << "merge landmark_rounds and landmark_open_rounds must be >= 1; ";
+  }
   if (join_min_pairs < 0) e << "merge join_min_pairs must be >= 0; ";
   if (!(join_pair_radius_m > 0.0) || !(join_max_rms_m > 0.0)) {
     e << "merge join_pair_radius_m and join_max_rms_m must be > 0; ";
@@ -92,6 +95,7 @@ void MapMerger::addSubmap(const MergeSubmap& s) {
   n.stamp = s.stamp;
   n.T_O_S = s.T_O_S;
   n.trunks = s.trunks;
+  n.open_stand = s.open_stand;
   auto [it, is_new] = m.robots.try_emplace(s.robot);
   Impl::Robot& r = it->second;
   if (is_new) r.order = m.robots.size() - 1;
@@ -288,7 +292,8 @@ MergeSubmap mergeSubmapOf(const Descriptor& d, const Pose& T_O_S) {
   s.id = d.submap_id;
   s.stamp = d.stamp;
   s.T_O_S = T_O_S;
-  s.trunks = d.trunks;
+  s.trunks = d.observedTrunks();
+  s.open_stand = d.accumulated;
   if (!d.levelled()) return s;
   const Eigen::Matrix3d R_S_L = d.level_rotation.normalized().conjugate().toRotationMatrix();
   for (TrunkLandmark& t : s.trunks) {

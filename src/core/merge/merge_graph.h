@@ -29,7 +29,8 @@ struct MergeGraph {
     double stamp = 0.0;
     Pose T_O_S = Pose::Identity();
     Trunks trunks;
-    double travelled = 0.0;  // along the robot's chain from its first submap [m]
+    bool open_stand = false;  // MergeSubmap::open_stand
+    double travelled = 0.0;   // along the robot's chain from its first submap [m]
     Eigen::Quaterniond q = Eigen::Quaterniond::Identity();  // estimate of T_M_S
     Eigen::Vector3d t = Eigen::Vector3d::Zero();
     Pose pose() const {

@@ -130,6 +130,7 @@ std::vector<LandmarkObservation> landmarkObservations(const MergeGraph& m, int c
       if (!tr.base_seen && !(m.p.landmark_hidden_base_sigma_xy_m > 0.0)) continue;
       LandmarkObservation o;
       o.base_seen = tr.base_seen;
+      o.open_stand = n.open_stand;
       o.submap = i;
       o.p_S = Eigen::Vector3d(tr.x, tr.y, tr.z);
       o.p_M = T * o.p_S;
@@ -143,6 +144,7 @@ std::vector<LandmarkObservation> landmarkObservations(const MergeGraph& m, int c
 LandmarkAssociationParams associationParams(const MergeParams& p) {
   LandmarkAssociationParams a;
   a.gate_m = p.landmark_gate_m;
+  a.open_gate_m = p.landmark_open_gate_m;
   a.radius_abs_tol_m = p.landmark_radius_tol_m;
   a.min_observations = p.landmark_min_observations;
   return a;
@@ -276,7 +278,10 @@ MergeSolveStats solveGraph(MergeGraph& m) {
 
 void refineWithLandmarks(MergeGraph& m, MergeSolveStats* st) {
   const auto t0 = std::chrono::steady_clock::now();
-  for (int k = 0; k < m.p.landmark_rounds; ++k) landmarkRound(m, st);
+  const bool open = std::any_of(m.nodes.begin(), m.nodes.end(),
+                                [](const MergeGraph::Node& n) { return n.open_stand; });
+  const int rounds = open ? m.p.landmark_open_rounds : m.p.landmark_rounds;
+  for (int k = 0; k < rounds; ++k) landmarkRound(m, st);
   st->landmark_ms = msSince(t0);
 }
 
