@@ -154,5 +154,25 @@ TEST(FleetMap, AnEarlierRunsDatabaseBecomesChainsOfItsOwnWithItsLoops) {
   EXPECT_FALSE(std::filesystem::exists(path + ".tmp"));
 }
 
+// A levelled entry holds its trunks in L: the merger takes them back in S, as from a live
+// descriptor (the stems would otherwise stand tilted by the levelling in the map).
+TEST(FleetMap, ALevelledDatabaseEntrysTrunksEnterTheMergerInS) {
+  auto levelled = entry("a", 0);
+  levelled->level_rotation = Eigen::Quaterniond(Eigen::AngleAxisd(0.2, Eigen::Vector3d::UnitX()));
+  const Eigen::Vector3d p_L(1.0, 5.0, 0.0);  // the entry's third trunk
+  LoopDetector db{LoopDetectorParams{}};
+  ASSERT_TRUE(db.insert(levelled, {"a/odom", Pose::Identity()}));
+  FleetMap m(MergeParams{}, {}, 0.1);
+  ASSERT_EQ(m.loadDatabase(db).submaps, 1u);
+  m.merger().refine();
+  const Eigen::Vector3d p_S = levelled->level_rotation.conjugate() * p_L;
+  ASSERT_FALSE(m.merger().stems().empty());
+  double nearest = std::numeric_limits<double>::infinity();
+  for (const MergedStem& s : m.merger().stems()) {
+    nearest = std::min(nearest, std::hypot(s.x - p_S.x(), s.y - p_S.y()));
+  }
+  EXPECT_LT(nearest, 1e-6);  // in L it would be 5 (1 - cos 0.2) = 0.10 m off
+}
+
 }  // namespace
 }  // namespace dtif::ros_glue
