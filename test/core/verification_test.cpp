@@ -158,5 +158,61 @@ TEST(Verification, RejectsWeakHypotheses) {
   EXPECT_EQ(v.reason(), "no pose");
 }
 
+// Open stands: a loop between accumulated descriptors carries the odometry's drift of their
+// neighbours' stems; the two submaps' own trunks, paired under its pose, pull yaw and x/y back to
+// what the submaps themselves saw. Roll, pitch and t_z stay; too few own pairs leave the pose.
+TEST(Verification, OwnTrunksRefitTheLoopOfAccumulatedDescriptors) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-12.0, 12.0);
+  const Pose tilt(Eigen::AngleAxisd(0.004, Eigen::Vector3d::UnitX()));
+  const Pose expected = poseXyYaw(5.0, -3.0, 0.3, 0.4) * tilt;  // T_c_q: a small residual tilt
+  Descriptor q, c;
+  q.accumulated = c.accumulated = true;
+  for (int k = 0; k < 9; ++k) {  // 5 stems both saw (k < 5), 2 one-off fits on either side
+    const Eigen::Vector3d p_c(u(rng), u(rng), 0.0);
+    if (k < 5 || k >= 7) c.own_trunks.push_back(TrunkLandmark{p_c.x(), p_c.y(), p_c.z(), 0.2});
+    const Eigen::Vector3d p_q = expected.inverse() * p_c;
+    if (k < 7) q.own_trunks.push_back(TrunkLandmark{p_q.x(), p_q.y(), p_q.z(), 0.2});
+  }
+  // The loop's pose as the accumulated stems gave it: 0.25 m and 0.4 deg off in the plane.
+  const Pose drifted = poseXyYaw(0.25, -0.15, 0.0, 0.4 * M_PI / 180.0) * expected;
+  VerifierParams params;
+  Verification v;
+  v.T_c_q = drifted;
+  ASSERT_TRUE(refineOnOwnTrunks(q, c, params, &v));
+  EXPECT_LT((v.T_c_q.translation() - expected.translation()).head<2>().norm(), 1e-6);
+  EXPECT_NEAR(v.T_c_q.translation().z(), drifted.translation().z(), 1e-9);
+  // The tilt (the query's z in c) is the one the loop had; the yaw is the truth's.
+  const Eigen::Vector3d z = Eigen::Vector3d::UnitZ();
+  EXPECT_NEAR(std::acos((v.T_c_q.linear() * z).dot(z)), std::acos((drifted.linear() * z).dot(z)),
+              1e-9);
+  const Eigen::Vector3d x_c = v.T_c_q.linear() * Eigen::Vector3d::UnitX();
+  const Eigen::Vector3d x_e = expected.linear() * Eigen::Vector3d::UnitX();
+  EXPECT_LT((x_c - x_e).norm(), 1e-6);
+
+  // Neither side accumulated, the stage off, or fewer own pairs than own_min_pairs: unchanged.
+  Descriptor q_own = q, c_own = c;
+  q_own.accumulated = c_own.accumulated = false;
+  q_own.trunks = q.own_trunks, c_own.trunks = c.own_trunks;
+  v.T_c_q = drifted;
+  EXPECT_FALSE(refineOnOwnTrunks(q_own, c_own, params, &v));
+  EXPECT_TRUE(v.T_c_q.isApprox(drifted));
+  VerifierParams off = params;
+  off.own_match_radius_m = 0.0;
+  EXPECT_FALSE(refineOnOwnTrunks(q, c, off, &v));
+  VerifierParams many = params;
+  many.own_min_pairs = 6;  // 5 stems in common
+  EXPECT_FALSE(refineOnOwnTrunks(q, c, many, &v));
+  EXPECT_TRUE(v.T_c_q.isApprox(drifted));
+  // One side accumulated is enough (its stems carry the drift into the loop).
+  q.accumulated = false;
+  q.trunks = q.own_trunks;
+  q.own_trunks.clear();
+  EXPECT_TRUE(refineOnOwnTrunks(q, c, params, &v));
+  EXPECT_LT((v.T_c_q.translation() - expected.translation()).head<2>().norm(), 1e-6);
+  many.own_min_pairs = 1;
+  EXPECT_NE(many.validate().find("own_min_pairs"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace dtif

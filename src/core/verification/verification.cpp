@@ -280,6 +280,10 @@ std::string VerifierParams::validate() const {
     err << "max_ground_ambiguity must be in [0, 1]; ";
   if (!(ground_tilt_search_deg >= 0.0 && ground_tilt_search_deg <= 5.0))
     err << "ground_tilt_search_deg must be in [0, 5] (0: no search); ";
+  if (!(own_match_radius_m >= 0.0 && std::isfinite(own_match_radius_m))) {
+    err << "own_match_radius_m must be >= 0 (0: off); ";
+  }
+  if (own_min_pairs < 2) err << "own_min_pairs must be >= 2; ";
   if (!(max_fit_ambiguity >= 0.0 && max_fit_ambiguity < 1.0)) {
     err << "max_fit_ambiguity must be in [0, 1) (0: ambiguous hypotheses are rejected); ";
   }
@@ -335,6 +339,36 @@ Refined guidedRefine(const Descriptor& q, const Descriptor& c, const Pose& T0, d
   return out;
 }
 
+bool refineOnOwnTrunks(const Descriptor& q, const Descriptor& c, const VerifierParams& params,
+                       Verification* v) {
+  if (!(params.own_match_radius_m > 0.0) || (!q.accumulated && !c.accumulated)) return false;
+  const Trunks& tq = q.observedTrunks();
+  const Trunks& tc = c.observedTrunks();
+  std::vector<P2> pc;
+  for (const TrunkLandmark& t : tc) pc.emplace_back(t.x, t.y);
+  Pose T = v->T_c_q;
+  std::vector<std::pair<int, int>> pairs;
+  std::vector<PointPair2d> pts;
+  for (int it = 0; it < 5; ++it) {
+    std::vector<P2> pq;
+    for (const TrunkLandmark& t : tq) pq.push_back((T * Eigen::Vector3d(t.x, t.y, t.z)).head<2>());
+    std::vector<std::pair<int, int>> now = mutualPairs(pq, pc, params.own_match_radius_m);
+    if (static_cast<int>(now.size()) < params.own_min_pairs) return false;
+    if (now == pairs) break;
+    pairs = std::move(now);
+    pts.clear();
+    for (const auto& [i, j] : pairs) pts.emplace_back(pq[i], pc[j]);
+    T = rigid2d(pts, 0.0) * T;  // a planar correction on top of the full pose
+  }
+  double sxy = 0.0;
+  for (const auto& [i, j] : pairs) {
+    sxy += ((T * Eigen::Vector3d(tq[i].x, tq[i].y, tq[i].z)).head<2>() - pc[j]).squaredNorm();
+  }
+  if (std::sqrt(sxy / pairs.size()) > params.max_rms_xy_m) return false;
+  v->T_c_q = T;
+  return true;
+}
+
 Verification verifyLoop(const Descriptor& q, const Descriptor& c,
                         const std::vector<Correspondence>& corrs, const PoseEstimate& est,
                         const VerifierParams& params) {
@@ -369,6 +403,7 @@ Verification verifyLoop(const Descriptor& q, const Descriptor& c,
 
   v.score = v.covisible_ratio * inlierWeightShare(corrs, est);
   v.accepted = true;
+  refineOnOwnTrunks(q, c, params, &v);
   return v;
 }
 

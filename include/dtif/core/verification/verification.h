@@ -95,12 +95,19 @@ struct VerifierParams {
   /// their levelling errors, which smear the differences of maps 20-40 m across. 0: no search
   /// [deg].
   double ground_tilt_search_deg = 1.0;
+  /// An accepted loop with an accumulated descriptor on either side (open stands) is refitted
+  /// in yaw and t_xy to the two submaps' own trunks (refineOnOwnTrunks) that pair up mutually
+  /// within this radius under its pose; 0: off [m].
+  double own_match_radius_m = 0.5;
+  int own_min_pairs = 3;  ///< fewer own pairs: the pose stays
 
   std::string validate() const;
 
   template <class V>
   void visit(V& v) {
     v("min_hypothesis_inliers", min_hypothesis_inliers);
+    v("own_match_radius_m", own_match_radius_m);
+    v("own_min_pairs", own_min_pairs);
     v("min_inliers", min_inliers);
     v("min_inlier_weight", min_inlier_weight);
     v("max_rms_xy_m", max_rms_xy_m);
@@ -224,5 +231,14 @@ struct Refined {
 /// Procrustes for yaw and t_xy; t_z is refineElevation's); a few rounds until the pairs stop
 /// changing.
 Refined guidedRefine(const Descriptor& q, const Descriptor& c, const Pose& T0, double radius);
+
+/// An accumulated descriptor's trunks carry its neighbours' sightings through odometry, and with
+/// them the odometry's drift over its span (0.17-0.22 m of loop translation in very_sparse).
+/// When q or c is accumulated and their own trunks (Descriptor::observedTrunks) pair up
+/// mutually within own_match_radius_m under v->T_c_q, at least own_min_pairs of them with an
+/// RMS of at most max_rms_xy_m, yaw and t_xy are refitted to those pairs (a few rounds, as
+/// guidedRefine); roll, pitch and t_z stay. Returns whether the pose was refitted.
+bool refineOnOwnTrunks(const Descriptor& q, const Descriptor& c, const VerifierParams& params,
+                       Verification* v);
 
 }  // namespace dtif
