@@ -106,8 +106,6 @@ struct VerifierParams {
   template <class V>
   void visit(V& v) {
     v("min_hypothesis_inliers", min_hypothesis_inliers);
-    v("own_match_radius_m", own_match_radius_m);
-    v("own_min_pairs", own_min_pairs);
     v("min_inliers", min_inliers);
     v("min_inlier_weight", min_inlier_weight);
     v("max_rms_xy_m", max_rms_xy_m);
@@ -134,6 +132,8 @@ struct VerifierParams {
     v("ground_window_m", ground_window_m);
     v("max_ground_ambiguity", max_ground_ambiguity);
     v("ground_tilt_search_deg", ground_tilt_search_deg);
+    v("own_match_radius_m", own_match_radius_m);
+    v("own_min_pairs", own_min_pairs);
   }
 };
 
