@@ -108,7 +108,7 @@ AccumulatedTrunks TrunkAccumulator::add(double stamp, const Pose& T_O_S, const T
   // have enough submaps, it is described again with stable stems like the rest (else a robot's
   // first submaps, on which the medians are still being gathered, kept their one-off fits).
   current.updatable = current.extended || looksOpen(out.stable_own, trunks_S.size());
-  current.described_own = out.submaps == 1 && !out.open_stand;
+  current.described_own = out.ownOnly();
   if (out.stable_own >= 0 && !trunks_S.empty()) {
     stability_.push_back({static_cast<double>(out.stable_own) / trunks_S.size(), out.stable_own});
     while (stability_.size() > static_cast<size_t>(params_.open_stand_window)) {
@@ -184,7 +184,7 @@ void TrunkAccumulator::forwardUpdates(std::vector<ForwardUpdate>* updates) {
     u.stamp = e.stamp;
     u.trunks = accumulateBothWays(i, &u.successors);
     // Its own trunks, as it was described: nothing to replace.
-    const bool own = u.trunks.submaps == 1 && !u.trunks.open_stand;
+    const bool own = u.trunks.ownOnly();
     if (own && e.described_own) continue;
     e.described_own = own;
     if (updates) updates->push_back(std::move(u));
@@ -322,7 +322,7 @@ GroundMap groundMapOfCloud(const Cloud& cloud_S, const Trunks& own, const TrunkE
 
 // A description other than the submap's own trunks keeps those beside it (what it observed).
 void markAccumulated(const AccumulatedTrunks& acc, const Trunks& own, Descriptor* d) {
-  d->accumulated = acc.submaps > 1 || acc.open_stand;
+  d->accumulated = !acc.ownOnly();
   if (d->accumulated) d->own_trunks = own;
 }
 

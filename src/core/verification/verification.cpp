@@ -110,6 +110,33 @@ std::vector<std::pair<int, int>> mutualPairs(const std::vector<P2>& pq, const st
   return out;
 }
 
+/// The trunks' centres, horizontally.
+std::vector<P2> xyOf(const Trunks& trunks) {
+  std::vector<P2> out;
+  out.reserve(trunks.size());
+  for (const TrunkLandmark& t : trunks) out.emplace_back(t.x, t.y);
+  return out;
+}
+
+/// The trunks' centres placed by T, horizontally.
+std::vector<P2> placedXy(const Trunks& trunks, const Pose& T) {
+  std::vector<P2> out;
+  out.reserve(trunks.size());
+  for (const TrunkLandmark& t : trunks)
+    out.push_back((T * Eigen::Vector3d(t.x, t.y, t.z)).head<2>());
+  return out;
+}
+
+/// RMS horizontal distance of the (query, candidate) pairs, the query's trunks placed by T.
+double planarRms(const Trunks& tq, const std::vector<P2>& pc, const Pose& T,
+                 const std::vector<std::pair<int, int>>& pairs) {
+  double sxy = 0.0;
+  for (const auto& [i, j] : pairs) {
+    sxy += ((T * Eigen::Vector3d(tq[i].x, tq[i].y, tq[i].z)).head<2>() - pc[j]).squaredNorm();
+  }
+  return std::sqrt(sxy / pairs.size());
+}
+
 /// Repetitive stands (plantation grids) support several poses almost equally; a loop is only
 /// trusted when the chosen hypothesis clearly dominates the runner-up in yaw and translation.
 double hypothesisAmbiguity(const PoseEstimate& est) {
@@ -169,11 +196,7 @@ bool refinementDiverged(const Descriptor& q, const Refined& ref, const Pose& T_h
 /// Sets v's covisible fields.
 Rejection checkCovisibility(const Descriptor& q, const Descriptor& c, const Pose& T,
                             const VerifierParams& params, Verification* v) {
-  std::vector<P2> pq, pc;
-  for (const TrunkLandmark& t : q.trunks) {
-    pq.push_back((T * Eigen::Vector3d(t.x, t.y, t.z)).head<2>());
-  }
-  for (const TrunkLandmark& t : c.trunks) pc.emplace_back(t.x, t.y);
+  const std::vector<P2> pq = placedXy(q.trunks, T), pc = xyOf(c.trunks);
   int inside = 0, matched = 0;
   coLocated(pq, pc, params.match_radius_m, &inside, &matched);
   coLocated(pc, pq, params.match_radius_m, &inside, &matched);
@@ -315,12 +338,9 @@ double inlierWeightShare(const std::vector<Correspondence>& corrs, const PoseEst
 Refined guidedRefine(const Descriptor& q, const Descriptor& c, const Pose& T0, double radius) {
   Refined out;
   out.T = T0;
-  std::vector<P2> pc;
-  for (const TrunkLandmark& t : c.trunks) pc.emplace_back(t.x, t.y);
+  const std::vector<P2> pc = xyOf(c.trunks);
   for (int it = 0; it < 5; ++it) {
-    std::vector<P2> pq;
-    for (const TrunkLandmark& t : q.trunks)
-      pq.push_back((out.T * Eigen::Vector3d(t.x, t.y, t.z)).head<2>());
+    const std::vector<P2> pq = placedXy(q.trunks, out.T);
     std::vector<std::pair<int, int>> pairs = mutualPairs(pq, pc, radius);
     if (pairs.size() < 2) break;
     if (pairs == out.pairs) break;
@@ -329,13 +349,7 @@ Refined guidedRefine(const Descriptor& q, const Descriptor& c, const Pose& T0, d
     for (const auto& [i, j] : pairs) points.emplace_back(P2(q.trunks[i].x, q.trunks[i].y), pc[j]);
     out.T = rigid2d(points, out.T.translation().z());  // refineElevation fixes t_z
   }
-  double sxy = 0.0;
-  for (const auto& [i, j] : out.pairs) {
-    const Eigen::Vector3d r = Eigen::Vector3d(c.trunks[j].x, c.trunks[j].y, c.trunks[j].z) -
-                              out.T * Eigen::Vector3d(q.trunks[i].x, q.trunks[i].y, q.trunks[i].z);
-    sxy += r.head<2>().squaredNorm();
-  }
-  if (!out.pairs.empty()) out.rms_xy = std::sqrt(sxy / out.pairs.size());
+  if (!out.pairs.empty()) out.rms_xy = planarRms(q.trunks, pc, out.T, out.pairs);
   return out;
 }
 
@@ -344,14 +358,12 @@ bool refineOnOwnTrunks(const Descriptor& q, const Descriptor& c, const VerifierP
   if (!(params.own_match_radius_m > 0.0) || (!q.accumulated && !c.accumulated)) return false;
   const Trunks& tq = q.observedTrunks();
   const Trunks& tc = c.observedTrunks();
-  std::vector<P2> pc;
-  for (const TrunkLandmark& t : tc) pc.emplace_back(t.x, t.y);
+  const std::vector<P2> pc = xyOf(tc);
   Pose T = v->T_c_q;
   std::vector<std::pair<int, int>> pairs;
   std::vector<PointPair2d> pts;
   for (int it = 0; it < 5; ++it) {
-    std::vector<P2> pq;
-    for (const TrunkLandmark& t : tq) pq.push_back((T * Eigen::Vector3d(t.x, t.y, t.z)).head<2>());
+    const std::vector<P2> pq = placedXy(tq, T);
     std::vector<std::pair<int, int>> now = mutualPairs(pq, pc, params.own_match_radius_m);
     if (static_cast<int>(now.size()) < params.own_min_pairs) return false;
     if (now == pairs) break;
@@ -360,11 +372,7 @@ bool refineOnOwnTrunks(const Descriptor& q, const Descriptor& c, const VerifierP
     for (const auto& [i, j] : pairs) pts.emplace_back(pq[i], pc[j]);
     T = rigid2d(pts, 0.0) * T;  // a planar correction on top of the full pose
   }
-  double sxy = 0.0;
-  for (const auto& [i, j] : pairs) {
-    sxy += ((T * Eigen::Vector3d(tq[i].x, tq[i].y, tq[i].z)).head<2>() - pc[j]).squaredNorm();
-  }
-  if (std::sqrt(sxy / pairs.size()) > params.max_rms_xy_m) return false;
+  if (planarRms(tq, pc, T, pairs) > params.max_rms_xy_m) return false;
   v->T_c_q = T;
   return true;
 }

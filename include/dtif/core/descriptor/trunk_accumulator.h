@@ -92,6 +92,8 @@ struct AccumulatedTrunks {
   /// counted (no predecessor in reach, or multi_submap off).
   int stable_own = -1;
   bool open_stand = false;  ///< described as in an open stand (open_stand_share)
+  /// Whether `trunks` are exactly the submap's own (no other submap's stem, no stable-only cut).
+  bool ownOnly() const { return submaps == 1 && !open_stand; }
 };
 
 /// An earlier submap described again with its successors' stems (forward accumulation).
