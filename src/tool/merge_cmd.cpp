@@ -117,7 +117,8 @@ void printGraphAndStems(const MergeSummary& sum) {
   if (sum.stem_slices) {
     const StemSliceStats& q = *sum.stem_slices;
     std::cout << std::setprecision(0) << "stem DBH from the points: " << q.refitted << " of "
-              << q.stems << " stems refitted (kept the median: " << q.too_few << " too few points, "
+              << q.stems << " stems refitted, " << q.blended
+              << " half-way to the median (kept the median: " << q.too_few << " too few points, "
               << q.one_sided << " one-sided, " << q.shrunk << " well inside it, " << q.no_fit
               << " no fit), " << q.points << " slice points from " << q.submap_views
               << " stem views, " << sum.stem_slices_ms << " ms\n";

@@ -99,7 +99,8 @@ struct Outcome {
   StemSliceStats stats;
 };
 
-Outcome survey(const Stem& s, const std::vector<double>& bearings, uint32_t seed) {
+Outcome survey(const Stem& s, const std::vector<double>& bearings, uint32_t seed,
+               const StemFusionParams& p = StemFusionParams{}) {
   std::mt19937 rng(seed);
   std::vector<View> views;
   std::vector<double> radii;
@@ -109,7 +110,7 @@ Outcome survey(const Stem& s, const std::vector<double>& bearings, uint32_t seed
   }
   Outcome o;
   o.median_r = median(radii);
-  StemSlices slices({inventoryEntry(s, 2.0 * o.median_r)}, StemFusionParams{});
+  StemSlices slices({inventoryEntry(s, 2.0 * o.median_r)}, p);
   for (const View& v : views) slices.addSubmap(0, v.T_M_S, v.cloud);
   o.pooled_r = 0.5 * slices.refit(&o.stats).at(0).dbh;
   return o;
@@ -163,10 +164,41 @@ TEST(StemSlices, PooledSidesAverageAnEllipse) {
 TEST(StemSlices, OneSidedSliceKeepsTheMedian) {
   // Every submap on the same side: the pooled arc is one side again, no better than the median.
   const Stem s;
-  const Outcome o = survey(s, {0.0, 0.2, 0.4}, 5);
+  StemFusionParams p;
+  p.slice_blend_min_arc_deg = 361.0;
+  const Outcome o = survey(s, {0.0, 0.2, 0.4}, 5, p);
   EXPECT_EQ(o.stats.refitted, 0u);
   EXPECT_EQ(o.stats.one_sided, 1u);
   EXPECT_DOUBLE_EQ(o.pooled_r, o.median_r);
+}
+
+TEST(StemSlices, AOneSidedSliceOverHalfTheStemGoesHalfWay) {
+  // Views 23 degrees apart: the pooled inliers cover more than half the circle but less than
+  // slice_min_arc_deg. The inventory's radius is 15 % too large (a neighbour in a view's fit).
+  // DBH is then the mean of the circle's and the inventory's.
+  const Stem s;
+  std::mt19937 rng(5);
+  std::vector<View> views;
+  for (double b : {0.0, 0.2, 0.4}) views.push_back(scan(s, b, 5.0, &rng));
+  const MergedStem entry = inventoryEntry(s, 2.0 * 1.15 * s.r);
+  StemFusionParams accept_any, blend_above_359;
+  accept_any.slice_min_arc_deg = 0.0;
+  accept_any.slice_max_shrink = 1.0;
+  blend_above_359.slice_blend_min_arc_deg = 359.0;
+  auto refit = [&](const StemFusionParams& p, StemSliceStats* st) {
+    StemSlices slices({entry}, p);
+    for (const View& v : views) slices.addSubmap(0, v.T_M_S, v.cloud);
+    return slices.refit(st).at(0).dbh;
+  };
+  StemSliceStats st;
+  const double circle = refit(accept_any, &st);
+  ASSERT_EQ(st.refitted, 1u);
+  EXPECT_LT(circle, entry.dbh - 0.02);
+  EXPECT_DOUBLE_EQ(refit(blend_above_359, &st), entry.dbh);
+  EXPECT_EQ(st.one_sided, 1u);
+  EXPECT_NEAR(refit(StemFusionParams{}, &st), 0.5 * (circle + entry.dbh), 1e-12);
+  EXPECT_EQ(st.blended, 1u);
+  EXPECT_EQ(st.one_sided, 0u);
 }
 
 TEST(StemSlices, TooFewSubmapsOrAnotherComponentKeepTheMedian) {
@@ -207,19 +239,27 @@ TEST(StemSlices, SubmapsOffByTheirPosesKeepTheMedian) {
     views.back().T_M_S.pretranslate(-0.06 * Eigen::Vector3d(std::cos(b), std::sin(b), 0.0));
   }
   const double r_median = median(radii);
-  StemFusionParams off;
+  StemFusionParams off, no_blend;
   off.slice_max_shrink = 1.0;
+  no_blend.slice_blend_min_arc_deg = 361.0;
   StemSlices unchecked({inventoryEntry(s, 2.0 * r_median)}, off);
-  StemSlices checked({inventoryEntry(s, 2.0 * r_median)}, StemFusionParams{});
+  StemSlices checked({inventoryEntry(s, 2.0 * r_median)}, no_blend);
+  StemSlices blended({inventoryEntry(s, 2.0 * r_median)}, StemFusionParams{});
   for (const View& v : views) {
     unchecked.addSubmap(0, v.T_M_S, v.cloud);
     checked.addSubmap(0, v.T_M_S, v.cloud);
+    blended.addSubmap(0, v.T_M_S, v.cloud);
   }
   StemSliceStats st;
-  EXPECT_LT(0.5 * unchecked.refit(&st).at(0).dbh, 0.9 * r_median);
+  const double circle_dbh = unchecked.refit(&st).at(0).dbh;
+  EXPECT_LT(0.5 * circle_dbh, 0.9 * r_median);
   EXPECT_EQ(st.refitted, 1u);
   EXPECT_DOUBLE_EQ(checked.refit(&st).at(0).dbh, 2.0 * r_median);
   EXPECT_EQ(st.shrunk, 1u);
+  // All round, the shrunk circle's arc is wide: by default DBH goes half-way to it.
+  EXPECT_NEAR(blended.refit(&st).at(0).dbh, 0.5 * (circle_dbh + 2.0 * r_median), 1e-12);
+  EXPECT_EQ(st.blended, 1u);
+  EXPECT_EQ(st.shrunk, 0u);
 }
 
 TEST(StemSlices, PlotCoordinatesKeepMillimetres) {
@@ -419,6 +459,9 @@ TEST(StemSlices, ParamsValidated) {
   p = StemFusionParams{};
   p.slice_max_shrink = -0.1;
   EXPECT_NE(p.validate().find("slice_max_shrink"), std::string::npos);
+  p = StemFusionParams{};
+  p.slice_blend_min_arc_deg = -1.0;
+  EXPECT_NE(p.validate().find("slice_blend_min_arc_deg"), std::string::npos);
   p = StemFusionParams{};
   p.slice_inlier_m = 0.0;
   EXPECT_NE(p.validate().find("slice_inlier_m"), std::string::npos);

@@ -151,7 +151,12 @@ std::vector<MergedStem> StemSlices::refit(StemSliceStats* stats) const {
     for (const Eigen::Vector2f& q : sl.xy) xy.push_back(q.cast<double>());
     const SliceFit f = fitStemSlice(xy, 0.0, 0.0, seedRadius(stems_[k]), p_);
     if (!f.ok) {
-      ++(f.one_sided ? st.one_sided : f.shrunk ? st.shrunk : st.no_fit);
+      if ((f.one_sided || f.shrunk) && f.arc_deg >= p_.slice_blend_min_arc_deg) {
+        out[k].dbh = 0.5 * (out[k].dbh + 2.0 * f.r);
+        ++st.blended;
+      } else {
+        ++(f.one_sided ? st.one_sided : f.shrunk ? st.shrunk : st.no_fit);
+      }
       continue;
     }
     out[k].dbh = 2.0 * f.r;

@@ -62,6 +62,11 @@ struct StemFusionParams {
   /// large, so a pooled circle well inside them means the submaps' arcs do not line up (poses
   /// centimetres off: the fit takes the inner envelope of the offset arcs) [0..1]
   double slice_max_shrink = 0.1;
+  /// A pooled circle refused only as one-sided or shrunk whose inliers still cover at least
+  /// this: DBH is the mean of its diameter and the observations' median. Both are off there
+  /// (the median small from one-sided views or large from a neighbour in a view, the circle
+  /// small from offset arcs), by 2-5 cm each and not together; > 360: never [deg]
+  double slice_blend_min_arc_deg = 180.0;
   /// Online (MapMergeNodelet, keepSliceCandidates): what each arriving submap cloud keeps for
   /// the refit at save_map, around the submap's own trunks, before the merged stems exist. The
   /// merged stem's centre, radius and base differ from this submap's trunk by centimetres
@@ -95,6 +100,7 @@ struct StemFusionParams {
     v("slice_min_arc_deg", slice_min_arc_deg);
     v("slice_inlier_m", slice_inlier_m);
     v("slice_max_shrink", slice_max_shrink);
+    v("slice_blend_min_arc_deg", slice_blend_min_arc_deg);
     v("slice_keep_margin_m", slice_keep_margin_m);
     v("slice_keep_band_m", slice_keep_band_m);
     v("slice_keep_max_points", slice_keep_max_points);

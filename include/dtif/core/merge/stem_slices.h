@@ -24,6 +24,7 @@ struct StemSliceStats {
   size_t one_sided = 0;     ///< kept it: the pooled arc was narrower than slice_min_arc_deg
   size_t no_fit = 0;        ///< kept it: no plausible circle (radius or centre far off)
   size_t shrunk = 0;        ///< kept it: the circle well inside the median (slice_max_shrink)
+  size_t blended = 0;       ///< one-sided or shrunk, arc >= slice_blend_min_arc_deg: mean of both
   size_t points = 0;        ///< slice points kept over all stems
   size_t submap_views = 0;  ///< (stem, submap) pairs that contributed points
 };
@@ -46,7 +47,9 @@ class StemSlices {
   /// The stems with dbh = 2 r and centre (x, y) of a robust circle fit (fitCircleRobust) to
   /// each pooled slice,
   /// where it has at least slice_min_points points from slice_min_submaps submaps and its
-  /// inliers cover at least slice_min_arc_deg; everything else unchanged. Deterministic.
+  /// inliers cover at least slice_min_arc_deg; dbh = the mean of 2 r and the inventory's dbh
+  /// (centre unchanged) where the circle was refused only as one-sided or shrunk and its
+  /// inliers cover at least slice_blend_min_arc_deg; everything else unchanged. Deterministic.
   std::vector<MergedStem> refit(StemSliceStats* stats = nullptr) const;
 
   /// One stem's pooled slice, horizontal points in M (for tests and diagnostics).
