@@ -338,6 +338,30 @@ TEST(MapMerger, RobustLossAloneLimitsAFalseLoop) {
   EXPECT_LT(mergedAte(m, sc), 0.25);
 }
 
+TEST(MapMerger, LoopsOfSubmapsInAnOpenStandGetTheWiderFloor) {
+  // b's submaps from 104 on are in an open stand: the loops of those are weighted at
+  // loop_open_sigma_xy_min_m horizontally, the others at loop_sigma_xy_min_m; the loops' own
+  // covariance (1 cm) is below both.
+  Scenario sc = makeScenario();
+  for (MergeSubmap& s : sc.submaps) s.open_stand = s.id >= 104;
+  const MapMerger m = merge(sc);
+  const MergeParams& p = m.params();
+  ASSERT_GT(p.loop_open_sigma_xy_min_m, p.loop_sigma_xy_min_m);
+  int open = 0, other = 0;
+  for (const MergeGraphEdge& e : m.graphEdges()) {
+    if (!e.loop) continue;
+    const bool is_open = e.from >= 104 || e.to >= 104;
+    const double sigma_xy = is_open ? p.loop_open_sigma_xy_min_m : p.loop_sigma_xy_min_m;
+    ++(is_open ? open : other);
+    for (int i : {0, 1}) {
+      EXPECT_NEAR(e.information(i, i), 1.0 / (sigma_xy * sigma_xy), 1e-6) << e.from << "-" << e.to;
+    }
+    EXPECT_NEAR(e.information(2, 2), 1.0 / (p.loop_sigma_z_min_m * p.loop_sigma_z_min_m), 1e-6);
+  }
+  EXPECT_GT(open, 0);
+  EXPECT_GT(other, 0);
+}
+
 TEST(MapMerger, ComponentsJoinWithAnEvent) {
   const Scenario sc = makeScenario();
   MapMerger m;

@@ -24,7 +24,7 @@ std::string MergeParams::validate() const {
   std::ostringstream e;
   for (double v : {odom_sigma_xy_m, odom_sigma_z_m, odom_sigma_rot_rad, odom_sigma_tilt_rad,
                    loop_sigma_xy_min_m, loop_sigma_z_min_m, loop_sigma_rot_min_rad,
-                   robust_loss_scale, pcm_sigmas}) {
+                   loop_open_sigma_xy_min_m, robust_loss_scale, pcm_sigmas}) {
     if (!(v > 0.0)) e << "merge sigmas, robust_loss_scale and pcm_sigmas must be > 0; ";
   }
   for (double v :
@@ -139,7 +139,7 @@ bool MapMerger::addLoop(const Loop& loop) {
     l.b = c;
     l.T_a_b = loop.T_c_q.inverse();
   }
-  l.sigmas = m.loopSigmas(loop.covariance);
+  l.sigmas = m.loopSigmas(loop.covariance, m.nodes[q].open_stand || m.nodes[c].open_stand);
   m.loops.push_back(l);
   addToGroup(m, m.loops.size() - 1);
   m.dirty = true;

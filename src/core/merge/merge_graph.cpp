@@ -16,11 +16,11 @@ Vector6d MergeGraph::odomSigmas(double d) const {
   return s;
 }
 
-Vector6d MergeGraph::loopSigmas(const Matrix6d& cov) const {
-  const Vector6d floor =
-      (Vector6d() << p.loop_sigma_xy_min_m, p.loop_sigma_xy_min_m, p.loop_sigma_z_min_m,
-       p.loop_sigma_rot_min_rad, p.loop_sigma_rot_min_rad, p.loop_sigma_rot_min_rad)
-          .finished();
+Vector6d MergeGraph::loopSigmas(const Matrix6d& cov, bool open_stand) const {
+  const double xy = open_stand ? p.loop_open_sigma_xy_min_m : p.loop_sigma_xy_min_m;
+  const Vector6d floor = (Vector6d() << xy, xy, p.loop_sigma_z_min_m, p.loop_sigma_rot_min_rad,
+                          p.loop_sigma_rot_min_rad, p.loop_sigma_rot_min_rad)
+                             .finished();
   Vector6d s;
   for (int i = 0; i < 6; ++i) {
     const double v = cov(i, i);

@@ -82,7 +82,8 @@ struct MergeGraph {
 
   // Noise models (merge_graph.cpp).
   Vector6d odomSigmas(double d) const;
-  Vector6d loopSigmas(const Matrix6d& cov) const;
+  /// The loop's sigmas, floored; open_stand: a submap of the loop is in an open stand.
+  Vector6d loopSigmas(const Matrix6d& cov, bool open_stand) const;
   Pose odom(size_t from, size_t to) const { return nodes[from].T_O_S.inverse() * nodes[to].T_O_S; }
 
   /// Robots with submaps, in insertion order.
