@@ -53,7 +53,7 @@ struct StemFusionParams {
   double slice_max_h_m = 1.5;             ///< slice's upper edge above the stem's base [m]
   double slice_margin_m = 0.15;           ///< gathered within r + this of the centre [m]
   int slice_max_points_per_submap = 256;  ///< per stem and submap, evenly strided [points]
-  int slice_min_points = 50;              ///< fewer pooled points: the median stays [points]
+  int slice_min_points = 20;              ///< fewer pooled points: the median stays [points]
   int slice_min_submaps = 2;              ///< fewer contributing submaps: the median stays
   double slice_min_arc_deg = 240.0;       ///< narrower pooled inlier arc: the median stays [deg]
   double slice_inlier_m = 0.04;           ///< circle inlier distance (Tukey: twice this) [m]
