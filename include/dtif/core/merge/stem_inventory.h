@@ -47,7 +47,8 @@ struct StemFusionParams {
   /// stem's slice slice_min_h_m..slice_max_h_m above its base, within r + slice_margin_m of its
   /// centre, pooled from every submap placed by the merged poses, one robust circle fitted. A
   /// stem seen from several sides loses the one-sided fits' range-noise bias. Where the slice
-  /// is too thin or one-sided the observations' median stays.
+  /// is too thin the observations' median stays; where its circle is one-sided or shrunk, the
+  /// median stays or goes half-way to the circle (slice_blend_min_arc_deg).
   bool dbh_from_points = true;
   double slice_min_h_m = 1.1;             ///< slice's lower edge above the stem's base [m]
   double slice_max_h_m = 1.5;             ///< slice's upper edge above the stem's base [m]
