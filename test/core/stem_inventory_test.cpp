@@ -236,6 +236,39 @@ TEST(StemInventory, AHiddenBaseTakesTheFartherSeenBasesWhenNoneAreNear) {
   EXPECT_NEAR(baseAt36(fuseStems(obs, near_only)), 9.2, 1e-9);
 }
 
+/// Rolling ground (dense_slope's hills: 1.5 m deep, 25 m apart, on a 20 % slope): seen bases on
+/// a 3 m grid, and a tree at the bottom of a hollow whose base nobody saw (its guesses 2 m up).
+TEST(StemInventory, AHiddenBaseInAHollowFollowsTheRollingGround) {
+  constexpr double kPi = 3.14159265358979323846, kX = 12.5, kY = 12.5;
+  auto ground = [&](double x, double y) {
+    return 0.2 * y + 0.75 * (std::cos(2.0 * kPi * x / 25.0) + std::cos(2.0 * kPi * y / 25.0));
+  };
+  std::vector<StemObservation> obs;
+  int64_t submap = 0;
+  for (int i = -4; i <= 4; ++i) {
+    for (int k = -4; k <= 4; ++k) {
+      const double x = kX + 3.0 * i + 0.4 * (k % 2), y = kY + 3.0 * k + 0.4 * (i % 2);
+      if (std::hypot(x - kX, y - kY) < 2.0) continue;  // the hidden tree's place
+      for (int s = 0; s < 2; ++s) obs.push_back({submap++, 0, x, y, ground(x, y), 0.15, true});
+    }
+  }
+  for (int s = 0; s < 4; ++s)
+    obs.push_back({submap++, 0, kX, kY, ground(kX, kY) + 2.0, 0.15, false});
+  auto hiddenBase = [&](const StemFusionParams& p) {
+    for (const MergedStem& m : fuseStems(obs, p)) {
+      if (std::hypot(m.x - kX, m.y - kY) < 0.1) return m.z_base;
+    }
+    ADD_FAILURE() << "the hidden tree is missing";
+    return 0.0;
+  };
+  StemFusionParams plane;
+  plane.terrain_sigma_m = 0.0;
+  // A plane through the seen bases within 12 m sits 1.4 m above the hollow's bottom; the
+  // distance-weighted quadratic 0.1 m (a cosine is not quite a quadratic over 8 m).
+  EXPECT_GT(hiddenBase(plane) - ground(kX, kY), 1.0);
+  EXPECT_NEAR(hiddenBase(StemFusionParams{}), ground(kX, kY), 0.15);
+}
+
 TEST(StemInventory, TaperNeedsEnoughObservationsAboveBreastHeight) {
   StemFusionParams p;
   std::vector<TaperPair> pairs;
@@ -287,6 +320,9 @@ TEST(StemInventory, NewParametersAreValidated) {
   p = StemFusionParams{};
   p.terrain_far_radius_m = 5.0 * p.terrain_radius_m;
   EXPECT_NE(p.validate().find("terrain_far_radius_m"), std::string::npos);
+  p = StemFusionParams{};
+  p.terrain_sigma_m = -1.0;
+  EXPECT_NE(p.validate().find("terrain_sigma_m"), std::string::npos);
   p = StemFusionParams{};
   p.path_min_samples = -1;
   EXPECT_NE(p.validate().find("path_min_samples"), std::string::npos);

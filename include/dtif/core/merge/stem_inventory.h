@@ -23,14 +23,18 @@ struct StemFusionParams {
   /// Observations whose base is off the tree's by more are left out of the DBH and position
   /// (when others remain): their ground was a guess far from the stem [m].
   double max_base_offset_m = 3.0;
-  /// A tree with no seen base takes its base from a plane through the seen bases of the trees
-  /// within this radius (at least 4, spread over >= 1 m); 0: never [m].
+  /// A tree with no seen base takes its base from a surface through the seen bases of the
+  /// trees within this radius (at least 4, spread over >= 1 m); 0: never [m].
   double terrain_radius_m = 12.0;
-  /// Where that finds no plane, the ground points within this; <= terrain_radius_m: never [m].
+  /// Where that finds no surface, the ground points within this; <= terrain_radius_m: never [m].
   double terrain_far_radius_m = 24.0;
+  /// Those points weighted by their distance (Gaussian of this sigma), the surface quadratic
+  /// where enough weight lies around, else a plane; 0: an unweighted plane. Rolling ground
+  /// bends within a plane's 24 m, and hidden bases lie in its hollows [m].
+  double terrain_sigma_m = 4.0;
   /// The robots walked on the ground: where understory hides the bases, the ground under the
-  /// sensor positions (SensorPosition) joins the seen bases in that plane. Each robot's sensor
-  /// height is the median of its positions' height above the seen bases' plane; a robot with
+  /// sensor positions (SensorPosition) joins the seen bases in that surface. Each robot's sensor
+  /// height is the median of its positions' height above the seen bases' surface; a robot with
   /// fewer such positions than this, or whose heights spread (median absolute deviation) more
   /// than path_max_spread_m, adds no ground (a drone, a mast that moves); 0: never.
   int path_min_samples = 3;
@@ -87,6 +91,7 @@ struct StemFusionParams {
     v("max_base_offset_m", max_base_offset_m);
     v("terrain_radius_m", terrain_radius_m);
     v("terrain_far_radius_m", terrain_far_radius_m);
+    v("terrain_sigma_m", terrain_sigma_m);
     v("path_min_samples", path_min_samples);
     v("path_max_spread_m", path_max_spread_m);
     v("taper_min_pairs", taper_min_pairs);
@@ -138,7 +143,7 @@ struct MergedStem {
 /// a similar radius, at most one observation per submap in a cluster; then clusters closer than
 /// the radius with no submap in common are joined) and fuses each cluster robustly. The tree's
 /// base: the median of the observations whose base was seen, else the seen bases of the trees
-/// around it and the ground under the robots' paths there (a plane; StemFusionParams::
+/// around it and the ground under the robots' paths there (a local surface; StemFusionParams::
 /// path_min_samples), else the median of all. Each observation fitted its circle 1.3 m above
 /// its own base estimate, which for a hidden base can be metres too high: DBH is the median
 /// radius of the observations within max_base_offset_m of the tree's base, each corrected to
