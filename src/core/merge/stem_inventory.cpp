@@ -259,7 +259,7 @@ double horizontalSpread(const std::vector<Eigen::Vector3d>& pts, const std::vect
 // (Gaussian), and where that weight adds up to kMinQuadWeight points spread over sigma / 2 both
 // ways the surface is quadratic: a plane across 24 m of rolling ground sits high over every
 // hollow and low on every crest (held-out seen bases of the built-in scenes: median error
-// 0.08-0.48 m for the plane, 0.01-0.11 m for sigma 4 m; docs/results.md).
+// 0.08-0.48 m for the plane, 0.01-0.12 m for sigma 4 m; docs/results.md).
 bool terrainAt(double x, double y, const std::vector<Eigen::Vector3d>& bases, double sigma,
                double* z) {
   constexpr double kMinSpreadM2 = 1.0, kMinQuadWeight = 6.0;
