@@ -236,11 +236,12 @@ TEST(StemInventory, AHiddenBaseTakesTheFartherSeenBasesWhenNoneAreNear) {
   EXPECT_NEAR(baseAt36(fuseStems(obs, near_only)), 9.2, 1e-9);
 }
 
-/// Rolling ground (dense_slope's hills: 1.5 m deep, 25 m apart, on a 20 % slope): seen bases on
-/// a 3 m grid, and a tree at the bottom of a hollow whose base nobody saw (its guesses 2 m up).
+/// Rolling ground (hills as dense_slope's, 1.5 m deep and 25 m apart, here on a 20 % grade): seen
+/// bases on a 3 m grid, and a tree at the bottom of a hollow whose base nobody saw (its guesses
+/// 2 m up).
 TEST(StemInventory, AHiddenBaseInAHollowFollowsTheRollingGround) {
   constexpr double kPi = 3.14159265358979323846, kX = 12.5, kY = 12.5;
-  auto ground = [&](double x, double y) {
+  auto ground = [](double x, double y) {
     return 0.2 * y + 0.75 * (std::cos(2.0 * kPi * x / 25.0) + std::cos(2.0 * kPi * y / 25.0));
   };
   std::vector<StemObservation> obs;
