@@ -266,9 +266,8 @@ bool terrainAt(double x, double y, const std::vector<Eigen::Vector3d>& bases, do
   if (bases.size() < 4) return false;
   std::vector<double> near(bases.size(), 1.0);
   if (!(horizontalSpread(bases, near) >= kMinSpreadM2)) return false;
-  double weight = static_cast<double>(bases.size());
+  double weight = 0.0;  // of the distance weights; only sigma > 0 has them
   if (sigma > 0.0) {
-    weight = 0.0;
     for (size_t i = 0; i < bases.size(); ++i) {
       const double d2 = (bases[i].head<2>() - Eigen::Vector2d(x, y)).squaredNorm();
       near[i] = std::exp(-0.5 * d2 / (sigma * sigma));
