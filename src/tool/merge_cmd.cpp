@@ -119,9 +119,10 @@ void printGraphAndStems(const MergeSummary& sum) {
     std::cout << std::setprecision(0) << "stem DBH from the points: " << q.refitted << " of "
               << q.stems << " stems refitted, " << q.blended
               << " half-way to the median (kept the median: " << q.too_few << " too few points, "
-              << q.one_sided << " one-sided, " << q.shrunk << " well inside it, " << q.no_fit
-              << " no fit), " << q.points << " slice points from " << q.submap_views
-              << " stem views, " << sum.stem_slices_ms << " ms\n";
+              << q.one_sided << " one-sided, " << q.shrunk << " well inside it, " << q.enclosing
+              << " around clutter, " << q.no_fit << " no fit), " << q.points
+              << " slice points from " << q.submap_views << " stem views, " << sum.stem_slices_ms
+              << " ms\n";
   }
 }
 

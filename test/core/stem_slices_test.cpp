@@ -201,6 +201,42 @@ TEST(StemSlices, AOneSidedSliceOverHalfTheStemGoesHalfWay) {
   EXPECT_EQ(st.one_sided, 0u);
 }
 
+TEST(StemSlices, ACircleAroundClutterKeepsTheMedian) {
+  // Dead branches all round the stem at breast height, denser than its bark (dense_slope's
+  // hidden-base stems): the best-supported circle runs through them, 8 cm outside the bark, with
+  // the bark inside it. No return comes from inside a stem, so that circle is refused.
+  const Stem s;
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::vector<View> views;
+  for (double b : allRound(6)) {
+    View v = scan(s, b, 5.0, &rng);
+    const Pose T_S_M = v.T_M_S.inverse();
+    for (int k = 0; k < 3000; ++k) {
+      const double a = 2.0 * kPi * u(rng), rr = s.r + 0.08 + 0.01 * (u(rng) - 0.5);
+      const Eigen::Vector3d q(s.x + rr * std::cos(a), s.y + rr * std::sin(a),
+                              s.z_base + 1.1 + 0.4 * u(rng));
+      const Eigen::Vector3d q_S = T_S_M * q;
+      v.cloud.push_back(pcl::PointXYZ(q_S.x(), q_S.y(), q_S.z()));
+    }
+    views.push_back(std::move(v));
+  }
+  const MergedStem entry = inventoryEntry(s, 2.0 * 0.95 * s.r);
+  auto refit = [&](const StemFusionParams& p, StemSliceStats* st) {
+    StemSlices slices({entry}, p);
+    for (const View& v : views) slices.addSubmap(0, v.T_M_S, v.cloud);
+    return slices.refit(st).at(0).dbh;
+  };
+  StemFusionParams any_ratio;
+  any_ratio.slice_min_inlier_ratio = 0.0;
+  StemSliceStats st;
+  EXPECT_NEAR(refit(any_ratio, &st), 2.0 * (s.r + 0.08), 0.01);  // the clutter's circle
+  EXPECT_EQ(st.refitted, 1u);
+  EXPECT_DOUBLE_EQ(refit(StemFusionParams{}, &st), entry.dbh);
+  EXPECT_EQ(st.enclosing, 1u);
+  EXPECT_EQ(st.refitted, 0u);
+}
+
 TEST(StemSlices, TooFewSubmapsOrAnotherComponentKeepTheMedian) {
   const Stem s;
   std::mt19937 rng(6);
@@ -462,6 +498,9 @@ TEST(StemSlices, ParamsValidated) {
   p = StemFusionParams{};
   p.slice_blend_min_arc_deg = -1.0;
   EXPECT_NE(p.validate().find("slice_blend_min_arc_deg"), std::string::npos);
+  p = StemFusionParams{};
+  p.slice_min_inlier_ratio = 1.5;
+  EXPECT_NE(p.validate().find("slice_min_inlier_ratio"), std::string::npos);
   p = StemFusionParams{};
   p.slice_inlier_m = 0.0;
   EXPECT_NE(p.validate().find("slice_inlier_m"), std::string::npos);

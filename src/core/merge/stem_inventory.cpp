@@ -493,6 +493,8 @@ std::string StemFusionParams::validate() const {
     e << "stems.slice_max_shrink must be in [0, 1]; ";
   if (!(slice_blend_min_arc_deg >= 0))
     e << "stems.slice_blend_min_arc_deg must be >= 0 (> 360: never); ";
+  if (!(slice_min_inlier_ratio >= 0 && slice_min_inlier_ratio <= 1))
+    e << "stems.slice_min_inlier_ratio must be in [0, 1]; ";
   if (!(slice_inlier_m > 0 && slice_inlier_m <= 0.5))
     e << "stems.slice_inlier_m must be in (0, 0.5]; ";
   if (!(slice_keep_margin_m >= 0 && slice_keep_margin_m <= 2))

@@ -35,7 +35,8 @@ SliceFit fitStemSlice(const std::vector<Eigen::Vector2d>& xy, double x0, double 
   out.cx = f.cx, out.cy = f.cy, out.r = f.r, out.arc_deg = f.arc_deg;
   out.one_sided = f.arc_deg < params.slice_min_arc_deg;
   out.shrunk = !out.one_sided && f.r < (1.0 - params.slice_max_shrink) * r0;
-  out.ok = !out.one_sided && !out.shrunk;
+  out.encloses = !out.one_sided && !out.shrunk && f.inlier_ratio < params.slice_min_inlier_ratio;
+  out.ok = !out.one_sided && !out.shrunk && !out.encloses;
   return out;
 }
 
@@ -155,7 +156,11 @@ std::vector<MergedStem> StemSlices::refit(StemSliceStats* stats) const {
         out[k].dbh = 0.5 * (out[k].dbh + 2.0 * f.r);
         ++st.blended;
       } else {
-        ++(f.one_sided ? st.one_sided : f.shrunk ? st.shrunk : st.no_fit);
+        // An enclosing circle's radius is the clutter's: nothing of it is worth blending.
+        ++(f.one_sided  ? st.one_sided
+           : f.shrunk   ? st.shrunk
+           : f.encloses ? st.enclosing
+                        : st.no_fit);
       }
       continue;
     }

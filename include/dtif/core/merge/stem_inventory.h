@@ -72,6 +72,10 @@ struct StemFusionParams {
   /// (the median small from one-sided views or large from a neighbour in a view, the circle
   /// small from offset arcs), by 2-5 cm each and not together; > 360: never [deg]
   double slice_blend_min_arc_deg = 180.0;
+  /// A pooled circle whose inliers are fewer than this fraction of its inliers and the points
+  /// inside it: the median stays. No return comes from inside a stem, so a circle with points
+  /// inside encloses it: dead branches or a shrub around the stem at breast height [0..1]
+  double slice_min_inlier_ratio = 0.8;
   /// Online (MapMergeNodelet, keepSliceCandidates): what each arriving submap cloud keeps for
   /// the refit at save_map, around the submap's own trunks, before the merged stems exist. The
   /// merged stem's centre, radius and base differ from this submap's trunk by centimetres
@@ -107,6 +111,7 @@ struct StemFusionParams {
     v("slice_inlier_m", slice_inlier_m);
     v("slice_max_shrink", slice_max_shrink);
     v("slice_blend_min_arc_deg", slice_blend_min_arc_deg);
+    v("slice_min_inlier_ratio", slice_min_inlier_ratio);
     v("slice_keep_margin_m", slice_keep_margin_m);
     v("slice_keep_band_m", slice_keep_band_m);
     v("slice_keep_max_points", slice_keep_max_points);

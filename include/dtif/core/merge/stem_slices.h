@@ -24,6 +24,7 @@ struct StemSliceStats {
   size_t one_sided = 0;     ///< kept it: the pooled arc was narrower than slice_min_arc_deg
   size_t no_fit = 0;        ///< kept it: no plausible circle (radius or centre far off)
   size_t shrunk = 0;        ///< kept it: the circle well inside the median (slice_max_shrink)
+  size_t enclosing = 0;     ///< kept it: points inside the circle (slice_min_inlier_ratio)
   size_t blended = 0;       ///< one-sided or shrunk, arc >= slice_blend_min_arc_deg: mean of both
   size_t points = 0;        ///< slice points kept over all stems
   size_t submap_views = 0;  ///< (stem, submap) pairs that contributed points
@@ -81,14 +82,17 @@ Cloud::Ptr keepSliceCandidates(const Cloud& cloud_S, const Trunks& trunks_S,
 /// The circle fit a pooled slice gets: fitCircleRobust with the radius bounded to
 /// [0.5 r0, 2 r0 + 0.05 m] about the inventory's radius r0, inlier distance slice_inlier_m.
 /// `ok` false when the fit failed, the centre is more than slice_margin_m from (x0, y0), the
-/// inliers' arc is narrower than slice_min_arc_deg (then one_sided) or the radius is below
-/// (1 - slice_max_shrink) r0 (then shrunk).
+/// inliers' arc is narrower than slice_min_arc_deg (then one_sided), the radius is below
+/// (1 - slice_max_shrink) r0 (then shrunk) or too many points lie inside the circle
+/// (slice_min_inlier_ratio; then encloses).
 struct SliceFit {
   bool ok = false;
   double cx = 0.0, cy = 0.0, r = 0.0;  ///< [m]
   double arc_deg = 0.0;                ///< inlier coverage [deg]
   bool one_sided = false;              ///< the fit was fine but its arc too narrow
   bool shrunk = false;                 ///< the fit was fine but its radius well below r0
+  bool encloses = false;               ///< the fit was fine (not one-sided, not shrunk) but
+                                       ///< points lie inside it
 };
 SliceFit fitStemSlice(const std::vector<Eigen::Vector2d>& xy, double x0, double y0, double r0,
                       const StemFusionParams& params);
