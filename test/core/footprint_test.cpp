@@ -235,6 +235,50 @@ TEST(Footprint, TrunkHeightCellsAreTheWindowPercentilesCells) {
   }
 }
 
+TEST(Footprint, TrunkHeightCellsMeasureFromTheExactPercentile) {
+  // Ground-level samples (every 2nd point) only, and between them probes 0.01 mm inside and
+  // outside both edges of the band above the definition's ground of their tile, one a cell: a
+  // ground off by the next value of its window (~0.1 mm here, ~900 samples) moves a probe's
+  // cell.
+  std::mt19937 rng(43);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  Cloud samples;
+  for (int i = 0; i < 20000; ++i) {
+    const float x = -15.0f + 32.0f * u(rng), y = -11.0f + 24.0f * u(rng);
+    samples.push_back(pcl::PointXYZ(x, y, 0.1f * u(rng) - 0.05f));  // level: every tile counts
+  }
+  Cloud probes;
+  Cells inside;
+  for (int64_t tx = -7; tx < 8; ++tx) {
+    for (int64_t ty = -5; ty < 6; ++ty) {
+      std::vector<float> window;  // the definition's ground of tile (tx, ty)
+      for (const pcl::PointXYZ& q : samples) {
+        if (std::abs(static_cast<int64_t>(std::floor(q.x / 2.0)) - tx) <= 1 &&
+            std::abs(static_cast<int64_t>(std::floor(q.y / 2.0)) - ty) <= 1)
+          window.push_back(q.z);
+      }
+      const auto k = window.begin() + static_cast<std::ptrdiff_t>(0.05 * (window.size() - 1.0));
+      std::nth_element(window.begin(), k, window.end());
+      constexpr float kEps = 1e-5f;
+      const float up[4] = {0.3f + kEps, 0.3f - kEps, 3.0f - kEps, 3.0f + kEps};  // in, out, ...
+      for (int c = 0; c < 4; ++c) {
+        const int64_t cx = 2 * tx + c % 2, cy = 2 * ty + c / 2;
+        probes.push_back(pcl::PointXYZ(cx + 0.5f, cy + 0.5f, *k + up[c]));
+        if (c % 2 == 0) inside.emplace_back(cx, cy);
+      }
+    }
+  }
+  ASSERT_LE(probes.size(), samples.size());
+  Cloud cloud;
+  for (size_t i = 0; i < samples.size(); ++i) {
+    cloud.push_back(samples[i]);
+    cloud.push_back(i < probes.size() ? probes[i] : samples[i]);  // no sample, below the band
+  }
+  std::sort(inside.begin(), inside.end());
+  ASSERT_EQ(cellsByTheDefinition(cloud, 2), inside);
+  EXPECT_EQ(trunkHeightCells(cloud, Pose::Identity(), 1.0, cloud.size() / 2), inside);
+}
+
 TEST(Footprint, TrunkHeightCellsOfAStemOnFlatGround) {
   // Flat ground over 12 m x 12 m and a 0.2 m stem at (5.5, 6.5) up to 5 m: only the stem's
   // cells hold points 0.3-3 m above the local ground.

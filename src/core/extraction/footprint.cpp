@@ -178,22 +178,32 @@ TileSamples sortedTileSamples(const HeightCellsPrepass& pre, Tiles* tiles) {
   return s;
 }
 
-// The k-th smallest (0-based) of the union of sorted runs: a merge of their heads, k + 1 steps
-// (k is 5 % of the window; nth_element on a copy of the window cost 4x more).
+// The k-th smallest (0-based) of the union of m >= 1 sorted runs. Each round drops a prefix that
+// ranks wholly below k: with s = max(1, (k + 1) / m), that of the run whose s-th value (or last,
+// if shorter) is the smallest such value v. Below v lie at most s - 1 values of each run, so with
+// the prefix at most k + 1 - (m - 1) values (s = 1: the smallest head, k >= 1): those of rank < k
+// in some order of the ties. About m ln(k / m) rounds of m comparisons instead of a merge's k + 1
+// steps of m (k is 5 % of the window, ~60).
 float kthOfSortedRuns(std::vector<std::pair<const float*, const float*>>* runs, size_t k) {
-  float v = 0.0f;
-  for (size_t step = 0; step <= k; ++step) {
-    size_t best = 0;
-    for (size_t r = 1; r < runs->size(); ++r) {
-      if (*(*runs)[r].first < *(*runs)[best].first) best = r;
+  while (runs->size() > 1) {
+    const size_t m = runs->size();
+    const size_t s = std::max<size_t>(1, (k + 1) / m);
+    size_t best = 0, take = 0;
+    float lowest = std::numeric_limits<float>::infinity();
+    for (size_t r = 0; r < m; ++r) {
+      const auto& [b, e] = (*runs)[r];
+      const size_t t = std::min<size_t>(s, static_cast<size_t>(e - b));
+      if (b[t - 1] < lowest || r == 0) lowest = b[t - 1], best = r, take = t;
     }
-    v = *(*runs)[best].first++;
+    if (k == 0) return lowest;  // s = 1: the smallest head
+    (*runs)[best].first += take;
+    k -= take;
     if ((*runs)[best].first == (*runs)[best].second) {
       (*runs)[best] = runs->back();
       runs->pop_back();
     }
   }
-  return v;
+  return (*runs)[0].first[k];
 }
 
 // Local ground per tile (in S): 5th percentile of z inside the window around it, on every
