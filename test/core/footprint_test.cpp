@@ -4,7 +4,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
+#include <map>
 #include <random>
 
 namespace dtif {
@@ -153,6 +156,127 @@ TEST(Footprint, MarksRefuseFarCoordinates) {
   const std::vector<float> s = {1.0f, 2.0f};
   EXPECT_FALSE(marks.init(s, s, s, 1.0, Eigen::Vector2d(2e6, 0.0), Eigen::Vector2d(2e6 + 10, 10)));
   EXPECT_FALSE(marks.init({}, {}, {}, 1.0, Eigen::Vector2d(0.0, 0.0), Eigen::Vector2d(10, 10)));
+}
+
+// DATASET.md's cells by its words, point by point: a tile's ground is the k-th smallest z
+// (k = 5 % of them, rounded down) of the samples in the 3 x 3 tiles of 2 m around it, the
+// samples being every stride-th point.
+Cells cellsByTheDefinition(const Cloud& cloud, size_t stride) {
+  using Tile = std::pair<int64_t, int64_t>;
+  const auto tile = [](float x, float y) {
+    return Tile(static_cast<int64_t>(std::floor(x / 2.0)),
+                static_cast<int64_t>(std::floor(y / 2.0)));
+  };
+  std::map<Tile, std::vector<float>> z_of;
+  for (size_t i = 0; i < cloud.size(); i += stride)
+    z_of[tile(cloud[i].x, cloud[i].y)].push_back(cloud[i].z);
+  std::map<Tile, float> ground;  // NaN: no sample in the window
+  const auto groundOf = [&](const Tile& t) {
+    const auto known = ground.find(t);
+    if (known != ground.end()) return known->second;
+    std::vector<float> window;
+    for (int64_t dx = -1; dx <= 1; ++dx) {
+      for (int64_t dy = -1; dy <= 1; ++dy) {
+        const auto it = z_of.find({t.first + dx, t.second + dy});
+        if (it != z_of.end()) window.insert(window.end(), it->second.begin(), it->second.end());
+      }
+    }
+    float g = std::numeric_limits<float>::quiet_NaN();
+    if (!window.empty()) {
+      const auto k = window.begin() + static_cast<std::ptrdiff_t>(0.05 * (window.size() - 1.0));
+      std::nth_element(window.begin(), k, window.end());
+      g = *k;
+    }
+    return ground[t] = g;
+  };
+  Cells out;
+  for (const pcl::PointXYZ& q : cloud) {
+    const float h = q.z - groundOf(tile(q.x, q.y));
+    if (h >= 0.3 && h <= 3.0)
+      out.emplace_back(static_cast<int64_t>(std::floor(q.x)),
+                       static_cast<int64_t>(std::floor(q.y)));
+  }
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
+// n points over [-15, 17] x [-11, 13] m: ground crossing z = 0 on a slope, and clutter up to 5 m
+// above it on a share of them; z in 1 cm steps (ties, -0 and +0 among them) when quantised.
+Cloud slopeAcrossZero(uint32_t seed, int n, bool quantised) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  Cloud cloud;
+  for (int i = 0; i < n; ++i) {
+    const float x = -15.0f + 32.0f * u(rng), y = -11.0f + 24.0f * u(rng);
+    const float ground = 0.04f * x - 0.3f + 0.3f * std::sin(0.5f * y);
+    const float up = u(rng) < 0.6f ? 0.1f * u(rng) : 5.0f * u(rng) * u(rng);
+    float z = ground + up;
+    if (quantised) z = std::round(z * 100.0f) / 100.0f;
+    if (z == 0.0f) z = i % 2 ? -0.0f : 0.0f;
+    cloud.push_back(pcl::PointXYZ(x, y, z));
+  }
+  return cloud;
+}
+
+TEST(Footprint, TrunkHeightCellsAreTheWindowPercentilesCells) {
+  // The cells of the definition, with every point as the ground samples and with every 7th: on
+  // a dense cloud with ties and on a sparse one (~190 samples a window), where the next value
+  // of a window lies ~1 cm above its 5th percentile and a wrong rank moves cells.
+  for (const auto& [n, quantised] : {std::make_pair(30000, true), std::make_pair(4000, false)}) {
+    const Cloud cloud = slopeAcrossZero(41, n, quantised);
+    for (const size_t stride : {size_t{1}, size_t{7}}) {
+      const Cells expected = cellsByTheDefinition(cloud, stride);
+      EXPECT_GT(expected.size(), 200u);
+      const size_t max_samples = stride == 1 ? 0 : cloud.size() / stride;
+      EXPECT_EQ(trunkHeightCells(cloud, Pose::Identity(), 1.0, max_samples), expected)
+          << n << " points, samples every " << stride << " points";
+    }
+  }
+}
+
+TEST(Footprint, TrunkHeightCellsMeasureFromTheExactPercentile) {
+  // Ground-level samples (every 2nd point) only, and between them probes 0.01 mm inside and
+  // outside both edges of the band above the definition's ground of their tile, one a cell: a
+  // ground off by the next value of its window (~0.1 mm here, ~900 samples) moves a probe's
+  // cell.
+  std::mt19937 rng(43);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  Cloud samples;
+  for (int i = 0; i < 20000; ++i) {
+    const float x = -15.0f + 32.0f * u(rng), y = -11.0f + 24.0f * u(rng);
+    samples.push_back(pcl::PointXYZ(x, y, 0.1f * u(rng) - 0.05f));  // level: every tile counts
+  }
+  Cloud probes;
+  Cells inside;
+  for (int64_t tx = -7; tx < 8; ++tx) {
+    for (int64_t ty = -5; ty < 6; ++ty) {
+      std::vector<float> window;  // the definition's ground of tile (tx, ty)
+      for (const pcl::PointXYZ& q : samples) {
+        if (std::abs(static_cast<int64_t>(std::floor(q.x / 2.0)) - tx) <= 1 &&
+            std::abs(static_cast<int64_t>(std::floor(q.y / 2.0)) - ty) <= 1)
+          window.push_back(q.z);
+      }
+      const auto k = window.begin() + static_cast<std::ptrdiff_t>(0.05 * (window.size() - 1.0));
+      std::nth_element(window.begin(), k, window.end());
+      constexpr float kEps = 1e-5f;
+      const float up[4] = {0.3f + kEps, 0.3f - kEps, 3.0f - kEps, 3.0f + kEps};  // in, out, ...
+      for (int c = 0; c < 4; ++c) {
+        const int64_t cx = 2 * tx + c % 2, cy = 2 * ty + c / 2;
+        probes.push_back(pcl::PointXYZ(cx + 0.5f, cy + 0.5f, *k + up[c]));
+        if (c % 2 == 0) inside.emplace_back(cx, cy);
+      }
+    }
+  }
+  ASSERT_LE(probes.size(), samples.size());
+  Cloud cloud;
+  for (size_t i = 0; i < samples.size(); ++i) {
+    cloud.push_back(samples[i]);
+    cloud.push_back(i < probes.size() ? probes[i] : samples[i]);  // no sample, below the band
+  }
+  std::sort(inside.begin(), inside.end());
+  ASSERT_EQ(cellsByTheDefinition(cloud, 2), inside);
+  EXPECT_EQ(trunkHeightCells(cloud, Pose::Identity(), 1.0, cloud.size() / 2), inside);
 }
 
 TEST(Footprint, TrunkHeightCellsOfAStemOnFlatGround) {
