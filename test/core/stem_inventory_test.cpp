@@ -307,6 +307,29 @@ TEST(StemInventory, ASecondFitOverlappingAWellSeenStemIsDropped) {
   EXPECT_EQ(fuseStems(obs, p).size(), 5u);
 }
 
+TEST(StemInventory, ACircleSeenOnceBesideAWellSeenStemIsDropped) {
+  // A stem of r = 0.2 m seen by five submaps; submap 3 also fitted a 7 cm circle whose edge lies
+  // 0.25 m from the stem's (a sapling under its crown, a branch): dropped, as a circle that close
+  // seen by two submaps is not. One seen once 0.35 m from it is kept.
+  auto survey = [](double gap, int seen_by) {
+    std::vector<StemObservation> obs;
+    for (int s = 0; s < 5; ++s) obs.push_back({s, 0, 0.0, 0.0, 0.0, 0.2, true});
+    for (int s = 0; s < seen_by; ++s) obs.push_back({3 + s, 0, 0.27 + gap, 0.0, 0.0, 0.07, true});
+    return fuseStems(obs, StemFusionParams{}).size();
+  };
+  EXPECT_EQ(survey(0.25, 1), 1u);
+  EXPECT_EQ(survey(0.25, 2), 2u);
+  EXPECT_EQ(survey(0.35, 1), 2u);
+  StemFusionParams p;
+  p.single_overlap_margin_m = 0.0;  // below overlap_margin_m: that applies
+  std::vector<StemObservation> obs;
+  for (int s = 0; s < 5; ++s) obs.push_back({s, 0, 0.0, 0.0, 0.0, 0.2, true});
+  obs.push_back({3, 0, 0.52, 0.0, 0.0, 0.07, true});
+  EXPECT_EQ(fuseStems(obs, p).size(), 2u);
+  obs.back().x = 0.33;  // 6 cm apart: a second fit of the stem
+  EXPECT_EQ(fuseStems(obs, p).size(), 1u);
+}
+
 TEST(StemInventory, NewParametersAreValidated) {
   StemFusionParams p;
   EXPECT_EQ(p.validate(), "");
@@ -333,6 +356,9 @@ TEST(StemInventory, NewParametersAreValidated) {
   p = StemFusionParams{};
   p.overlap_margin_m = 2.0;
   EXPECT_NE(p.validate().find("overlap_margin_m"), std::string::npos);
+  p = StemFusionParams{};
+  p.single_overlap_margin_m = 1.5;
+  EXPECT_NE(p.validate().find("single_overlap_margin_m"), std::string::npos);
 }
 
 }  // namespace

@@ -430,7 +430,8 @@ std::vector<MergedStem> dropOverlapping(std::vector<MergedStem> stems, const Ste
   });
   double reach = 0.0;  // largest centre distance of two overlapping entries
   for (const MergedStem& s : stems) reach = std::max(reach, s.dbh);
-  reach += p.overlap_margin_m;
+  const double single_margin = std::max(p.overlap_margin_m, p.single_overlap_margin_m);
+  reach += single_margin;
   auto cell = [&](double v) { return cellIndex(v / std::max(reach, 1e-3)); };
   std::unordered_map<int64_t, std::vector<size_t>> kept_grid;
   std::vector<char> keep(stems.size(), 1);
@@ -444,7 +445,8 @@ std::vector<MergedStem> dropOverlapping(std::vector<MergedStem> stems, const Ste
         for (size_t k : it->second) {
           const MergedStem& a = stems[k];
           if (a.component != b.component || a.observations < 2 * b.observations) continue;
-          if (std::hypot(a.x - b.x, a.y - b.y) < 0.5 * (a.dbh + b.dbh) + p.overlap_margin_m) {
+          const double margin = b.observations == 1 ? single_margin : p.overlap_margin_m;
+          if (std::hypot(a.x - b.x, a.y - b.y) < 0.5 * (a.dbh + b.dbh) + margin) {
             keep[i] = 0;
             break;
           }
@@ -480,6 +482,7 @@ std::string StemFusionParams::validate() const {
   if (!(path_max_spread_m >= 0)) e << "stems.path_max_spread_m must be >= 0; ";
   if (taper_min_pairs < 0) e << "stems.taper_min_pairs must be >= 0; ";
   if (!(overlap_margin_m <= 1.0)) e << "stems.overlap_margin_m must be <= 1 (< 0: off); ";
+  if (!(single_overlap_margin_m <= 1.0)) e << "stems.single_overlap_margin_m must be <= 1; ";
   if (!(slice_min_h_m >= 0 && slice_max_h_m > slice_min_h_m && slice_max_h_m <= 5))
     e << "stems.slice_min_h_m must be >= 0 and < slice_max_h_m <= 5; ";
   if (!(slice_margin_m >= 0 && slice_margin_m <= 1))

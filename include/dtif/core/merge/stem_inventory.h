@@ -47,6 +47,11 @@ struct StemFusionParams {
   /// as many submaps is dropped (two trunks cannot overlap: a second fit of the same stem);
   /// < 0: never [m].
   double overlap_margin_m = 0.1;
+  /// The margin for an entry seen by one submap only (against one seen by at least two): a
+  /// second circle that close to a stem that other submaps saw alone is more likely a branch, a
+  /// sapling under its crown or a misplaced fit of it than a tree they all missed; below
+  /// overlap_margin_m: that applies [m].
+  double single_overlap_margin_m = 0.3;
   /// DBH from the points (StemSlices; `dtif merge`, which reads the submap clouds again): each
   /// stem's slice slice_min_h_m..slice_max_h_m above its base, within r + slice_margin_m of its
   /// centre, pooled from every submap placed by the merged poses, one robust circle fitted. A
@@ -100,6 +105,7 @@ struct StemFusionParams {
     v("path_max_spread_m", path_max_spread_m);
     v("taper_min_pairs", taper_min_pairs);
     v("overlap_margin_m", overlap_margin_m);
+    v("single_overlap_margin_m", single_overlap_margin_m);
     v("dbh_from_points", dbh_from_points);
     v("slice_min_h_m", slice_min_h_m);
     v("slice_max_h_m", slice_max_h_m);
