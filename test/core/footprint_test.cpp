@@ -158,6 +158,14 @@ TEST(Footprint, MarksRefuseFarCoordinates) {
   EXPECT_FALSE(marks.init({}, {}, {}, 1.0, Eigen::Vector2d(0.0, 0.0), Eigen::Vector2d(10, 10)));
 }
 
+// The ground of a window's samples by DATASET.md: the k-th smallest z, k = 5 % of them rounded
+// down (the window not empty).
+float windowGround(std::vector<float> window) {
+  const auto k = window.begin() + static_cast<std::ptrdiff_t>(0.05 * (window.size() - 1.0));
+  std::nth_element(window.begin(), k, window.end());
+  return *k;
+}
+
 // DATASET.md's cells by its words, point by point: a tile's ground is the k-th smallest z
 // (k = 5 % of them, rounded down) of the samples in the 3 x 3 tiles of 2 m around it, the
 // samples being every stride-th point.
@@ -181,13 +189,8 @@ Cells cellsByTheDefinition(const Cloud& cloud, size_t stride) {
         if (it != z_of.end()) window.insert(window.end(), it->second.begin(), it->second.end());
       }
     }
-    float g = std::numeric_limits<float>::quiet_NaN();
-    if (!window.empty()) {
-      const auto k = window.begin() + static_cast<std::ptrdiff_t>(0.05 * (window.size() - 1.0));
-      std::nth_element(window.begin(), k, window.end());
-      g = *k;
-    }
-    return ground[t] = g;
+    return ground[t] =
+               window.empty() ? std::numeric_limits<float>::quiet_NaN() : windowGround(window);
   };
   Cells out;
   for (const pcl::PointXYZ& q : cloud) {
@@ -257,13 +260,12 @@ TEST(Footprint, TrunkHeightCellsMeasureFromTheExactPercentile) {
             std::abs(static_cast<int64_t>(std::floor(q.y / 2.0)) - ty) <= 1)
           window.push_back(q.z);
       }
-      const auto k = window.begin() + static_cast<std::ptrdiff_t>(0.05 * (window.size() - 1.0));
-      std::nth_element(window.begin(), k, window.end());
+      const float ground = windowGround(window);
       constexpr float kEps = 1e-5f;
       const float up[4] = {0.3f + kEps, 0.3f - kEps, 3.0f - kEps, 3.0f + kEps};  // in, out, ...
       for (int c = 0; c < 4; ++c) {
         const int64_t cx = 2 * tx + c % 2, cy = 2 * ty + c / 2;
-        probes.push_back(pcl::PointXYZ(cx + 0.5f, cy + 0.5f, *k + up[c]));
+        probes.push_back(pcl::PointXYZ(cx + 0.5f, cy + 0.5f, ground + up[c]));
         if (c % 2 == 0) inside.emplace_back(cx, cy);
       }
     }
