@@ -105,9 +105,15 @@ TEST(StemInventory, ComponentsAreKeptApartAndMinObservationsFilters) {
 }
 
 TEST(StemInventory, OneSubmapNeverContributesTwiceToATree) {
-  // Two trunks 0.3 m apart in one submap are two trees.
+  // Two trunks 0.3 m apart in one submap are two trees to the clustering. (Seen by that submap
+  // only, their bark 0.1 m apart, the inventory lists the larger: OfTwoCirclesSeenOnce... below.)
   std::vector<StemObservation> obs{{1, 0, 0.0, 0.0, 0.0, 0.1, true},
                                    {1, 0, 0.3, 0.0, 0.0, 0.1, true}};
+  StemFusionParams p;
+  p.single_pair_margin_m = -1.0;
+  EXPECT_EQ(fuseStems(obs, p).size(), 2u);
+  obs.push_back({2, 0, 0.0, 0.0, 0.0, 0.1, true});
+  obs.push_back({2, 0, 0.3, 0.0, 0.0, 0.1, true});
   EXPECT_EQ(fuseStems(obs, StemFusionParams{}).size(), 2u);
 }
 
@@ -330,6 +336,53 @@ TEST(StemInventory, ACircleSeenOnceBesideAWellSeenStemIsDropped) {
   EXPECT_EQ(fuseStems(obs, p).size(), 1u);
 }
 
+TEST(StemInventory, ACircleSeenOnceBesideAStemManySubmapsSawIsDropped) {
+  // A 0.3 m stem seen by n submaps; one of them also fitted a 17 cm circle whose edge lies 0.45 m
+  // from the stem's. Beside a stem seen by 8 (well seen) it goes; by 7, or with the rule off, it
+  // stays, as does one 0.7 m away.
+  auto survey = [](double gap, int seen_by, const StemFusionParams& p) {
+    std::vector<StemObservation> obs;
+    for (int s = 0; s < seen_by; ++s) obs.push_back({s, 0, 0.0, 0.0, 0.0, 0.15, true});
+    obs.push_back({0, 0, 0.15 + 0.085 + gap, 0.0, 0.0, 0.085, true});
+    return fuseStems(obs, p).size();
+  };
+  const StemFusionParams p;
+  EXPECT_EQ(survey(0.45, 8, p), 1u);
+  EXPECT_EQ(survey(0.45, 7, p), 2u);
+  EXPECT_EQ(survey(0.7, 8, p), 2u);
+  StemFusionParams off;
+  off.well_seen_observations = 0;
+  EXPECT_EQ(survey(0.45, 8, off), 2u);
+}
+
+TEST(StemInventory, OfTwoCirclesSeenOnceThatCloseTheSmallerIsDropped) {
+  // One submap fitted a stem of r = 0.14 m and a 7 cm circle whose edge lies 0.12 m from it (part
+  // of the bark with clutter beside): no other submap saw either, so the larger stays, whichever
+  // came first. 0.2 m apart both stay, as do two such circles that a second submap saw too.
+  auto survey = [](double gap, int seen_by, bool small_first) {
+    std::vector<StemObservation> obs;
+    for (int s = 0; s < seen_by; ++s) {
+      const StemObservation big{s, 0, 0.0, 0.0, 0.0, 0.14, true};
+      const StemObservation small{s, 0, 0.21 + gap, 0.0, 0.0, 0.07, true};
+      obs.push_back(small_first ? small : big);
+      obs.push_back(small_first ? big : small);
+    }
+    return fuseStems(obs, StemFusionParams{});
+  };
+  for (bool small_first : {false, true}) {
+    const auto kept = survey(0.12, 1, small_first);
+    ASSERT_EQ(kept.size(), 1u);
+    EXPECT_NEAR(kept[0].dbh, 0.28, 1e-9);
+    EXPECT_EQ(survey(0.2, 1, small_first).size(), 2u);
+    EXPECT_EQ(survey(0.12, 2, small_first).size(), 2u);
+  }
+  StemFusionParams off;
+  off.single_pair_margin_m = -1.0;
+  const std::vector<StemObservation> pair{{0, 0, 0.0, 0.0, 0.0, 0.14, true},
+                                          {0, 0, 0.33, 0.0, 0.0, 0.07, true}};
+  EXPECT_EQ(fuseStems(pair, off).size(), 2u);
+}
+
 TEST(StemInventory, NewParametersAreValidated) {
   StemFusionParams p;
   EXPECT_EQ(p.validate(), "");
@@ -359,6 +412,15 @@ TEST(StemInventory, NewParametersAreValidated) {
   p = StemFusionParams{};
   p.single_overlap_margin_m = 1.5;
   EXPECT_NE(p.validate().find("single_overlap_margin_m"), std::string::npos);
+  p = StemFusionParams{};
+  p.single_pair_margin_m = 1.5;
+  EXPECT_NE(p.validate().find("single_pair_margin_m"), std::string::npos);
+  p = StemFusionParams{};
+  p.well_seen_observations = -1;
+  EXPECT_NE(p.validate().find("well_seen_observations"), std::string::npos);
+  p = StemFusionParams{};
+  p.single_well_seen_margin_m = 2.5;
+  EXPECT_NE(p.validate().find("single_well_seen_margin_m"), std::string::npos);
 }
 
 }  // namespace

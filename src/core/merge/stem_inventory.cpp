@@ -420,18 +420,35 @@ MergedStem fuse(const std::vector<StemObservation>& obs, const Tree& t, double t
 // Drops the entries whose circle comes within overlap_margin_m of the circle of an entry seen
 // by at least twice as many submaps: two trunks cannot overlap, so the weaker one is a second
 // fit of the same stem (a branch or the root flare with part of the bark, which extraction keeps
-// beside the stem's own fit when their circles just miss each other).
+// beside the stem's own fit when their circles just miss each other). Of two entries seen once
+// each, within single_pair_margin_m, the smaller goes: mostly one submap's two circles on one
+// stem (its bark, and part of it with clutter beside), which clustering cannot join since one
+// submap holds both; two real stems that close are rarely each seen by one submap only. Beside
+// a stem that many submaps saw (well_seen_observations), an entry seen once gets a wider margin
+// still: those submaps had that spot in clear view, and a tree there would be seen by more.
+double overlapMargin(const MergedStem& kept, const MergedStem& b, const StemFusionParams& p) {
+  if (kept.observations == 1 && b.observations == 1) return p.single_pair_margin_m;
+  if (kept.observations < 2 * b.observations) return -1.0;
+  if (b.observations > 1) return p.overlap_margin_m;
+  const double single = std::max(p.overlap_margin_m, p.single_overlap_margin_m);
+  if (p.well_seen_observations > 0 && kept.observations >= p.well_seen_observations)
+    return std::max(single, p.single_well_seen_margin_m);
+  return single;
+}
+
 std::vector<MergedStem> dropOverlapping(std::vector<MergedStem> stems, const StemFusionParams& p) {
   if (!(p.overlap_margin_m >= 0.0) || stems.empty()) return stems;
   std::vector<size_t> order(stems.size());
   for (size_t i = 0; i < order.size(); ++i) order[i] = i;
   std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
-    return stems[a].observations > stems[b].observations;
+    if (stems[a].observations != stems[b].observations)
+      return stems[a].observations > stems[b].observations;
+    return stems[a].dbh > stems[b].dbh;
   });
   double reach = 0.0;  // largest centre distance of two overlapping entries
   for (const MergedStem& s : stems) reach = std::max(reach, s.dbh);
-  const double single_margin = std::max(p.overlap_margin_m, p.single_overlap_margin_m);
-  reach += single_margin;
+  reach += std::max({p.overlap_margin_m, p.single_overlap_margin_m, p.single_pair_margin_m,
+                     p.single_well_seen_margin_m});
   auto cell = [&](double v) { return cellIndex(v / std::max(reach, 1e-3)); };
   std::unordered_map<int64_t, std::vector<size_t>> kept_grid;
   std::vector<char> keep(stems.size(), 1);
@@ -444,8 +461,8 @@ std::vector<MergedStem> dropOverlapping(std::vector<MergedStem> stems, const Ste
         if (it == kept_grid.end()) continue;
         for (size_t k : it->second) {
           const MergedStem& a = stems[k];
-          if (a.component != b.component || a.observations < 2 * b.observations) continue;
-          const double margin = b.observations == 1 ? single_margin : p.overlap_margin_m;
+          const double margin = overlapMargin(a, b, p);
+          if (a.component != b.component || margin < 0.0) continue;
           if (std::hypot(a.x - b.x, a.y - b.y) < 0.5 * (a.dbh + b.dbh) + margin) {
             keep[i] = 0;
             break;
@@ -483,6 +500,9 @@ std::string StemFusionParams::validate() const {
   if (taper_min_pairs < 0) e << "stems.taper_min_pairs must be >= 0; ";
   if (!(overlap_margin_m <= 1.0)) e << "stems.overlap_margin_m must be <= 1 (< 0: off); ";
   if (!(single_overlap_margin_m <= 1.0)) e << "stems.single_overlap_margin_m must be <= 1; ";
+  if (!(single_pair_margin_m <= 1.0)) e << "stems.single_pair_margin_m must be <= 1 (< 0: off); ";
+  if (well_seen_observations < 0) e << "stems.well_seen_observations must be >= 0; ";
+  if (!(single_well_seen_margin_m <= 2.0)) e << "stems.single_well_seen_margin_m must be <= 2; ";
   if (!(slice_min_h_m >= 0 && slice_max_h_m > slice_min_h_m && slice_max_h_m <= 5))
     e << "stems.slice_min_h_m must be >= 0 and < slice_max_h_m <= 5; ";
   if (!(slice_margin_m >= 0 && slice_margin_m <= 1))

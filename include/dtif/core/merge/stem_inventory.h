@@ -52,6 +52,16 @@ struct StemFusionParams {
   /// sapling under its crown or a misplaced fit of it than a tree they all missed; below
   /// overlap_margin_m: that applies [m].
   double single_overlap_margin_m = 0.3;
+  /// The margin between two entries seen by one submap each: the one of smaller DBH is dropped
+  /// (mostly one submap's second circle beside a stem, on part of its bark with clutter: two real
+  /// stems that close are rarely each seen by one submap only); < 0: never [m].
+  double single_pair_margin_m = 0.15;
+  /// An entry seen by this many submaps or more is well seen: they had the spot beside it in
+  /// clear view, and a tree there would be seen by more than one of them; 0: none is.
+  int well_seen_observations = 8;
+  /// The margin for an entry seen by one submap only against a well-seen one (below
+  /// single_overlap_margin_m: that applies) [m].
+  double single_well_seen_margin_m = 0.6;
   /// DBH from the points (StemSlices; `dtif merge`, which reads the submap clouds again): each
   /// stem's slice slice_min_h_m..slice_max_h_m above its base, within r + slice_margin_m of its
   /// centre, pooled from every submap placed by the merged poses, one robust circle fitted. A
@@ -106,6 +116,9 @@ struct StemFusionParams {
     v("taper_min_pairs", taper_min_pairs);
     v("overlap_margin_m", overlap_margin_m);
     v("single_overlap_margin_m", single_overlap_margin_m);
+    v("single_pair_margin_m", single_pair_margin_m);
+    v("well_seen_observations", well_seen_observations);
+    v("single_well_seen_margin_m", single_well_seen_margin_m);
     v("dbh_from_points", dbh_from_points);
     v("slice_min_h_m", slice_min_h_m);
     v("slice_max_h_m", slice_max_h_m);
