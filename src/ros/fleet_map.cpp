@@ -23,6 +23,7 @@ void FleetMap::reset() {
   global_id_.clear();
   stamp_index_.clear();
   stamp_of_.clear();
+  chain_of_.clear();
   odom_of_.clear();
   clouds_.clear();
   slices_ = SlicePointStore(params_.stems);
@@ -68,6 +69,7 @@ std::string FleetMap::addToMerger(const std::string& chain, MergeSubmap s) {
   global_id_[key] = next_id_;
   stamp_index_[{robot, stamp}] = next_id_;
   stamp_of_[next_id_] = stamp;
+  chain_of_[next_id_] = chain;
   odom_of_[next_id_] = s.T_O_S;
   ++next_id_;
   return "";
@@ -113,12 +115,26 @@ std::string FleetMap::addCloud(const std::string& robot, double stamp, const Clo
   Cloud::Ptr in_s(new Cloud);
   pcl::transformPointCloud(cloud_O, *in_s, T_S_O.matrix().cast<float>());
   clouds_[it->second] = voxelDown(*in_s);
-  if (params_.stems.dbh_from_points) {
-    const std::optional<Pose> T_M_S = merger_.pose(it->second);
-    slices_.addCloud(it->second, *in_s, known, T_M_S ? merger_.component(robot) : -1,
-                     T_M_S.value_or(Pose::Identity()));
+  if (!params_.stems.dbh_from_points) return "";
+  if (params_.stems.slice_defer_clouds > 0) {
+    slices_.holdCloud(it->second, *in_s);
+    for (int64_t id : slices_.overdue()) settleSlices(id, known);
+  } else {
+    settleSlices(it->second, known, in_s.get());
   }
   return "";
+}
+
+void FleetMap::settleSlices(int64_t id, const std::vector<MergedStem>& known,
+                            const Cloud* cloud_S) {
+  const std::optional<Pose> T_M_S = merger_.pose(id);
+  const int component = T_M_S ? merger_.component(chain_of_.at(id)) : -1;
+  const Pose pose = T_M_S.value_or(Pose::Identity());
+  if (cloud_S) {
+    slices_.addCloud(id, *cloud_S, known, component, pose);
+  } else {
+    slices_.settle(id, known, component, pose);
+  }
 }
 
 FleetMap::Loaded FleetMap::loadDatabase(const LoopDetector& db) {

@@ -481,6 +481,116 @@ TEST(SlicePointStore, KeepsThePointsOfKnownStemsTheSubmapDidNotExtract) {
   EXPECT_EQ(a.points, b.points);
 }
 
+TEST(KeepSliceBand, DropsWhatNoSliceCanReachAboveTheLowestPointOfItsCell) {
+  // A tilted submap frame (stock FAST-LIO2): levelled, the ground is at 0.5 m; a crown point
+  // 3.5 m above it goes, one at 2.9 m stays, as does the lowest point of a cell without ground
+  // (whatever it is, it may be the ground there).
+  StemFusionParams p;  // slice_max_h_m 1.5 + slice_keep_band_m 0.5 + 1 m: 3 m
+  const Eigen::Matrix3d R_L_S = Eigen::AngleAxisd(0.2, Eigen::Vector3d::UnitX()).matrix();
+  const Eigen::Matrix3d R_S_L = R_L_S.transpose();
+  auto inS = [&](double x, double y, double z) {
+    const Eigen::Vector3d q = R_S_L * Eigen::Vector3d(x, y, z);
+    return pcl::PointXYZ(q.x(), q.y(), q.z());
+  };
+  Cloud c;
+  c.push_back(inS(0.2, 0.2, 0.5));   // ground
+  c.push_back(inS(0.8, 0.7, 3.4));   // bark, 2.9 m above the ground of its cell
+  c.push_back(inS(0.5, 0.5, 4.0));   // crown
+  c.push_back(inS(5.5, 0.5, 12.0));  // a crown point alone in its cell
+  c.push_back(pcl::PointXYZ(NAN, 0.0, 0.0));
+  const Cloud::Ptr kept = keepSliceBand(c, R_L_S, p);
+  ASSERT_EQ(kept->size(), 3u);
+  EXPECT_EQ((*kept)[1].z, c[1].z);
+  EXPECT_EQ((*kept)[2].x, c[3].x);
+  // Unlevelled, the same cloud's cells and heights differ: the check does level it.
+  EXPECT_NE(keepSliceBand(c, Eigen::Matrix3d::Identity(), p)->size(), 3u);
+}
+
+TEST(SlicePointStore, HeldCloudsGiveTheirPointsToStemsExtractedLater) {
+  // Three submaps see the stem; only the last extracts it, and no stem was known when the first
+  // two clouds came. Cut at arrival, they keep nothing of it and the refit has one view (too
+  // few); held, they give their points as the whole clouds give theirs to dtif merge.
+  const Stem s;
+  StemFusionParams p;
+  p.slice_keep_max_points = 10000;
+  const MergedStem m = inventoryEntry(s, 0.19);
+  auto survey = [&](int defer, StemSliceStats* st) {
+    StemFusionParams q = p;
+    q.slice_defer_clouds = defer;
+    SlicePointStore store(q);
+    StemSlices whole({m}, q);
+    std::vector<MergedPose> poses;
+    std::mt19937 rng(14);
+    for (double b : allRound(3)) {
+      const View v = scan(s, b, 5.0, &rng);
+      const int64_t id = static_cast<int64_t>(poses.size());
+      store.addTrunks(id,
+                      id == 2 ? Trunks{ownTrunk(v, s, Eigen::Vector3d::Zero(), 0.09)} : Trunks{},
+                      Eigen::Matrix3d::Identity());
+      if (defer > 0) {
+        EXPECT_TRUE(store.holdCloud(id, v.cloud));
+        EXPECT_TRUE(store.overdue().empty());
+      } else {
+        store.addCloud(id, v.cloud);
+      }
+      whole.addSubmap(0, v.T_M_S, v.cloud);
+      poses.push_back(MergedPose{id, "alpha", 0, v.T_M_S});
+    }
+    StemSliceStats all;
+    const double dbh = store.refit({m}, poses, st).at(0).dbh;
+    return std::make_pair(dbh, whole.refit(&all).at(0).dbh);
+  };
+  StemSliceStats cut, held;
+  EXPECT_DOUBLE_EQ(survey(0, &cut).first, 0.19);
+  EXPECT_EQ(cut.submap_views, 1u);
+  EXPECT_EQ(cut.too_few, 1u);
+  const auto [dbh, from_whole] = survey(24, &held);
+  EXPECT_EQ(held.submap_views, 3u);
+  EXPECT_EQ(held.refitted, 1u);
+  EXPECT_DOUBLE_EQ(dbh, from_whole);
+}
+
+TEST(SlicePointStore, AHeldCloudIsCutDownToTheStemsKnownWhenItFallsDue) {
+  // A window of one cloud: each cloud falls due when the next comes and is cut down to the
+  // stems known then. Submap 0 fell due before the stem was known: it keeps nothing of it;
+  // submap 1 after: it keeps the stem's points.
+  const Stem s;
+  StemFusionParams p;
+  p.slice_keep_max_points = 10000;
+  p.slice_defer_clouds = 1;
+  const MergedStem m = inventoryEntry(s, 0.19);
+  SlicePointStore store(p);
+  std::vector<MergedPose> poses;
+  std::vector<Cloud> clouds;
+  std::mt19937 rng(15);
+  for (double b : allRound(3)) {
+    const View v = scan(s, b, 5.0, &rng);
+    const int64_t id = static_cast<int64_t>(poses.size());
+    store.addTrunks(id, Trunks{}, Eigen::Matrix3d::Identity());
+    ASSERT_TRUE(store.holdCloud(id, v.cloud));
+    const std::vector<int64_t> due = store.overdue();
+    ASSERT_EQ(due.size(), id == 0 ? 0u : 1u);
+    if (id > 0) {
+      EXPECT_EQ(due[0], id - 1);
+      const std::vector<MergedStem> known =
+          id == 1 ? std::vector<MergedStem>{} : std::vector<MergedStem>{m};
+      EXPECT_TRUE(store.settle(due[0], known, 0, poses[due[0]].T_M_S));
+      EXPECT_FALSE(store.settle(due[0], known, 0, poses[due[0]].T_M_S));  // no longer held
+    }
+    poses.push_back(MergedPose{id, "alpha", 0, v.T_M_S});
+    clouds.push_back(v.cloud);
+  }
+  EXPECT_EQ(store.heldClouds(), 1u);
+  EXPECT_EQ(store.submapsWithPoints(), 3u);
+  StemSliceStats st;
+  store.refit({m}, poses, &st);
+  EXPECT_EQ(st.submap_views, 2u);  // submaps 1 (settled) and 2 (held)
+  // Sent again, a cloud is held anew and its count starts over.
+  ASSERT_TRUE(store.holdCloud(1, clouds[1]));
+  EXPECT_EQ(store.overdue(), std::vector<int64_t>{2});
+  EXPECT_FALSE(store.holdCloud(7, clouds[0]));  // no trunks for submap 7
+}
+
 TEST(StemSlices, ParamsValidated) {
   StemFusionParams p;
   EXPECT_EQ(p.validate(), "");
@@ -498,6 +608,9 @@ TEST(StemSlices, ParamsValidated) {
   p = StemFusionParams{};
   p.slice_blend_min_arc_deg = -1.0;
   EXPECT_NE(p.validate().find("slice_blend_min_arc_deg"), std::string::npos);
+  p = StemFusionParams{};
+  p.slice_defer_clouds = -1;
+  EXPECT_NE(p.validate().find("slice_defer_clouds"), std::string::npos);
   p = StemFusionParams{};
   p.slice_min_inlier_ratio = 1.5;
   EXPECT_NE(p.validate().find("slice_min_inlier_ratio"), std::string::npos);

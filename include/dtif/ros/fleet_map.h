@@ -63,7 +63,9 @@ class FleetMap {
 
   /// A submap cloud in the robot's odometry frame, stamped with its submap's anchor time: kept
   /// voxel-downsampled in the submap frame S and, with stems.dbh_from_points, its points near the
-  /// trunks of `known` (the inventory so far). Returns "" or why it was dropped.
+  /// trunks of `known` (the inventory so far); with stems.slice_defer_clouds, held for the slices
+  /// until that many later clouds came, and the clouds then due cut down to `known`. Returns ""
+  /// or why it was dropped.
   std::string addCloud(const std::string& robot, double stamp, const Cloud& cloud_O,
                        const std::vector<MergedStem>& known);
 
@@ -94,6 +96,10 @@ class FleetMap {
   // next id; "" or why not.
   std::string addToMerger(const std::string& chain, MergeSubmap s);
   Cloud::Ptr voxelDown(const Cloud& in) const;
+  // Submap id's points for the slices cut down to `known` under its current pose: cloud_S, or
+  // its held cloud when null.
+  void settleSlices(int64_t id, const std::vector<MergedStem>& known,
+                    const Cloud* cloud_S = nullptr);
 
   MergeParams params_;
   std::vector<FieldStem> field_;
@@ -103,6 +109,7 @@ class FleetMap {
   std::map<Key, int64_t> global_id_;                               // (robot, own id) -> id
   std::map<std::pair<std::string, double>, int64_t> stamp_index_;  // (robot, stamp) -> id
   std::map<int64_t, double> stamp_of_;                             // id -> anchor stamp
+  std::map<int64_t, std::string> chain_of_;                        // id -> merger robot
   std::map<int64_t, Pose> odom_of_;                                // id -> T_O_S
   std::map<int64_t, Cloud::Ptr> clouds_;                           // id -> cloud in S
   SlicePointStore slices_;                                         // id -> points near trunks

@@ -1,5 +1,6 @@
 #include "dtif/core/merge/slice_store.h"
 
+#include <algorithm>
 #include <cmath>
 
 namespace dtif {
@@ -46,11 +47,51 @@ bool SlicePointStore::addCloud(int64_t id, const Cloud& cloud_S,
   Trunks trunks = src->second.trunks_S;
   const Trunks more = knownInCloud(cloud_S, known, component, T_M_S, 1.0);
   trunks.insert(trunks.end(), more.begin(), more.end());
-  Cloud::ConstPtr kept = keepSliceCandidates(cloud_S, trunks, src->second.R_L_S, p_);
-  Cloud::ConstPtr& slot = clouds_[id];
-  if (slot) points_ -= slot->size();
-  points_ += kept->size();
-  slot = kept;
+  store(id, keepSliceCandidates(cloud_S, trunks, src->second.R_L_S, p_), &clouds_);
+  return true;
+}
+
+void SlicePointStore::store(int64_t id, Cloud::ConstPtr cloud,
+                            std::map<int64_t, Cloud::ConstPtr>* to) {
+  for (auto* m : {&clouds_, &held_}) {
+    auto it = m->find(id);
+    if (it == m->end()) continue;
+    points_ -= it->second->size();
+    m->erase(it);
+  }
+  points_ += cloud->size();
+  (*to)[id] = std::move(cloud);
+}
+
+bool SlicePointStore::holdCloud(int64_t id, const Cloud& cloud_S) {
+  auto src = sources_.find(id);
+  if (src == sources_.end()) return false;
+  store(id, keepSliceBand(cloud_S, src->second.R_L_S, p_), &held_);
+  held_order_.push_back(id);
+  return true;
+}
+
+std::vector<int64_t> SlicePointStore::overdue() const {
+  std::vector<int64_t> out;
+  const size_t window = static_cast<size_t>(std::max(p_.slice_defer_clouds, 0));
+  // Arrivals of settled or replaced submaps stay in the order, and count as later clouds.
+  for (size_t i = 0; i + window < held_order_.size(); ++i) {
+    const int64_t id = held_order_[i];
+    const bool latest =
+        std::find(held_order_.begin() + i + 1, held_order_.end(), id) == held_order_.end();
+    if (latest && held_.count(id)) out.push_back(id);
+  }
+  return out;
+}
+
+bool SlicePointStore::settle(int64_t id, const std::vector<MergedStem>& known, int component,
+                             const Pose& T_M_S) {
+  auto it = held_.find(id);
+  if (it == held_.end()) return false;
+  const Cloud::ConstPtr band = it->second;
+  addCloud(id, *band, known, component, T_M_S);
+  // What came before the oldest held arrival counts for none of them.
+  while (!held_order_.empty() && !held_.count(held_order_.front())) held_order_.pop_front();
   return true;
 }
 
@@ -60,8 +101,10 @@ std::vector<MergedStem> SlicePointStore::refit(const std::vector<MergedStem>& st
   StemSlices slices(stems, p_);
   // In the merger's submap order (refitStemDbh: the dataset's order).
   for (const MergedPose& pose : poses) {
-    auto it = clouds_.find(pose.id);
-    if (it != clouds_.end()) slices.addSubmap(pose.component, pose.T_M_S, *it->second);
+    for (const auto* m : {&clouds_, &held_}) {
+      auto it = m->find(pose.id);
+      if (it != m->end()) slices.addSubmap(pose.component, pose.T_M_S, *it->second);
+    }
   }
   return slices.refit(stats);
 }

@@ -525,6 +525,8 @@ std::string StemFusionParams::validate() const {
   if (!(slice_keep_band_m >= 0 && slice_keep_band_m <= 3))
     e << "stems.slice_keep_band_m must be in [0, 3]; ";
   if (slice_keep_max_points < 1) e << "stems.slice_keep_max_points must be >= 1; ";
+  if (!(slice_defer_clouds >= 0 && slice_defer_clouds <= 10000))
+    e << "stems.slice_defer_clouds must be in [0, 10000]; ";
   return e.str();
 }
 

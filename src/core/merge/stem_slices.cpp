@@ -134,6 +134,34 @@ Cloud::Ptr keepSliceCandidates(const Cloud& cloud_S, const Trunks& trunks_S,
   return out;
 }
 
+Cloud::Ptr keepSliceBand(const Cloud& cloud_S, const Eigen::Matrix3d& R_L_S,
+                         const StemFusionParams& params) {
+  constexpr double kBandCellM = 1.0;   // cell of the lowest points [m]
+  constexpr double kSlopeRiseM = 1.0;  // a slope's rise across a cell, allowed for [m]
+  const double top = params.slice_max_h_m + params.slice_keep_band_m + kSlopeRiseM;
+  const Eigen::Matrix3f R = R_L_S.cast<float>();
+  // Levelled z and cell per point (the cell key of a non-finite point is never looked up).
+  std::vector<float> z_L(cloud_S.size());
+  std::vector<int64_t> key(cloud_S.size());
+  std::unordered_map<int64_t, float> lowest;
+  for (size_t i = 0; i < cloud_S.size(); ++i) {
+    const Eigen::Vector3f q = R * cloud_S[i].getVector3fMap();
+    if (!q.allFinite()) {
+      z_L[i] = NAN;
+      continue;
+    }
+    z_L[i] = q.z();
+    key[i] = packCell(cellIndex(q.x() / kBandCellM), cellIndex(q.y() / kBandCellM));
+    auto [it, fresh] = lowest.emplace(key[i], q.z());
+    if (!fresh) it->second = std::min(it->second, q.z());
+  }
+  Cloud::Ptr out(new Cloud);
+  for (size_t i = 0; i < cloud_S.size(); ++i) {
+    if (std::isfinite(z_L[i]) && z_L[i] <= lowest[key[i]] + top) out->push_back(cloud_S[i]);
+  }
+  return out;
+}
+
 std::vector<MergedStem> StemSlices::refit(StemSliceStats* stats) const {
   StemSliceStats st;
   st.stems = stems_.size();

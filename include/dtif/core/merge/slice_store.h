@@ -3,12 +3,16 @@
 // stems, and keeping the clouds whole would grow without bound. So each submap keeps only its
 // full-resolution points near its own trunks and the stems known then (keepSliceCandidates), in
 // its own frame S; at save_map StemSlices runs over them with the merged poses, as `dtif merge`
-// runs it over the dataset's whole clouds (refitStemDbh).
+// runs it over the dataset's whole clouds (refitStemDbh). "Then" is a while after the cloud
+// came (slice_defer_clouds): a submap sees about twice the stems it extracts, and many of the
+// others are first extracted by the submaps that follow it.
 #pragma once
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <deque>
 #include <map>
+#include <vector>
 
 #include "dtif/core/cloud.h"
 #include "dtif/core/merge/map_merger.h"
@@ -34,15 +38,27 @@ class SlicePointStore {
   bool addCloud(int64_t id, const Cloud& cloud_S, const std::vector<MergedStem>& known = {},
                 int component = -1, const Pose& T_M_S = Pose::Identity());
 
-  /// The inventory with the DBH refitted on the kept points (StemSlices::refit), the submaps
-  /// placed by `poses`; submaps without kept points or pose contribute nothing.
+  /// Its cloud in S held until slice_defer_clouds later clouds came (keepSliceBand: whatever
+  /// height any slice can take), then settled: cut down as addCloud cuts it, with the stems and
+  /// pose of then. Replaces what the submap kept or held. False when its trunks are unknown.
+  bool holdCloud(int64_t id, const Cloud& cloud_S);
+  /// The held submaps with slice_defer_clouds or more later clouds, oldest first.
+  std::vector<int64_t> overdue() const;
+  /// addCloud of held submap `id`'s cloud (known, component, T_M_S as there); false when none
+  /// is held.
+  bool settle(int64_t id, const std::vector<MergedStem>& known, int component, const Pose& T_M_S);
+
+  /// The inventory with the DBH refitted on the kept and held points (StemSlices::refit), the
+  /// submaps placed by `poses`; submaps without points or pose contribute nothing.
   std::vector<MergedStem> refit(const std::vector<MergedStem>& stems,
                                 const std::vector<MergedPose>& poses,
                                 StemSliceStats* stats = nullptr) const;
 
-  size_t submapsWithPoints() const { return clouds_.size(); }
+  size_t submapsWithPoints() const { return clouds_.size() + held_.size(); }
+  size_t heldClouds() const { return held_.size(); }
+  /// Kept and held points.
   size_t points() const { return points_; }
-  /// Memory of the kept points and the waiting trunks [bytes].
+  /// Memory of the kept and held points and the waiting trunks [bytes].
   size_t bytes() const;
 
  private:
@@ -51,9 +67,14 @@ class SlicePointStore {
     Eigen::Matrix3d R_L_S = Eigen::Matrix3d::Identity();
   };
 
+  // Replaces submap id's points (kept or held) by `cloud`, in `to`.
+  void store(int64_t id, Cloud::ConstPtr cloud, std::map<int64_t, Cloud::ConstPtr>* to);
+
   StemFusionParams p_;
   std::map<int64_t, Source> sources_;
-  std::map<int64_t, Cloud::ConstPtr> clouds_;
+  std::map<int64_t, Cloud::ConstPtr> clouds_;  // kept: cut down to the stems near the submap
+  std::map<int64_t, Cloud::ConstPtr> held_;    // held: within the slices' band
+  std::deque<int64_t> held_order_;             // held submaps by arrival (may hold settled ids)
   size_t points_ = 0;
 };
 

@@ -98,6 +98,10 @@ struct StemFusionParams {
   double slice_keep_margin_m = 0.25;  ///< kept within r + slice_margin_m + this [m]
   double slice_keep_band_m = 0.5;     ///< kept slice_min_h_m - this .. slice_max_h_m + this [m]
   int slice_keep_max_points = 2048;   ///< per trunk and submap, evenly strided [points]
+  /// A cloud is held whole within the height of any slice (keepSliceBand) until this many later
+  /// clouds came, then cut down to the stems known then: a stem that one of those submaps
+  /// extracts, of its robot or another, gets this submap's points too. 0: cut at arrival.
+  int slice_defer_clouds = 24;
   std::string validate() const;
 
   template <class V>
@@ -134,6 +138,7 @@ struct StemFusionParams {
     v("slice_keep_margin_m", slice_keep_margin_m);
     v("slice_keep_band_m", slice_keep_band_m);
     v("slice_keep_max_points", slice_keep_max_points);
+    v("slice_defer_clouds", slice_defer_clouds);
   }
 };
 

@@ -68,6 +68,14 @@ class StemSlices {
   std::unordered_map<int64_t, std::vector<size_t>> grid_;  // 1 m cell -> stems near it
 };
 
+/// What a submap cloud can give any stem's slice, whatever the stem's base turns out to be: the
+/// points of `cloud_S` (non-finite skipped, in their order) no higher, levelled by R_L_S, than
+/// slice_max_h_m + slice_keep_band_m + 1 m above the lowest point of their 1 m cell. The lowest
+/// point of a cell is at or above its ground, and the metre covers a slope's rise across it;
+/// the crowns, most of a submap under a canopy, go.
+Cloud::Ptr keepSliceBand(const Cloud& cloud_S, const Eigen::Matrix3d& R_L_S,
+                         const StemFusionParams& params);
+
 /// Online counterpart of a submap cloud kept for StemSlices (MapMergeNodelet): the points of
 /// `cloud_S` (in S, non-finite skipped, in their order) that lie, levelled by R_L_S (identity for
 /// an unlevelled submap), within r + slice_margin_m + slice_keep_margin_m of one of the submap's
