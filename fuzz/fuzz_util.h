@@ -10,18 +10,24 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <system_error>
 
 namespace dtif::fuzz {
 
-/// A folder of this process under the temporary folder, made once.
+/// A folder of this process under the temporary folder, made once and removed when the
+/// process exits (libFuzzer exits normally at the end of its time; each run is a new process).
 inline const std::filesystem::path& scratchDir() {
-  static const std::filesystem::path dir = [] {
-    const auto p =
+  struct Dir {
+    std::filesystem::path path =
         std::filesystem::temp_directory_path() / ("dtif_fuzz_" + std::to_string(::getpid()));
-    std::filesystem::create_directories(p);
-    return p;
-  }();
-  return dir;
+    Dir() { std::filesystem::create_directories(path); }
+    ~Dir() {
+      std::error_code ec;
+      std::filesystem::remove_all(path, ec);
+    }
+  };
+  static const Dir dir;
+  return dir.path;
 }
 
 /// Writes the input to scratchDir()/name and returns its path.

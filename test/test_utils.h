@@ -6,6 +6,8 @@
 #include <filesystem>
 #include <random>
 #include <string>
+#include <system_error>
+#include <vector>
 
 #include "dtif/core/types.h"
 
@@ -33,13 +35,29 @@ Eigen::Vector3d randomVector(std::mt19937& rng, Dx& dx, Dy& dy, Dz& dz) {
   return {x, y, z};
 }
 
+/// The folders freshTempDir made, removed when the test process exits (a developer running
+/// the tests all day would otherwise fill /tmp: one holds a 1 GB sparse file).
+struct TempDirs {
+  std::vector<std::filesystem::path> paths;
+  ~TempDirs() {
+    std::error_code ec;
+    for (const std::filesystem::path& p : paths) std::filesystem::remove_all(p, ec);
+  }
+};
+inline TempDirs& tempDirs() {
+  static TempDirs dirs;
+  return dirs;
+}
+
 /// An empty folder of this process under the system's temporary folder (removed first if it
-/// exists); the process id keeps test runs on one machine out of each other's way.
+/// exists, and when the process exits); the process id keeps test runs on one machine out of
+/// each other's way.
 inline std::filesystem::path freshTempDir(const std::string& name) {
   const std::filesystem::path p =
       std::filesystem::temp_directory_path() / (name + "_" + std::to_string(::getpid()));
   std::filesystem::remove_all(p);
   std::filesystem::create_directories(p);
+  tempDirs().paths.push_back(p);
   return p;
 }
 
