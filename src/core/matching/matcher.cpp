@@ -343,6 +343,7 @@ std::string MatcherParams::validate() const {
   if (neighbour_triangles < 0 || neighbour_triangles > 12) {
     err << "neighbour_triangles must be in [0, 12]; ";
   }
+  if (vote_max_correspondences < 0) err << "vote_max_correspondences must be >= 0 (0: no limit); ";
   if (!(vote_max_pair_m >= 2.0 && vote_max_pair_m <= 100.0)) {
     err << "vote_max_pair_m must be in [2, 100]; ";
   }
