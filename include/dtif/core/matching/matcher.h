@@ -33,7 +33,7 @@ struct MatcherParams {
   bool vote_fallback = true;
   /// ... only when the triangles gave fewer correspondences than this (0: whatever their
   /// number). A repetitive stand's triangles fill all max_correspondences without a clear pose,
-  /// and its trunk pairs vote as ambiguously (plantation: 10-120 ms a vote, always rejected).
+  /// and its trunk pairs vote as ambiguously (plantation: 7-120 ms a fallback, all rejected).
   int vote_max_correspondences = 400;
   double vote_max_pair_m = 6.0;   ///< longest trunk pair that votes [m]
   double vote_yaw_bin_deg = 2.0;  ///< yaw bin of the vote accumulator [deg]
