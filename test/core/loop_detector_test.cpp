@@ -314,6 +314,37 @@ TEST(LoopDetector, NoHypothesisTriggersTheVoteFallback) {
   EXPECT_GE(found, 8);
 }
 
+/// The vote fallback runs only when the triangles gave fewer than vote_max_correspondences
+/// correspondences: with two at most (max_correspondences 2), a cap of 2 leaves every pair with
+/// the triangles' rejection alone (no votes, no loop), a cap of 3 or none votes as before.
+TEST(LoopDetector, TheVoteFallbackStopsAtVoteMaxCorrespondences) {
+  LoopDetectorParams votes, capped, above;
+  votes.matcher.max_correspondences = 2;
+  votes.matcher.vote_max_correspondences = 0;  // no limit
+  capped = above = votes;
+  capped.matcher.vote_max_correspondences = 2;
+  above.matcher.vote_max_correspondences = 3;
+  ASSERT_EQ(capped.validate(), "");
+  int at_cap = 0, found = 0;
+  for (const PairCase& pc : overlappingPairs(10, 2024)) {
+    if (buildCorrespondences(pc.q, pc.c, votes.matcher).size() != 2) continue;
+    ++at_cap;
+    Verification ver, ver_above;
+    EXPECT_FALSE(matchPair(pc.q, pc.c, capped, nullptr, &ver).has_value());
+    EXPECT_EQ(ver.rejection, Rejection::kFewCorrespondences);
+    EXPECT_EQ(ver.vote_rejection, Rejection::kNone);  // no votes
+    const auto lc = matchPair(pc.q, pc.c, votes, nullptr, &ver);
+    const auto lc_above = matchPair(pc.q, pc.c, above, nullptr, &ver_above);
+    EXPECT_EQ(lc.has_value(), lc_above.has_value());
+    EXPECT_EQ(ver.reason(), ver_above.reason());
+    found += lc.has_value();
+  }
+  EXPECT_GE(at_cap, 8);
+  EXPECT_GE(found, 6);  // the votes find loops that the capped fallback leaves
+  capped.matcher.vote_max_correspondences = -1;
+  EXPECT_NE(capped.validate().find("vote_max_correspondences"), std::string::npos);
+}
+
 /// The one "same robot, too recent" rule (query, evaluation, simulator, benchmark).
 TEST(LoopDetector, EligibleLoopPairRule) {
   const std::string a = "a", b = "b";

@@ -462,7 +462,12 @@ TEST(QueryIndex, SupportFromBoundsEqualsTheDirectTests) {
       EXPECT_EQ(pairs_a, pairs_b);
       ASSERT_EQ(a.strong, b.strong);
       ASSERT_EQ(a.weak, b.weak);
-      EXPECT_EQ(a.touched, b.touched);  // first touch first: the same pairs in the same order
+      EXPECT_EQ(a.touched, b.touched);  // the same pairs, by index
+      // touched lists exactly the non-zero entries, ascending.
+      std::vector<uint32_t> nonzero;
+      for (size_t k = 0; k < a.strong.size(); ++k)
+        if (a.strong[k] > 0 || a.weak[k] > 0) nonzero.push_back(static_cast<uint32_t>(k));
+      EXPECT_EQ(a.touched, nonzero);
       for (size_t k = 0; k < a.strong.size(); ++k) strong += a.strong[k] > 0, weak += a.weak[k] > 0;
       // The heaviest K (selected, then sorted) are the first K of all of them sorted.
       MatcherParams all = p;

@@ -54,6 +54,15 @@ struct Hypothesis {
   bool ok() const { return voted ? votes == Rejection::kNone : triangles == Rejection::kNone; }
 };
 
+/// Whether the vote fallback runs after the triangles gave `corrs` correspondences but no
+/// hypothesis. Not when they gave vote_max_correspondences or more: the triangles of a
+/// repetitive stand match plentifully yet support no single pose, and its trunk pairs vote just
+/// as ambiguously, at the highest cost (every pair of a grid is length-consistent with many).
+bool votesFor(size_t corrs, const MatcherParams& params) {
+  const int cap = params.vote_max_correspondences;
+  return params.vote_fallback && (cap <= 0 || corrs < static_cast<size_t>(cap));
+}
+
 /// Correspondences and pose (matching and solver timed into stats); the vote fallback once
 /// the triangles gave no hypothesis (its voted pairs replace corrs).
 Hypothesis hypothesize(const Descriptor& q, const Descriptor& c, const LoopDetectorParams& params,
@@ -70,7 +79,7 @@ Hypothesis hypothesize(const Descriptor& q, const Descriptor& c, const LoopDetec
   } else {
     h.triangles = Rejection::kFewCorrespondences;
   }
-  if (h.triangles == Rejection::kNone || !params.matcher.vote_fallback) return h;
+  if (h.triangles == Rejection::kNone || !votesFor(h.corrs.size(), params.matcher)) return h;
   t0 = std::chrono::steady_clock::now();
   std::vector<Correspondence> voted = voteCorrespondences(q, c, params, &h.votes);
   if (stats) stats->match_ms += msSince(t0);

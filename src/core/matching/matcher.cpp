@@ -343,6 +343,7 @@ std::string MatcherParams::validate() const {
   if (neighbour_triangles < 0 || neighbour_triangles > 12) {
     err << "neighbour_triangles must be in [0, 12]; ";
   }
+  if (vote_max_correspondences < 0) err << "vote_max_correspondences must be >= 0 (0: no limit); ";
   if (!(vote_max_pair_m >= 2.0 && vote_max_pair_m <= 100.0)) {
     err << "vote_max_pair_m must be in [2, 100]; ";
   }
@@ -448,16 +449,19 @@ __attribute__((noinline)) SupportScratch& supportScratch() {
 }
 
 /// The vertex support being counted, in the scratch's packed table; out() copies it into
-/// sup. The table is all zero again afterwards: out() clears what it copies, the destructor
-/// what an exception (an allocation failing in push_back) would leave.
+/// sup. The table is all zero again afterwards: out() clears it, the destructor when out() was
+/// not reached (an allocation failing). The non-zero entries are found by a scan of the table
+/// in out(), not listed at their first touch: that test was a branch per count that the
+/// lattice stands' counts mispredicted (a first touch is a coin toss there).
 class SupportCounts {
  public:
-  SupportCounts(std::vector<uint32_t>* table, VertexSupport* sup) : sup_(*sup) {
-    if (table->size() < sup_.nq * sup_.nc) table->resize(sup_.nq * sup_.nc, 0);
+  SupportCounts(std::vector<uint32_t>* table, VertexSupport* sup)
+      : sup_(*sup), n_(sup_.nq * sup_.nc) {
+    if (table->size() < n_) table->resize(n_, 0);
     packed_ = table->data();
   }
   ~SupportCounts() {
-    for (const uint32_t k : sup_.touched) packed_[k] = 0;
+    if (!done_) std::fill(packed_, packed_ + n_, 0u);
   }
   /// Eq. (3.4)-(3.7) for one triangle pair of mask m (7: all edges consistent): strong
   /// support to its three vertex pairs, else weak support to the ends of its consistent edges.
@@ -474,14 +478,22 @@ class SupportCounts {
       bump(kWeak, q.v[kEdgeEnds[a][1]], c.v[kEdgeEnds[a][1]]);
     }
   }
+  /// The counts into sup (touched: the non-zero entries by index), without branches.
   void out() {
-    sup_.strong.assign(sup_.nq * sup_.nc, 0);
-    sup_.weak.assign(sup_.nq * sup_.nc, 0);
-    for (const uint32_t k : sup_.touched) {
-      sup_.strong[k] = static_cast<uint16_t>(packed_[k] & 0xffffu);
-      sup_.weak[k] = static_cast<uint16_t>(packed_[k] >> 16);
-      packed_[k] = 0;
+    sup_.strong.resize(n_);
+    sup_.weak.resize(n_);
+    sup_.touched.resize(n_);
+    size_t m = 0;
+    for (size_t k = 0; k < n_; ++k) {
+      const uint32_t v = packed_[k];
+      sup_.strong[k] = static_cast<uint16_t>(v & 0xffffu);
+      sup_.weak[k] = static_cast<uint16_t>(v >> 16);
+      sup_.touched[m] = static_cast<uint32_t>(k);
+      m += v != 0;
     }
+    sup_.touched.resize(m);
+    std::fill(packed_, packed_ + n_, 0u);
+    done_ = true;
   }
 
  private:
@@ -489,11 +501,12 @@ class SupportCounts {
   void bump(int shift, int iq, int ic) {
     const size_t k = static_cast<size_t>(iq) * sup_.nc + ic;
     const uint32_t v = packed_[k];
-    if (v == 0) sup_.touched.push_back(static_cast<uint32_t>(k));
     if ((v >> shift & 0xffffu) != 0xffffu) packed_[k] = v + (1u << shift);  // saturates
   }
   VertexSupport& sup_;
+  size_t n_;
   uint32_t* packed_ = nullptr;
+  bool done_ = false;
 };
 
 /// The candidate triangles (sorted by len[0]) whose longest edge can pass Cons_l with l:
@@ -551,8 +564,8 @@ VertexSupport accumulateSupport(const std::vector<MatchTriangle>& tq,
   std::vector<ConsistencyBounds> own;
   if (!bq) own = consistencyBounds(tq, params);
   const std::vector<ConsistencyBounds>& bounds = bq ? *bq : own;
-  // Flat matrices: submaps hold tens to a few hundred trunks. The touched list lets the final
-  // scan visit only non-zero entries.
+  // Flat matrices: submaps hold tens to a few hundred trunks. The touched list lets the
+  // weights visit only non-zero entries.
   VertexSupport sup;
   sup.nq = nq;
   sup.nc = nc;

@@ -268,24 +268,20 @@ std::vector<Tim> translationInvariantMeasurements(const std::vector<Corresponden
     // Two correspondences sharing a trunk are alternatives (one of them is wrong), never
     // independent evidence.
     if (corrs[a].iq == corrs[b].iq || corrs[a].ic == corrs[b].ic) return;
-    Tim m{a,
-          b,
-          corrs[a].pq.x() - corrs[b].pq.x(),
-          corrs[a].pq.y() - corrs[b].pq.y(),
-          corrs[a].pc.x() - corrs[b].pc.x(),
-          corrs[a].pc.y() - corrs[b].pc.y(),
-          std::sqrt(w[a] * w[b])};  // omega_ab of Eq. (3.13)
+    const double qx = corrs[a].pq.x() - corrs[b].pq.x(), qy = corrs[a].pq.y() - corrs[b].pq.y();
+    const double cx = corrs[a].pc.x() - corrs[b].pc.x(), cy = corrs[a].pc.y() - corrs[b].pc.y();
     // Most TIMs fail the length test below by far: decided on sqrt, which is within a few
-    // ulps of hypot (the margin), before the costlier hypot that the kept ones are measured by.
-    const double sq = std::sqrt(m.qx * m.qx + m.qy * m.qy),
-                 sc = std::sqrt(m.cx * m.cx + m.cy * m.cy);
+    // ulps of hypot (the margin), before the costlier hypot that the kept ones are measured by
+    // (and before their weight's sqrt).
+    const double sq = std::sqrt(qx * qx + qy * qy), sc = std::sqrt(cx * cx + cy * cy);
     if (std::fabs(sq - sc) > beta_r + 1e-12 * (1.0 + sq + sc)) return;
-    const double lq = std::hypot(m.qx, m.qy), lc = std::hypot(m.cx, m.cy);
+    const double lq = std::hypot(qx, qy), lc = std::hypot(cx, cy);
     if (lq < 1e-9 || lc < 1e-9) return;
     // A rotation preserves length: a TIM with | |d^q| - |d^c| | > beta_R has residual
     // > beta_R at every theta, so it adds the constant beta_R^2 to Eq. (3.14) and cannot
     // move the minimiser. Dropping it is exact and removes most outliers before GNC.
     if (std::fabs(lq - lc) > beta_r) return;
+    Tim m{a, b, qx, qy, cx, cy, std::sqrt(w[a] * w[b])};  // omega_ab of Eq. (3.13)
     m.lq = lq;
     m.lc = lc;
     tims.push_back(m);

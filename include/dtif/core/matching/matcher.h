@@ -31,6 +31,10 @@ struct MatcherParams {
   /// Beyond the paper: when the triangles give no usable hypothesis, trunk pairs vote for a
   /// planar pose (pair_vote.h), and the best-fitting voted pose is verified like any other.
   bool vote_fallback = true;
+  /// ... only when the triangles gave fewer correspondences than this (0: whatever their
+  /// number). A repetitive stand's triangles fill all max_correspondences without a clear pose,
+  /// and its trunk pairs vote as ambiguously (plantation: 7-120 ms a fallback, all rejected).
+  int vote_max_correspondences = 400;
   double vote_max_pair_m = 6.0;   ///< longest trunk pair that votes [m]
   double vote_yaw_bin_deg = 2.0;  ///< yaw bin of the vote accumulator [deg]
   double vote_xy_bin_m = 0.5;     ///< translation bin of the vote accumulator [m]
@@ -51,6 +55,7 @@ struct MatcherParams {
     v("max_correspondences", max_correspondences);
     v("neighbour_triangles", neighbour_triangles);
     v("vote_fallback", vote_fallback);
+    v("vote_max_correspondences", vote_max_correspondences);
     v("vote_max_pair_m", vote_max_pair_m);
     v("vote_yaw_bin_deg", vote_yaw_bin_deg);
     v("vote_xy_bin_m", vote_xy_bin_m);

@@ -28,7 +28,7 @@ struct VertexSupport {
   size_t nq = 0, nc = 0;
   std::vector<uint16_t> strong;   ///< E^s (saturates at 65535)
   std::vector<uint16_t> weak;     ///< E^w (saturates at 65535)
-  std::vector<uint32_t> touched;  ///< flat indices of the non-zero entries, first touch first
+  std::vector<uint32_t> touched;  ///< flat indices of the non-zero entries, ascending
 };
 
 /// Eqs. (3.4)-(3.7) over the triangle pairs whose longest edges are Cons_l-consistent (tc
