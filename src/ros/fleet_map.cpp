@@ -118,23 +118,21 @@ std::string FleetMap::addCloud(const std::string& robot, double stamp, const Clo
   if (!params_.stems.dbh_from_points) return "";
   if (params_.stems.slice_defer_clouds > 0) {
     slices_.holdCloud(it->second, *in_s);
-    for (int64_t id : slices_.overdue()) settleSlices(id, known);
+    for (int64_t id : slices_.overdue()) {
+      const auto [component, T_M_S] = placement(id);
+      slices_.settle(id, known, component, T_M_S);
+    }
   } else {
-    settleSlices(it->second, known, in_s.get());
+    const auto [component, T_M_S] = placement(it->second);
+    slices_.addCloud(it->second, *in_s, known, component, T_M_S);
   }
   return "";
 }
 
-void FleetMap::settleSlices(int64_t id, const std::vector<MergedStem>& known,
-                            const Cloud* cloud_S) {
+std::pair<int, Pose> FleetMap::placement(int64_t id) const {
   const std::optional<Pose> T_M_S = merger_.pose(id);
-  const int component = T_M_S ? merger_.component(chain_of_.at(id)) : -1;
-  const Pose pose = T_M_S.value_or(Pose::Identity());
-  if (cloud_S) {
-    slices_.addCloud(id, *cloud_S, known, component, pose);
-  } else {
-    slices_.settle(id, known, component, pose);
-  }
+  if (!T_M_S) return {-1, Pose::Identity()};
+  return {merger_.component(chain_of_.at(id)), *T_M_S};
 }
 
 FleetMap::Loaded FleetMap::loadDatabase(const LoopDetector& db) {

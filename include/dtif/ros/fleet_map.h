@@ -96,10 +96,8 @@ class FleetMap {
   // next id; "" or why not.
   std::string addToMerger(const std::string& chain, MergeSubmap s);
   Cloud::Ptr voxelDown(const Cloud& in) const;
-  // Submap id's points for the slices cut down to `known` under its current pose: cloud_S, or
-  // its held cloud when null.
-  void settleSlices(int64_t id, const std::vector<MergedStem>& known,
-                    const Cloud* cloud_S = nullptr);
+  // Merger id's component and current pose T_M_S; -1 and identity while it has none.
+  std::pair<int, Pose> placement(int64_t id) const;
 
   MergeParams params_;
   std::vector<FieldStem> field_;

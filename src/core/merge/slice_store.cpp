@@ -47,40 +47,43 @@ bool SlicePointStore::addCloud(int64_t id, const Cloud& cloud_S,
   Trunks trunks = src->second.trunks_S;
   const Trunks more = knownInCloud(cloud_S, known, component, T_M_S, 1.0);
   trunks.insert(trunks.end(), more.begin(), more.end());
-  store(id, keepSliceCandidates(cloud_S, trunks, src->second.R_L_S, p_), &clouds_);
+  drop(id);
+  Cloud::ConstPtr kept = keepSliceCandidates(cloud_S, trunks, src->second.R_L_S, p_);
+  points_ += kept->size();
+  clouds_[id] = std::move(kept);
   return true;
 }
 
-void SlicePointStore::store(int64_t id, Cloud::ConstPtr cloud,
-                            std::map<int64_t, Cloud::ConstPtr>* to) {
-  for (auto* m : {&clouds_, &held_}) {
-    auto it = m->find(id);
-    if (it == m->end()) continue;
+void SlicePointStore::drop(int64_t id) {
+  if (auto it = clouds_.find(id); it != clouds_.end()) {
     points_ -= it->second->size();
-    m->erase(it);
+    clouds_.erase(it);
   }
-  points_ += cloud->size();
-  (*to)[id] = std::move(cloud);
+  if (auto it = held_.find(id); it != held_.end()) {
+    points_ -= it->second.cloud->size();
+    held_.erase(it);
+  }
 }
 
 bool SlicePointStore::holdCloud(int64_t id, const Cloud& cloud_S) {
   auto src = sources_.find(id);
   if (src == sources_.end()) return false;
-  store(id, keepSliceBand(cloud_S, src->second.R_L_S, p_), &held_);
-  held_order_.push_back(id);
+  drop(id);
+  Cloud::ConstPtr band = keepSliceBand(cloud_S, src->second.R_L_S, p_);
+  points_ += band->size();
+  held_[id] = Held{std::move(band), holds_++};
   return true;
 }
 
 std::vector<int64_t> SlicePointStore::overdue() const {
-  std::vector<int64_t> out;
   const size_t window = static_cast<size_t>(std::max(p_.slice_defer_clouds, 0));
-  // Arrivals of settled or replaced submaps stay in the order, and count as later clouds.
-  for (size_t i = 0; i + window < held_order_.size(); ++i) {
-    const int64_t id = held_order_[i];
-    const bool latest =
-        std::find(held_order_.begin() + i + 1, held_order_.end(), id) == held_order_.end();
-    if (latest && held_.count(id)) out.push_back(id);
+  std::vector<std::pair<size_t, int64_t>> due;  // (arrival, id)
+  for (const auto& [id, h] : held_) {
+    if (h.arrival + window < holds_) due.emplace_back(h.arrival, id);
   }
+  std::sort(due.begin(), due.end());
+  std::vector<int64_t> out;
+  for (const auto& [arrival, id] : due) out.push_back(id);
   return out;
 }
 
@@ -88,10 +91,8 @@ bool SlicePointStore::settle(int64_t id, const std::vector<MergedStem>& known, i
                              const Pose& T_M_S) {
   auto it = held_.find(id);
   if (it == held_.end()) return false;
-  const Cloud::ConstPtr band = it->second;
+  const Cloud::ConstPtr band = it->second.cloud;  // addCloud drops it from held_
   addCloud(id, *band, known, component, T_M_S);
-  // What came before the oldest held arrival counts for none of them.
-  while (!held_order_.empty() && !held_.count(held_order_.front())) held_order_.pop_front();
   return true;
 }
 
@@ -101,9 +102,10 @@ std::vector<MergedStem> SlicePointStore::refit(const std::vector<MergedStem>& st
   StemSlices slices(stems, p_);
   // In the merger's submap order (refitStemDbh: the dataset's order).
   for (const MergedPose& pose : poses) {
-    for (const auto* m : {&clouds_, &held_}) {
-      auto it = m->find(pose.id);
-      if (it != m->end()) slices.addSubmap(pose.component, pose.T_M_S, *it->second);
+    if (auto it = clouds_.find(pose.id); it != clouds_.end()) {
+      slices.addSubmap(pose.component, pose.T_M_S, *it->second);
+    } else if (auto h = held_.find(pose.id); h != held_.end()) {
+      slices.addSubmap(pose.component, pose.T_M_S, *h->second.cloud);
     }
   }
   return slices.refit(stats);

@@ -10,7 +10,6 @@
 
 #include <Eigen/Core>
 #include <cstdint>
-#include <deque>
 #include <map>
 #include <vector>
 
@@ -67,14 +66,19 @@ class SlicePointStore {
     Eigen::Matrix3d R_L_S = Eigen::Matrix3d::Identity();
   };
 
-  // Replaces submap id's points (kept or held) by `cloud`, in `to`.
-  void store(int64_t id, Cloud::ConstPtr cloud, std::map<int64_t, Cloud::ConstPtr>* to);
+  struct Held {
+    Cloud::ConstPtr cloud;  // within the slices' band
+    size_t arrival = 0;     // holds_ when it came: holds_ - 1 - arrival later clouds came since
+  };
+
+  // Forgets submap id's kept or held points.
+  void drop(int64_t id);
 
   StemFusionParams p_;
   std::map<int64_t, Source> sources_;
   std::map<int64_t, Cloud::ConstPtr> clouds_;  // kept: cut down to the stems near the submap
-  std::map<int64_t, Cloud::ConstPtr> held_;    // held: within the slices' band
-  std::deque<int64_t> held_order_;             // held submaps by arrival (may hold settled ids)
+  std::map<int64_t, Held> held_;
+  size_t holds_ = 0;  // clouds held so far
   size_t points_ = 0;
 };
 
