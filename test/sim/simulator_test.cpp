@@ -3,7 +3,6 @@
 #include "dtif/sim/simulator.h"
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -20,6 +19,7 @@
 #include "dtif/sim/sim_world.h"
 #include "dtif/sim/window_plan.h"
 #include "dtif_test/test_config.h"
+#include "test_utils.h"
 
 namespace fs = std::filesystem;
 using dtif::Pose;
@@ -29,24 +29,8 @@ namespace {
 
 constexpr double kDeg = M_PI / 180.0;
 
-// The tests' folders, removed when the process ends: being per process, they would pile up.
-struct TempDirs {
-  std::vector<fs::path> paths;
-  ~TempDirs() {
-    std::error_code ec;
-    for (const fs::path& p : paths) fs::remove_all(p, ec);
-  }
-};
-TempDirs temp_dirs;
-
 fs::path tempDir(const std::string& name) {
-  // Per process: other checkouts may run these tests on the same machine at the same time.
-  const fs::path p =
-      fs::temp_directory_path() / ("dtif_sim_test_" + name + "_" + std::to_string(::getpid()));
-  fs::remove_all(p);
-  fs::create_directories(p);
-  temp_dirs.paths.push_back(p);
-  return p;
+  return dtif::test::freshTempDir("dtif_sim_test_" + name);
 }
 
 std::string readFile(const fs::path& p) {
@@ -467,7 +451,7 @@ TEST(SimulatorDataset, WrittenEqualsRead) {
   const SceneParams s = liteScene();
   const fs::path dir = tempDir("rw");
   const fs::path png = dir.string() + ".png";
-  temp_dirs.paths.push_back(png);
+  dtif::test::tempDirs().paths.push_back(png);  // removed at exit with the folders
   Simulator sim(s, 9);
   CollectSubmaps sink;
   sim.run(nullptr, &sink, 1);
