@@ -3,7 +3,8 @@
 a dataset's ground truth, as DATASET.md's ATE (positions, best rigid alignment, no scale), over
 all robots of each map frame and per robot (each aligned alone, odometry alone beside it); and,
 when the dataset has stems.csv, its merged_stems.csv as dtif merge scores its own (each map
-frame placed by its poses' alignment; a stem matches the nearest true one within 0.5 m).
+frame placed by its poses' alignment; a stem matches the nearest true one within 0.5 m): listed,
+matched, precision, recall, duplicates, position and DBH errors.
 Usage: score_ros_merge.py <dataset_dir> <map_dir>"""
 import csv
 import math
@@ -85,20 +86,34 @@ def median(v):
 
 
 def score_stems(ds, mp, by_comp):
-    """Matched stems, mean position error [m] and median |DBH error| [m] (dtif merge's
-    scoreStems, match radius 0.5 m), over the map frames with poses."""
+    """The saved inventory as dtif merge's scoreStems scores its own (match radius 0.5 m, over
+    the map frames with poses): a dict of listed, matched, precision, recall (true stems within
+    10 m of a submap's ground-truth position that some entry matched), duplicates (entries
+    beyond the first on one true stem; rate per matched entry), mean position error [m] and
+    median |DBH error| [m]."""
     true = [[float(r[k]) for k in ("x", "y", "dbh")] for r in csv.DictReader(open(ds + "/stems.csv"))]
+    poses = [[float(r[k]) for k in ("tx", "ty")] for r in csv.DictReader(open(ds + "/ground_truth.csv"))]
     place = {c: align([r[0] for r in rows], [r[1] for r in rows]) for c, rows in by_comp.items()}
-    pos, dbh = [], []
+    pos, dbh, hits, listed = [], [], [0] * len(true), 0
     for r in csv.DictReader(open(mp + "/merged_stems.csv")):
         if r["component"] not in place:
             continue
+        listed += 1
         p = place[r["component"]]([float(r[k]) for k in ("x", "y", "z_base")])
         d, j = min((math.hypot(p[0] - t[0], p[1] - t[1]), j) for j, t in enumerate(true))
         if d < 0.5:
             pos.append(d)
             dbh.append(abs(float(r["dbh"]) - true[j][2]))
-    return len(pos), sum(pos) / max(len(pos), 1), median(dbh) if dbh else 0.0
+            hits[j] += 1
+    in_range = [j for j, t in enumerate(true)
+                if any(math.hypot(t[0] - q[0], t[1] - q[1]) <= 10.0 for q in poses)]
+    matched = len(pos)
+    duplicates = sum(h - 1 for h in hits if h > 1)
+    return {"listed": listed, "matched": matched,
+            "precision": matched / listed if listed else 0.0,
+            "recall": sum(1 for j in in_range if hits[j]) / len(in_range) if in_range else 0.0,
+            "duplicates": duplicates, "duplicate_rate": duplicates / matched if matched else 0.0,
+            "pos": sum(pos) / max(matched, 1), "dbh": median(dbh) if dbh else 0.0}
 
 
 def main():
@@ -132,9 +147,12 @@ def main():
                                              align_rms([odom[i] for i in mine],
                                                        [gt[i] for i in mine])))
     if os.path.exists(ds + "/stems.csv") and os.path.exists(mp + "/merged_stems.csv"):
-        n, pos, dbh = score_stems(ds, mp, by_comp)
-        print("stems matched  mean position error [m]  median DBH error [cm]")
-        print("%13d  %23.3f  %21.2f" % (n, pos, 100 * dbh))
+        st = score_stems(ds, mp, by_comp)
+        print("stems listed  matched  precision  recall  duplicates  mean position error [m]  "
+              "median DBH error [cm]")
+        print("%12d  %7d  %9.3f  %6.3f  %4d (%.1f %%)  %23.3f  %21.2f" % (
+            st["listed"], st["matched"], st["precision"], st["recall"], st["duplicates"],
+            100 * st["duplicate_rate"], st["pos"], 100 * st["dbh"]))
 
 
 if __name__ == "__main__":
