@@ -85,14 +85,13 @@ def median(v):
     return v[h] if len(v) % 2 else 0.5 * (v[h - 1] + v[h])
 
 
-def score_stems(ds, mp, by_comp):
+def score_stems(ds, mp, by_comp, gt):
     """The saved inventory as dtif merge's scoreStems scores its own (match radius 0.5 m, over
     the map frames with poses): a dict of listed, matched, precision, recall (true stems within
     10 m of a submap's ground-truth position that some entry matched), duplicates (entries
     beyond the first on one true stem; rate per matched entry), mean position error [m] and
-    median |DBH error| [m]."""
+    median |DBH error| [m]. gt: the submaps' ground-truth positions (ground_truth.csv) by id."""
     true = [[float(r[k]) for k in ("x", "y", "dbh")] for r in csv.DictReader(open(ds + "/stems.csv"))]
-    poses = [[float(r[k]) for k in ("tx", "ty")] for r in csv.DictReader(open(ds + "/ground_truth.csv"))]
     place = {c: align([r[0] for r in rows], [r[1] for r in rows]) for c, rows in by_comp.items()}
     pos, dbh, hits, listed = [], [], [0] * len(true), 0
     for r in csv.DictReader(open(mp + "/merged_stems.csv")):
@@ -106,7 +105,7 @@ def score_stems(ds, mp, by_comp):
             dbh.append(abs(float(r["dbh"]) - true[j][2]))
             hits[j] += 1
     in_range = [j for j, t in enumerate(true)
-                if any(math.hypot(t[0] - q[0], t[1] - q[1]) <= 10.0 for q in poses)]
+                if any(math.hypot(t[0] - q[0], t[1] - q[1]) <= 10.0 for q in gt.values())]
     matched = len(pos)
     duplicates = sum(h - 1 for h in hits if h > 1)
     return {"listed": listed, "matched": matched,
@@ -147,7 +146,7 @@ def main():
                                              align_rms([odom[i] for i in mine],
                                                        [gt[i] for i in mine])))
     if os.path.exists(ds + "/stems.csv") and os.path.exists(mp + "/merged_stems.csv"):
-        st = score_stems(ds, mp, by_comp)
+        st = score_stems(ds, mp, by_comp, gt)
         print("stems listed  matched  precision  recall  duplicates  mean position error [m]  "
               "median DBH error [cm]")
         print("%12d  %7d  %9.3f  %6.3f  %4d (%.1f %%)  %23.3f  %21.2f" % (
