@@ -445,11 +445,19 @@ void writeMergeSummaryJson(const std::string& path, const MergeSummary& s) {
   j["landmark_observations"] = s.run.last.landmark_observations;
   if (s.stem_slices) {
     const StemSliceStats& q = *s.stem_slices;
-    j["stem_dbh_from_points"] = {{"stems", q.stems},      {"refitted", q.refitted},
-                                 {"too_few", q.too_few},  {"one_sided", q.one_sided},
-                                 {"no_fit", q.no_fit},    {"shrunk", q.shrunk},
-                                 {"blended", q.blended},  {"enclosing", q.enclosing},
-                                 {"points", q.points},    {"submap_views", q.submap_views},
+    j["stem_dbh_from_points"] = {{"stems", q.stems},
+                                 {"refitted", q.refitted},
+                                 {"too_few", q.too_few},
+                                 {"one_sided", q.one_sided},
+                                 {"no_fit", q.no_fit},
+                                 {"shrunk", q.shrunk},
+                                 {"blended", q.blended},
+                                 {"enclosing", q.enclosing},
+                                 {"points", q.points},
+                                 {"submap_views", q.submap_views},
+                                 {"aligned_submaps", q.alignment.views},
+                                 {"aligned_on_stems", q.alignment.stems},
+                                 {"alignment_max_shift_m", q.alignment.max_shift_m},
                                  {"ms", s.stem_slices_ms}};
   }
   j["false_loop_injected"] = s.false_loop_injected;

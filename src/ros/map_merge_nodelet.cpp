@@ -587,10 +587,11 @@ class MapMergeNodelet : public nodelet::Nodelet {
     NODELET_INFO(
         "save_map: DBH from the points on %zu of %zu stems, half-way on %zu (%zu too few, %zu "
         "one-sided, %zu shrunk, %zu around clutter, %zu no fit; %zu slice points from %zu submap "
-        "views), %.1f ms; kept "
+        "views; %zu submaps aligned on %zu stems, largest shift %.1f cm), %.1f ms; kept "
         "%zu points of %zu submaps, %zu bytes (%zu per submap)",
         st.refitted, st.stems, st.blended, st.too_few, st.one_sided, st.shrunk, st.enclosing,
-        st.no_fit, st.points, st.submap_views, msSince(t0), slices.points(), n, slices.bytes(),
+        st.no_fit, st.points, st.submap_views, st.alignment.views, st.alignment.stems,
+        100.0 * st.alignment.max_shift_m, msSince(t0), slices.points(), n, slices.bytes(),
         n ? slices.bytes() / n : size_t{0});
     std::lock_guard<std::mutex> lock(merge_mutex_);
     stems_dbh_from_points_ = st.refitted;

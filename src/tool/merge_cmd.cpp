@@ -123,6 +123,12 @@ void printGraphAndStems(const MergeSummary& sum) {
               << " around clutter, " << q.no_fit << " no fit), " << q.points
               << " slice points from " << q.submap_views << " stem views, " << sum.stem_slices_ms
               << " ms\n";
+    const SliceAlignmentStats& a = q.alignment;
+    if (a.views > 0) {
+      std::cout << std::setprecision(1) << "  submaps aligned on the bark first: " << a.views
+                << " submaps on " << a.stems << " stems (" << a.points << " points), largest shift "
+                << 100.0 * a.max_shift_m << " cm\n";
+    }
   }
 }
 

@@ -34,20 +34,18 @@ struct View {
   std::vector<Eigen::Vector2d> slice_M;  // this view's slice alone, in M
 };
 
-View scan(const Stem& s, double bearing, double range, std::mt19937* rng) {
+/// Bark points of stem s as a sensor walking 1 m along `side` through `walk` sees them, added
+/// to v's cloud (in S through v.T_M_S) and, within the slice's heights, to v.slice_M.
+void addBark(const Stem& s, const Eigen::Vector2d& walk, const Eigen::Vector2d& side,
+             std::mt19937* rng, View* v) {
   std::normal_distribution<double> noise(0.0, kSigma);
   std::uniform_real_distribution<double> u(0.0, 1.0);
-  View v;
-  const Eigen::Vector2d dir(std::cos(bearing), std::sin(bearing));
-  const Eigen::Vector2d side(-dir.y(), dir.x());
-  v.T_M_S = Eigen::Translation3d(s.x + range * dir.x(), s.y + range * dir.y(), s.z_base + 1.0) *
-            Eigen::AngleAxisd(bearing + 2.0, Eigen::Vector3d::UnitZ());
-  const Pose T_S_M = v.T_M_S.inverse();
+  const Pose T_S_M = v->T_M_S.inverse();
   const Eigen::Vector2d c(s.x, s.y);
   for (int k = 0; k < 4000; ++k) {
     // Rays evenly spread in the sensor's azimuth across the stem, as a lidar's are: few hit
     // the flanks, where the noise would run along the bark.
-    const Eigen::Vector2d sensor = c + range * dir + (u(*rng) - 0.5) * side;
+    const Eigen::Vector2d sensor = walk + (u(*rng) - 0.5) * side;
     const Eigen::Vector2d to_c = c - sensor;
     const double half = std::asin(std::min(1.0, s.r / to_c.norm()));
     const double az = std::atan2(to_c.y(), to_c.x()) + half * (2.0 * u(*rng) - 1.0);
@@ -60,9 +58,20 @@ View scan(const Stem& s, double bearing, double range, std::mt19937* rng) {
     const Eigen::Vector2d q = p + noise(*rng) * ray;
     const double z = s.z_base + 0.9 + 1.0 * u(*rng);
     const Eigen::Vector3d q_S = T_S_M * Eigen::Vector3d(q.x(), q.y(), z);
-    v.cloud.push_back(pcl::PointXYZ(q_S.x(), q_S.y(), q_S.z()));
-    if (z - s.z_base >= 1.1 && z - s.z_base <= 1.5) v.slice_M.push_back(q);
+    v->cloud.push_back(pcl::PointXYZ(q_S.x(), q_S.y(), q_S.z()));
+    if (z - s.z_base >= 1.1 && z - s.z_base <= 1.5) v->slice_M.push_back(q);
   }
+}
+
+View scan(const Stem& s, double bearing, double range, std::mt19937* rng) {
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  View v;
+  const Eigen::Vector2d dir(std::cos(bearing), std::sin(bearing));
+  const Eigen::Vector2d side(-dir.y(), dir.x());
+  v.T_M_S = Eigen::Translation3d(s.x + range * dir.x(), s.y + range * dir.y(), s.z_base + 1.0) *
+            Eigen::AngleAxisd(bearing + 2.0, Eigen::Vector3d::UnitZ());
+  const Pose T_S_M = v.T_M_S.inverse();
+  addBark(s, Eigen::Vector2d(s.x, s.y) + range * dir, side, rng, &v);
   // Ground under the stem and a shrub beside it: outside the slice (height, distance).
   for (int k = 0; k < 500; ++k) {
     const Eigen::Vector3d g(s.x + 2.0 * u(*rng) - 1.0, s.y + 2.0 * u(*rng) - 1.0, s.z_base);
@@ -296,6 +305,97 @@ TEST(StemSlices, SubmapsOffByTheirPosesKeepTheMedian) {
   EXPECT_NEAR(blended.refit(&st).at(0).dbh, 0.5 * (circle_dbh + 2.0 * r_median), 1e-12);
   EXPECT_EQ(st.blended, 1u);
   EXPECT_EQ(st.shrunk, 0u);
+}
+
+/// Nine stems on a 4 m grid seen by eight submaps: four walking among them, each pose off by
+/// `shift` (a direction of its own) and `yaw_deg` (merged poses centimetres off each other, as
+/// the landmark refinement leaves them), and four outside, in place, that see the stems' far
+/// sides. The refit's radius error of each stem, with the alignment as in `p`.
+std::vector<double> gridRadiusErrors(double shift, double yaw_deg, const StemFusionParams& p,
+                                     StemSliceStats* st) {
+  std::vector<Stem> stems;
+  std::vector<MergedStem> entries;
+  for (int i = 0; i < 9; ++i) {
+    Stem s;
+    s.x = 4.0 * (i % 3 - 1), s.y = 4.0 * (i / 3 - 1), s.r = 0.08 + 0.02 * (i % 5);
+    stems.push_back(s);
+    entries.push_back(inventoryEntry(s, 2.0 * s.r));
+  }
+  std::mt19937 rng(11);
+  StemSlices slices(entries, p);
+  int k = 0;
+  for (double d : {1.0, 6.0}) {
+    for (double b : allRound(4)) {
+      const Eigen::Vector2d at = d * std::sqrt(2.0) * Eigen::Vector2d(std::cos(b), std::sin(b));
+      View v;
+      v.T_M_S = Eigen::Translation3d(at.x(), at.y(), 1.0) *
+                Eigen::AngleAxisd(b + 2.0, Eigen::Vector3d::UnitZ());
+      for (const Stem& s : stems) {
+        const Eigen::Vector2d to = (Eigen::Vector2d(s.x, s.y) - at).normalized();
+        addBark(s, at, Eigen::Vector2d(-to.y(), to.x()), &rng, &v);
+      }
+      const double a = 1.1 * k++, inner = d < 2.0 ? 1.0 : 0.0;
+      const Pose off =
+          Eigen::Translation3d(inner * shift * std::cos(a), inner * shift * std::sin(a), 0.0) *
+          Eigen::AngleAxisd(inner * yaw_deg * kPi / 180.0, Eigen::Vector3d::UnitZ());
+      slices.addSubmap(0, off * v.T_M_S, v.cloud);
+    }
+  }
+  const std::vector<MergedStem> out = slices.refit(st);
+  std::vector<double> err;
+  for (size_t j = 0; j < stems.size(); ++j) err.push_back(0.5 * out[j].dbh - stems[j].r);
+  return err;
+}
+
+TEST(StemSlices, SubmapsAlignedOnTheBarkUndoTheirPoseOffsets) {
+  StemFusionParams off = StemFusionParams{}, on = StemFusionParams{};
+  off.slice_align_sigma_m = 0.0;
+  off.slice_max_shrink = on.slice_max_shrink = 1.0;  // the circles themselves, not the median
+  StemSliceStats st_off, st_on;
+  const std::vector<double> e_off = gridRadiusErrors(0.03, 0.2, off, &st_off);
+  const std::vector<double> e_on = gridRadiusErrors(0.03, 0.2, on, &st_on);
+  EXPECT_EQ(st_off.alignment.views, 0u);
+  EXPECT_EQ(st_on.alignment.views, 4u);  // the outer four see their stems from one side
+  EXPECT_EQ(st_on.alignment.stems, 9u);
+  EXPECT_GT(st_on.alignment.max_shift_m, 0.01);
+  double worst_off = 0.0;
+  for (size_t k = 0; k < e_on.size(); ++k) {
+    worst_off = std::max(worst_off, std::fabs(e_off[k]));
+    EXPECT_NEAR(e_on[k], 0.0, 0.0025) << "stem " << k;  // seed 11: at most 1.9 mm
+  }
+  EXPECT_GT(worst_off, 0.005);  // seed 11: +0.3 to +6.8 mm, every stem too large
+}
+
+TEST(StemSlices, SubmapsInPlaceStayInPlace) {
+  StemSliceStats st;
+  for (double e : gridRadiusErrors(0.0, 0.0, StemFusionParams{}, &st)) EXPECT_NEAR(e, 0.0, 0.003);
+  EXPECT_EQ(st.alignment.views, 4u);
+  EXPECT_LT(st.alignment.max_shift_m, 0.003);
+}
+
+TEST(AlignSliceViews, ViewsWithFewStemsOrNoneKeepNoCorrection) {
+  // Three noiseless arcs of one circle from three views, each view 1 cm off: one stem cannot
+  // tell a view's shift from the radius, so nothing moves; a fourth view has no points.
+  std::vector<Eigen::Vector2f> xy;
+  std::vector<uint32_t> view;
+  for (uint32_t v = 0; v < 3; ++v) {
+    for (int k = 0; k < 20; ++k) {
+      const double a = 2.0 * kPi * v / 3.0 + 0.05 * (k - 10);
+      xy.emplace_back(0.11 * std::cos(a) + 0.01, 0.11 * std::sin(a));
+      view.push_back(v);
+    }
+  }
+  AlignedSlice s;
+  s.xy = &xy, s.view = &view, s.r = 0.11, s.cx = 0.0, s.cy = 0.0;
+  const std::vector<Eigen::Vector2d> origins = {{5, 0}, {-2.5, 4.3}, {-2.5, -4.3}, {0, 9}};
+  SliceAlignmentStats st;
+  const std::vector<ViewCorrection> c = alignSliceViews(origins, {s}, 0.04, {}, &st);
+  ASSERT_EQ(c.size(), 4u);
+  for (const ViewCorrection& v : c) EXPECT_TRUE(v.dx == 0.0 && v.dy == 0.0 && v.dyaw == 0.0);
+  EXPECT_EQ(st.views, 0u);
+  EXPECT_EQ(st.stems, 1u);
+  EXPECT_EQ(st.points, 60u);
+  EXPECT_TRUE(alignSliceViews(origins, {}, 0.04, {}).at(0).dx == 0.0);
 }
 
 TEST(StemSlices, PlotCoordinatesKeepMillimetres) {

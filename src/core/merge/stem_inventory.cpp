@@ -514,6 +514,10 @@ std::string StemFusionParams::validate() const {
     e << "stems.slice_min_arc_deg must be in [0, 360]; ";
   if (!(slice_max_shrink >= 0 && slice_max_shrink <= 1))
     e << "stems.slice_max_shrink must be in [0, 1]; ";
+  if (!std::isfinite(slice_align_sigma_m))
+    e << "stems.slice_align_sigma_m must be finite (<= 0: off); ";
+  if (slice_align_sigma_m > 0 && !(slice_align_sigma_deg > 0 && slice_align_sigma_deg < 90))
+    e << "stems.slice_align_sigma_deg must be in (0, 90) when slice_align_sigma_m > 0; ";
   if (!(slice_blend_min_arc_deg >= 0))
     e << "stems.slice_blend_min_arc_deg must be >= 0 (> 360: never); ";
   if (!(slice_min_inlier_ratio >= 0 && slice_min_inlier_ratio <= 1))

@@ -58,6 +58,8 @@ void StemSlices::addSubmap(int component, const Pose& T_M_S, const Cloud& cloud_
   if (grid_.empty()) return;
   const Eigen::Matrix3d R = T_M_S.linear();
   const Eigen::Vector3d t = T_M_S.translation();
+  const uint32_t view = static_cast<uint32_t>(origins_.size());
+  origins_.push_back(t.head<2>());
   std::map<size_t, std::vector<Eigen::Vector2f>> found;  // stem -> points, relative to its centre
   for (const pcl::PointXYZ& pt : cloud_S.points) {
     if (!std::isfinite(pt.x) || !std::isfinite(pt.y) || !std::isfinite(pt.z)) continue;
@@ -79,6 +81,7 @@ void StemSlices::addSubmap(int component, const Pose& T_M_S, const Cloud& cloud_
     Slice& sl = slices_[k];
     const size_t n = std::min(cap, pts.size());
     for (size_t j = 0; j < n; ++j) sl.xy.push_back(pts[j * pts.size() / n]);
+    sl.view.insert(sl.view.end(), n, view);
     ++sl.submaps;
   }
 }
@@ -162,22 +165,57 @@ Cloud::Ptr keepSliceBand(const Cloud& cloud_S, const Eigen::Matrix3d& R_L_S,
   return out;
 }
 
+bool StemSlices::enoughPoints(size_t k) const {
+  const Slice& sl = slices_[k];
+  return sl.xy.size() >= static_cast<size_t>(p_.slice_min_points) &&
+         sl.submaps >= p_.slice_min_submaps;
+}
+
+std::vector<ViewCorrection> StemSlices::alignViews(StemSliceStats* st) const {
+  if (!(p_.slice_align_sigma_m > 0.0)) return std::vector<ViewCorrection>(origins_.size());
+  // Only stems whose pooled circle is accepted as it is: their arcs span the stem, so the
+  // views' offsets show against each other instead of in the radius.
+  std::vector<AlignedSlice> stems;
+  for (size_t k = 0; k < stems_.size(); ++k) {
+    if (!enoughPoints(k)) continue;
+    const SliceFit f = fitStemSlice(correctedSlice(k, {}), 0.0, 0.0, seedRadius(stems_[k]), p_);
+    if (!f.ok) continue;
+    stems.push_back({Eigen::Vector2d(stems_[k].x, stems_[k].y), &slices_[k].xy, &slices_[k].view,
+                     f.cx, f.cy, f.r});
+  }
+  SliceAlignmentParams ap;
+  ap.sigma_m = p_.slice_align_sigma_m;
+  ap.sigma_deg = p_.slice_align_sigma_deg;
+  return alignSliceViews(origins_, stems, p_.slice_inlier_m, ap, &st->alignment);
+}
+
+std::vector<Eigen::Vector2d> StemSlices::correctedSlice(
+    size_t k, const std::vector<ViewCorrection>& c) const {
+  const Slice& sl = slices_[k];
+  const Eigen::Vector2d seed(stems_[k].x, stems_[k].y);
+  std::vector<Eigen::Vector2d> xy;
+  xy.reserve(sl.xy.size());
+  for (size_t j = 0; j < sl.xy.size(); ++j) {
+    const Eigen::Vector2d p = sl.xy[j].cast<double>();
+    xy.push_back(c.empty() ? p : correctedPoint(p, seed, origins_[sl.view[j]], c[sl.view[j]]));
+  }
+  return xy;
+}
+
 std::vector<MergedStem> StemSlices::refit(StemSliceStats* stats) const {
   StemSliceStats st;
   st.stems = stems_.size();
   std::vector<MergedStem> out = stems_;
+  const std::vector<ViewCorrection> corrections = alignViews(&st);
   for (size_t k = 0; k < stems_.size(); ++k) {
     const Slice& sl = slices_[k];
     st.points += sl.xy.size();
     st.submap_views += static_cast<size_t>(sl.submaps);
-    if (sl.xy.size() < static_cast<size_t>(p_.slice_min_points) ||
-        sl.submaps < p_.slice_min_submaps) {
+    if (!enoughPoints(k)) {
       ++st.too_few;
       continue;
     }
-    std::vector<Eigen::Vector2d> xy;
-    xy.reserve(sl.xy.size());
-    for (const Eigen::Vector2f& q : sl.xy) xy.push_back(q.cast<double>());
+    const std::vector<Eigen::Vector2d> xy = correctedSlice(k, corrections);
     const SliceFit f = fitStemSlice(xy, 0.0, 0.0, seedRadius(stems_[k]), p_);
     if (!f.ok) {
       if ((f.one_sided || f.shrunk) && f.arc_deg >= p_.slice_blend_min_arc_deg) {

@@ -91,6 +91,11 @@ struct StemFusionParams {
   /// inside it: the median stays. No return comes from inside a stem, so a circle with points
   /// inside encloses it: dead branches or a shrub around the stem at breast height [0..1]
   double slice_min_inlier_ratio = 0.8;
+  /// Before the refit, each submap's slices are aligned on the bark (alignSliceViews): a planar
+  /// correction per submap, drawn towards none with this std dev per axis, that brings the
+  /// well-seen stems' arcs onto common circles; <= 0: off [m]
+  double slice_align_sigma_m = 0.03;
+  double slice_align_sigma_deg = 0.3;  ///< ... and its yaw's [deg]
   /// Online (MapMergeNodelet, keepSliceCandidates): what each arriving submap cloud keeps for
   /// the refit at save_map, around the submap's own trunks, before the merged stems exist. The
   /// merged stem's centre, radius and base differ from this submap's trunk by centimetres
@@ -135,6 +140,8 @@ struct StemFusionParams {
     v("slice_max_shrink", slice_max_shrink);
     v("slice_blend_min_arc_deg", slice_blend_min_arc_deg);
     v("slice_min_inlier_ratio", slice_min_inlier_ratio);
+    v("slice_align_sigma_m", slice_align_sigma_m);
+    v("slice_align_sigma_deg", slice_align_sigma_deg);
     v("slice_keep_margin_m", slice_keep_margin_m);
     v("slice_keep_band_m", slice_keep_band_m);
     v("slice_keep_max_points", slice_keep_max_points);

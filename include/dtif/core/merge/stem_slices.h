@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "dtif/core/cloud.h"
+#include "dtif/core/merge/slice_alignment.h"
 #include "dtif/core/merge/stem_inventory.h"
 #include "dtif/core/types.h"
 
@@ -28,6 +29,7 @@ struct StemSliceStats {
   size_t blended = 0;       ///< one-sided or shrunk, arc >= slice_blend_min_arc_deg: mean of both
   size_t points = 0;        ///< slice points kept over all stems
   size_t submap_views = 0;  ///< (stem, submap) pairs that contributed points
+  SliceAlignmentStats alignment;  ///< the submaps' alignment on the bark before the refit
 };
 
 /// Gathers the breast-height slice points of a fixed set of merged stems from submap clouds, one
@@ -45,8 +47,10 @@ class StemSlices {
   /// stems); at most slice_max_points_per_submap per stem, evenly strided.
   void addSubmap(int component, const Pose& T_M_S, const Cloud& cloud_S);
 
-  /// The stems with dbh = 2 r and centre (x, y) of a robust circle fit (fitCircleRobust) to
-  /// each pooled slice,
+  /// First, unless slice_align_sigma_m <= 0, each submap's points are moved by its correction
+  /// from alignSliceViews over the stems whose pooled circle is accepted (the merged poses are
+  /// centimetres off each other; stats->alignment). Then the stems with dbh = 2 r and centre
+  /// (x, y) of a robust circle fit (fitCircleRobust) to each pooled slice,
   /// where it has at least slice_min_points points from slice_min_submaps submaps and its
   /// inliers cover at least slice_min_arc_deg; dbh = the mean of 2 r and the inventory's dbh
   /// (centre unchanged) where the circle was refused only as one-sided or shrunk and its
@@ -59,10 +63,18 @@ class StemSlices {
  private:
   struct Slice {
     std::vector<Eigen::Vector2f> xy;
+    std::vector<uint32_t> view;  // per point: the addSubmap call it came from
     int submaps = 0;
   };
 
+  bool enoughPoints(size_t k) const;  // slice_min_points from slice_min_submaps
+  // Each view's correction by alignSliceViews (none when off or nothing to align on).
+  std::vector<ViewCorrection> alignViews(StemSliceStats* st) const;
+  // Stem k's slice with its views' corrections.
+  std::vector<Eigen::Vector2d> correctedSlice(size_t k, const std::vector<ViewCorrection>& c) const;
+
   std::vector<MergedStem> stems_;
+  std::vector<Eigen::Vector2d> origins_;  // per view: the submap's origin in M
   StemFusionParams p_;
   std::vector<Slice> slices_;
   std::unordered_map<int64_t, std::vector<size_t>> grid_;  // 1 m cell -> stems near it
