@@ -10,10 +10,15 @@
 #include "dtif/core/extraction/trunk_extractor.h"
 
 #include <algorithm>
+#include <cfloat>
 #include <cmath>
 #include <cstdio>
 #include <limits>
 #include <sstream>
+
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 #include "dtif/core/extraction/extraction_stages.h"
 #include "dtif/core/extraction/point_bounds.h"
@@ -244,6 +249,35 @@ bool takeFootprintSamples(const Cloud& cloud, size_t stride, std::vector<float>*
   return true;
 }
 
+// firstPass's tests and local coordinates of one point. With SSE2 the point (x, y, z and PCL's
+// padding, 16 bytes) is one register and the tests take its three lanes at once. The local
+// coordinates are float differences: ox, the floor of a float, is a float, and a float
+// difference rounded through double is the one rounded directly (53 >= 2 * 24 + 2), so they are
+// the values toLocalPoints computes through double.
+#ifdef __SSE2__
+class PointLanes {
+ public:
+  explicit PointLanes(const pcl::PointXYZ& q) : v_(_mm_loadu_ps(q.data)) {}
+  bool finite() const { return xyz(_mm_cmple_ps(abs(), _mm_set1_ps(FLT_MAX))) == 7; }  // no NaN
+  bool absurd() const { return xyz(_mm_cmpgt_ps(abs(), _mm_set1_ps(1e8f))) != 0; }
+  // PointBounds::inside: |x - cx| <= hs in double, x and y in two lanes.
+  bool inside(const __m128d& cxy, const __m128d& cz, const __m128d& hs) const {
+    const __m128d sign = _mm_set1_pd(-0.0);
+    const __m128d dxy = _mm_andnot_pd(sign, _mm_sub_pd(_mm_cvtps_pd(v_), cxy));
+    const __m128d dz = _mm_andnot_pd(sign, _mm_sub_pd(_mm_cvtps_pd(_mm_movehl_ps(v_, v_)), cz));
+    const int in_xy = _mm_movemask_pd(_mm_cmple_pd(dxy, hs));
+    const int in_z = _mm_movemask_pd(_mm_cmple_pd(dz, hs)) & 1;
+    return (in_xy == 3) & (in_z == 1);
+  }
+  __m128 minus(const __m128& o) const { return _mm_sub_ps(v_, o); }
+
+ private:
+  static int xyz(__m128 mask) { return _mm_movemask_ps(mask) & 7; }
+  __m128 abs() const { return _mm_and_ps(v_, _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff))); }
+  __m128 v_;
+};
+#endif
+
 // toLocalPoints of a cloud whose finite points all lie inside b, and (marks not null) each
 // finite point added to the footprint's marks, in one pass over the cloud, the largest array
 // extraction reads. *finite counts the finite points. false when a finite point lies outside b
@@ -255,32 +289,58 @@ bool firstPass(const Cloud& cloud, const PointBounds& b, LocalPoints* pts, Heigh
   pts->x.resize(size), pts->y.resize(size), pts->z.resize(size);
   float *X = pts->x.data(), *Y = pts->y.data(), *Z = pts->z.data();
   const pcl::PointXYZ* P = cloud.points.data();
-  const double cx = b.centre.x(), cy = b.centre.y(), cz = b.centre.z(), hs = b.half_side_m;
-  double ox = 0.0, oy = 0.0, oz = 0.0;
-  float minx = 0.0f, maxx = 0.0f, miny = 0.0f, maxy = 0.0f;
+  float ox = 0.0f, oy = 0.0f, oz = 0.0f;
   bool have_origin = false;
   size_t n = 0, nf = 0;
   const bool marking = marks != nullptr;
   HeightCellMarks::Pass marker = marking ? marks->pass() : HeightCellMarks::Pass();
+  // The ground grid's extent, in the order binGroundGrid would take it (lanes x and y).
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+#ifdef __SSE2__
+  const __m128d cxy = _mm_set_pd(b.centre.y(), b.centre.x()), cz = _mm_set1_pd(b.centre.z());
+  const __m128d hs = _mm_set1_pd(b.half_side_m);
+  __m128 origin = _mm_setzero_ps(), lo = _mm_set1_ps(kInf), hi = _mm_set1_ps(-kInf);
+  for (size_t i = 0; i < size; ++i) {
+    const PointLanes q(P[i]);
+    if (!q.finite()) continue;
+    ++nf;
+    if (!q.inside(cxy, cz, hs)) return false;
+    if (marking) marker.add(P[i].x, P[i].y, P[i].z);
+    // As toLocalPoints: absurd magnitudes would overflow the cell indices.
+    if (q.absurd()) continue;
+    if (!have_origin) {
+      ox = std::floor(P[i].x), oy = std::floor(P[i].y), oz = std::floor(P[i].z);
+      origin = _mm_set_ps(0.0f, oz, oy, ox), have_origin = true;
+    }
+    const __m128 l = q.minus(origin);
+    _mm_store_ss(X + n, l), _mm_store_ss(Y + n, _mm_shuffle_ps(l, l, 1));
+    _mm_store_ss(Z + n, _mm_movehl_ps(l, l));
+    lo = _mm_min_ps(l, lo), hi = _mm_max_ps(l, hi);  // std::min(lo, l), std::max(hi, l)
+    ++n;
+  }
+  float minx = _mm_cvtss_f32(lo), miny = _mm_cvtss_f32(_mm_shuffle_ps(lo, lo, 1));
+  float maxx = _mm_cvtss_f32(hi), maxy = _mm_cvtss_f32(_mm_shuffle_ps(hi, hi, 1));
+#else
+  const double cx = b.centre.x(), cy = b.centre.y(), cz = b.centre.z(), hs = b.half_side_m;
+  float minx = kInf, maxx = -kInf, miny = kInf, maxy = -kInf;
   for (size_t i = 0; i < size; ++i) {
     const float x = P[i].x, y = P[i].y, z = P[i].z;
     if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) continue;
     ++nf;
     if (!(std::abs(x - cx) <= hs && std::abs(y - cy) <= hs && std::abs(z - cz) <= hs)) return false;
     if (marking) marker.add(x, y, z);
-    // As toLocalPoints: absurd magnitudes would overflow the cell indices.
     if (std::abs(x) > 1e8f || std::abs(y) > 1e8f || std::abs(z) > 1e8f) continue;
     if (!have_origin)
       ox = std::floor(x), oy = std::floor(y), oz = std::floor(z), have_origin = true;
-    const float lx = static_cast<float>(x - ox), ly = static_cast<float>(y - oy);
-    X[n] = lx, Y[n] = ly, Z[n] = static_cast<float>(z - oz);
-    // The ground grid's extent, in the order binGroundGrid would take it.
-    if (n == 0) minx = maxx = lx, miny = maxy = ly;
+    const float lx = x - ox, ly = y - oy;
+    X[n] = lx, Y[n] = ly, Z[n] = z - oz;
     minx = std::min(minx, lx), maxx = std::max(maxx, lx);
     miny = std::min(miny, ly), maxy = std::max(maxy, ly);
     ++n;
   }
+#endif
   if (marking) marks->finish(marker);
+  if (n == 0) minx = maxx = miny = maxy = 0.0f;
   pts->ox = ox, pts->oy = oy, pts->oz = oz;
   pts->minx = minx, pts->maxx = maxx, pts->miny = miny, pts->maxy = maxy;
   pts->has_extent = n > 0;
