@@ -109,7 +109,7 @@ TEST(Footprint, MarksGiveTrunkHeightCells) {
   // power-of-two cell size and at one that is not, with and without subsampled percentiles.
   for (const uint32_t seed : {1u, 2u}) {
     Cloud cloud = bumpyStand(seed);
-    for (const double cell_m : {1.0, 0.3}) {
+    for (const double cell_m : {1.0, 2.0, 0.5, 0.3}) {
       for (const size_t max_samples : {size_t{0}, size_t{5000}}) {
         const size_t stride = max_samples > 0 ? cloud.size() / max_samples : 1;
         std::vector<float> sx, sy, sz;
@@ -125,6 +125,33 @@ TEST(Footprint, MarksGiveTrunkHeightCells) {
         EXPECT_EQ(marks.cells(), expected) << "seed " << seed << ", cell " << cell_m;
       }
     }
+  }
+}
+
+TEST(Footprint, MarksAtCellAndTileEdgesGiveTrunkHeightCells) {
+  // Cells of 2^k m take the cell and the 2 m tile from one floor per coordinate: points on
+  // whole and half metres and one float step either side, both signs, fall where
+  // trunkHeightCells puts them.
+  Cloud cloud;
+  for (float x = -9.75f; x < 10.0f; x += 0.5f)
+    for (float y = -9.75f; y < 10.0f; y += 0.5f) cloud.push_back(pcl::PointXYZ(x, y, 0.0f));
+  for (int i = -16; i <= 16; ++i) {
+    const float v = 0.5f * static_cast<float>(i);
+    for (const float x : {std::nextafter(v, -1e9f), v, std::nextafter(v, 1e9f)})
+      for (const float y : {std::nextafter(-v, -1e9f), 0.0f, std::nextafter(-v, 1e9f)})
+        cloud.push_back(pcl::PointXYZ(x, y, 1.0f));
+  }
+  std::vector<float> sx, sy, sz;
+  for (const pcl::PointXYZ& q : cloud) sx.push_back(q.x), sy.push_back(q.y), sz.push_back(q.z);
+  for (const double cell_m : {1.0, 2.0, 4.0, 0.5, 0.3}) {
+    HeightCellMarks marks;
+    ASSERT_TRUE(
+        marks.init(sx, sy, sz, cell_m, Eigen::Vector2d(-20.0, -20.0), Eigen::Vector2d(20.0, 20.0)));
+    for (const pcl::PointXYZ& q : cloud) marks.add(q.x, q.y, q.z);
+    EXPECT_TRUE(marks.complete());
+    const Cells expected = trunkHeightCells(cloud, Pose::Identity(), cell_m, 0);
+    EXPECT_GT(expected.size(), 10u);
+    EXPECT_EQ(marks.cells(), expected) << "cell " << cell_m;
   }
 }
 

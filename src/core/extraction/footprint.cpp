@@ -316,6 +316,7 @@ bool HeightCellMarks::init(const std::vector<float>& sx, const std::vector<float
   int e = 0;
   g.pow2_ = std::frexp(cell_m, &e) == 0.5 && e > -1000 && e < 1000;  // as Divisor
   g.inv_cell_ = g.pow2_ ? 1.0 / cell_m : 0.0;
+  g.shift_ = g.pow2_ && e >= 1 && e <= 40 ? e - 1 : -1;
   g.cx0_ = fastCellIndex(lo.x() / cell_m), g.cy0_ = fastCellIndex(lo.y() / cell_m);
   g.cw_ = fastCellIndex(hi.x() / cell_m) - g.cx0_ + 1;
   g.ch_ = fastCellIndex(hi.y() / cell_m) - g.cy0_ + 1;

@@ -72,14 +72,17 @@ class HeightCellMarks {
     /// Marks the cell of a point (inside the box) when it lies in the trunk-height band; a
     /// point without a tile or outside the band marks the sink, one byte past the cells.
     void add(float x, float y, float z) {
-      const int64_t tx = floorOf(static_cast<double>(x) * 0.5) - tx0_;  // x / 2 m tile, exactly
-      const int64_t ty = floorOf(static_cast<double>(y) * 0.5) - ty0_;
+      // floor(x / 2^k) = floor(floor(x) / 2^k) = floor(x) >> k: the 2 m tile and, for cells of
+      // 2^k m (k >= 0, the default 1 m), the cell from one floor of each coordinate.
+      const int64_t fx = floorOf(x), fy = floorOf(y);
+      const int64_t tx = (fx >> 1) - tx0_, ty = (fy >> 1) - ty0_;
       const bool tile = (static_cast<uint64_t>(tx) < static_cast<uint64_t>(tw_)) &
                         (static_cast<uint64_t>(ty) < static_cast<uint64_t>(th_));
       const float h =
           z - ground_[select(tile, static_cast<size_t>(ty * tw_ + tx), 0)];  // NaN: none
       const bool band = tile & (h >= kMin) & (h <= kMax);
-      const int64_t cx = floorOf(cellDiv(x)) - cx0_, cy = floorOf(cellDiv(y)) - cy0_;
+      const int64_t cx = (shift_ >= 0 ? fx >> shift_ : floorOf(cellDiv(x))) - cx0_;
+      const int64_t cy = (shift_ >= 0 ? fy >> shift_ : floorOf(cellDiv(y))) - cy0_;
       const bool box = (static_cast<uint64_t>(cx) < static_cast<uint64_t>(cw_)) &
                        (static_cast<uint64_t>(cy) < static_cast<uint64_t>(ch_));
       outside_ |= band & !box;  // only by rounding at the box's edge
@@ -96,6 +99,7 @@ class HeightCellMarks {
     double cellDiv(float v) const { return pow2_ ? v * inv_cell_ : v / cell_m_; }
     double cell_m_ = 1.0, inv_cell_ = 1.0;
     bool pow2_ = true;
+    int shift_ = 0;                                // k of cells of 2^k m, k >= 0; else -1
     int64_t tx0_ = 0, ty0_ = 0, tw_ = 0, th_ = 0;  // tile grid
     int64_t cx0_ = 0, cy0_ = 0, cw_ = 0, ch_ = 0;  // cell grid
     const float* ground_ = nullptr;
@@ -125,6 +129,10 @@ class HeightCellMarks {
   static int64_t floorOf(double v) {  // floor without libm's call; |v| < 2^40 here
     const int64_t i = static_cast<int64_t>(v);
     return i - (v < static_cast<double>(i));
+  }
+  static int64_t floorOf(float v) {  // exact: i converts back exactly (|v| >= 2^23 is whole)
+    const int64_t i = static_cast<int64_t>(v);
+    return i - (v < static_cast<float>(i));
   }
   static constexpr double kMin = 0.3, kMax = 3.0;  // the band, as trunkHeightCells compares it
   // The tile grid (ground_), the cell grid (marks_, column-major) and whether a point fell
