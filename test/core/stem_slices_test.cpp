@@ -718,6 +718,14 @@ TEST(StemSlices, ParamsValidated) {
   p.slice_inlier_m = 0.0;
   EXPECT_NE(p.validate().find("slice_inlier_m"), std::string::npos);
   p = StemFusionParams{};
+  p.slice_align_sigma_m = NAN;
+  EXPECT_NE(p.validate().find("slice_align_sigma_m"), std::string::npos);
+  p = StemFusionParams{};
+  p.slice_align_sigma_deg = 0.0;
+  EXPECT_NE(p.validate().find("slice_align_sigma_deg"), std::string::npos);
+  p.slice_align_sigma_m = 0.0;  // off: its yaw sigma is not used
+  EXPECT_EQ(p.validate(), "");
+  p = StemFusionParams{};
   p.slice_keep_margin_m = -0.1;
   EXPECT_NE(p.validate().find("slice_keep_margin_m"), std::string::npos);
   p = StemFusionParams{};

@@ -171,7 +171,7 @@ TEST(Config, ShippedMergeYamlNamesEveryField) {
   MergeParams p;
   p.visit(named);
   p.stems.visit(named);
-  EXPECT_EQ(fields, 72);
+  EXPECT_EQ(fields, 74);
 }
 
 // A merge section reaches the merger's parameters; an invalid value is refused by name.
