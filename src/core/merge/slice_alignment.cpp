@@ -113,7 +113,10 @@ std::vector<ViewCorrection> alignSliceViews(const std::vector<Eigen::Vector2d>& 
   }
   if (st.views > 0) {
     ceres::Solver::Options opt;
-    opt.linear_solver_type = ceres::DENSE_SCHUR;  // a few dozen views: a small reduced system
+    // The reduced system is 3 x 3 per pair of views: dense for a few hundred submaps (a run of a
+    // few units), sparse beyond (a fleet's thousands would need gigabytes dense).
+    constexpr size_t kDenseMaxViews = 300;
+    opt.linear_solver_type = st.views <= kDenseMaxViews ? ceres::DENSE_SCHUR : ceres::SPARSE_SCHUR;
     opt.linear_solver_ordering = ordering;
     opt.max_num_iterations = p.max_iterations;
     opt.num_threads = 1;
