@@ -172,7 +172,7 @@ bool StemSlices::enoughPoints(size_t k) const {
 }
 
 std::vector<ViewCorrection> StemSlices::alignViews(StemSliceStats* st) const {
-  if (!(p_.slice_align_sigma_m > 0.0)) return std::vector<ViewCorrection>(origins_.size());
+  if (!(p_.slice_align_sigma_m > 0.0)) return {};  // the points as they are
   // Only stems whose pooled circle is accepted as it is: their arcs span the stem, so the
   // views' offsets show against each other instead of in the radius.
   std::vector<AlignedSlice> stems;
@@ -197,7 +197,7 @@ std::vector<Eigen::Vector2d> StemSlices::correctedSlice(
   xy.reserve(sl.xy.size());
   for (size_t j = 0; j < sl.xy.size(); ++j) {
     const Eigen::Vector2d p = sl.xy[j].cast<double>();
-    xy.push_back(c.empty() ? p : correctedPoint(p, seed, origins_[sl.view[j]], c[sl.view[j]]));
+    xy.push_back(c.empty() ? p : correctedPoint(p, origins_[sl.view[j]] - seed, c[sl.view[j]]));
   }
   return xy;
 }

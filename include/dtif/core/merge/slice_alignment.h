@@ -40,7 +40,8 @@ struct SliceAlignmentParams {
 };
 
 /// One stem's pooled slice for the alignment: its points relative to `seed` (M), the submap
-/// (view) of each, and the circle fitted to them all (relative to seed).
+/// (view) of each, each view's points consecutive (as StemSlices gathers them), and the circle
+/// fitted to them all (relative to seed).
 struct AlignedSlice {
   Eigen::Vector2d seed = Eigen::Vector2d::Zero();
   const std::vector<Eigen::Vector2f>* xy = nullptr;
@@ -67,12 +68,14 @@ std::vector<ViewCorrection> alignSliceViews(const std::vector<Eigen::Vector2d>& 
                                             const SliceAlignmentParams& params,
                                             SliceAlignmentStats* stats = nullptr);
 
-/// A point p of a slice (relative to `seed`) of view origin `o`, moved by correction c.
-inline Eigen::Vector2d correctedPoint(const Eigen::Vector2d& p, const Eigen::Vector2d& seed,
-                                      const Eigen::Vector2d& o, const ViewCorrection& c) {
-  const Eigen::Vector2d a = p + seed - o;
+/// A point p of a slice (relative to its stem's seed) moved by correction c of its view, whose
+/// origin lies at o relative to the seed. Relative coordinates throughout: plot coordinates
+/// (500 km out) would cost the point its sub-millimetres on the way through them.
+inline Eigen::Vector2d correctedPoint(const Eigen::Vector2d& p, const Eigen::Vector2d& o,
+                                      const ViewCorrection& c) {
+  const Eigen::Vector2d a = p - o;
   const double cs = std::cos(c.dyaw), sn = std::sin(c.dyaw);
-  return o - seed + Eigen::Vector2d(cs * a.x() - sn * a.y() + c.dx, sn * a.x() + cs * a.y() + c.dy);
+  return o + Eigen::Vector2d(cs * a.x() - sn * a.y() + c.dx, sn * a.x() + cs * a.y() + c.dy);
 }
 
 }  // namespace dtif

@@ -68,9 +68,9 @@ class StemSlices {
   };
 
   bool enoughPoints(size_t k) const;  // slice_min_points from slice_min_submaps
-  // Each view's correction by alignSliceViews (none when off or nothing to align on).
+  // Each view's correction by alignSliceViews; empty when off (the points stay as they are).
   std::vector<ViewCorrection> alignViews(StemSliceStats* st) const;
-  // Stem k's slice with its views' corrections.
+  // Stem k's slice with its views' corrections (none: as gathered).
   std::vector<Eigen::Vector2d> correctedSlice(size_t k, const std::vector<ViewCorrection>& c) const;
 
   std::vector<MergedStem> stems_;
