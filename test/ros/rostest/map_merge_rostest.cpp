@@ -9,7 +9,10 @@
 //  - TF map -> odometry frame puts each robot's latest submap within tolerance of ground truth;
 //  - get_map_info and save_map report and write the merged map;
 //  - the saved inventory's DBH was measured on the points the submap clouds kept
-//    (stems.dbh_from_points), within the median DBH error of the true stems.
+//    (stems.dbh_from_points), within the median DBH error of the true stems;
+//  - a false loop the test publishes on /loop_closures as soon as the first loop between the
+//    robots arrives (#16's robustness check through the nodelets) is not in the saved pose
+//    graph, and the map above is checked with it in.
 #include <gtest/gtest.h>
 #include <ros/ros.h>
 #include <tf2_ros/transform_listener.h>
@@ -22,7 +25,10 @@
 #include <fstream>
 #include <iostream>
 #include <map>
+#include <mutex>
+#include <optional>
 #include <set>
+#include <sstream>
 #include <thread>
 
 #include "dtif/io/dataset.h"
@@ -71,6 +77,81 @@ size_t countLines(const fs::path& p) {
 }
 
 using Paths = std::map<std::string, test::Latest<nav_msgs::Path>>;
+
+// Collects the loops and, when the first loop between two robots arrives, publishes one false
+// loop as dtif merge --inject-false-loop makes it: between those robots' two submaps seen so far
+// that lie farthest apart (ground truth), the query the later one, 3 m, -2 m and 0.4 rad off,
+// with the real loop's covariance. Before the robots share a frame, with one real loop to weigh
+// it against: if the back end took it, it would bend the map as the robots join.
+struct FalseLoop {
+  const Dataset* ds = nullptr;
+  Inbox<dtif::TrunkDescriptor>* descriptors = nullptr;
+  Inbox<dtif::LoopClosure>* loops = nullptr;
+  ros::Publisher pub;
+  std::mutex mutex;
+  std::optional<Loop> sent;
+
+  void cb(const dtif::LoopClosure::ConstPtr& m) {
+    loops->cb(m);  // this one too, once published: the merge counts it
+    std::lock_guard<std::mutex> lock(mutex);
+    if (sent || m->query_robot == m->candidate_robot) return;
+    double farthest = -1.0;
+    Loop l;
+    for (const test::SeenSubmap& c : test::seenSubmaps(*ds, descriptors->all())) {
+      if (c.robot != m->candidate_robot) continue;
+      for (const test::SeenSubmap& q : test::seenSubmaps(*ds, descriptors->all())) {
+        if (q.robot != m->query_robot || q.stamp <= c.stamp) continue;
+        const double d =
+            (ds->T_W_S.at(q.dataset_id).translation() - ds->T_W_S.at(c.dataset_id).translation())
+                .norm();
+        if (d > farthest) farthest = d, l.query_id = q.submap_id, l.candidate_id = c.submap_id;
+      }
+    }
+    if (farthest < 0.0) return;
+    l.query_robot = m->query_robot;
+    l.candidate_robot = m->candidate_robot;
+    l.T_c_q.linear() = Eigen::AngleAxisd(0.4, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    l.T_c_q.translation() << 3.0, -2.0, 0.0;
+    l.covariance =
+        Eigen::Map<const Eigen::Matrix<double, 6, 6, Eigen::RowMajor>>(m->covariance.data());
+    l.inliers = std::max(12, m->inliers);
+    l.score = 0.9;
+    dtif::LoopClosure msg = ros_glue::toMsg(l);
+    msg.header = m->header;
+    pub.publish(msg);
+    sent = l;
+    std::cout << "false loop " << l.query_robot << "/" << l.query_id << " -> " << l.candidate_robot
+              << "/" << l.candidate_id << " (" << farthest << " m apart) after " << loops->size()
+              << " loops\n";
+  }
+};
+
+// Whether the saved pose graph (pose_graph.g2o: odometry edges and the loops used) has an edge
+// between the submaps of loop `l` (graph ids from submap_ids.csv).
+bool inSavedGraph(const fs::path& map_dir, const Loop& l) {
+  std::map<std::pair<std::string, int64_t>, std::string> graph_id;
+  std::ifstream ids(map_dir / "submap_ids.csv");
+  std::string line;
+  std::getline(ids, line);  // id,chain,robot,submap_id,stamp
+  while (std::getline(ids, line)) {
+    std::stringstream row(line);
+    std::string id, chain, robot, submap;
+    std::getline(row, id, ',');
+    std::getline(row, chain, ',');
+    std::getline(row, robot, ',');
+    std::getline(row, submap, ',');
+    graph_id[{robot, std::stoll(submap)}] = id;
+  }
+  const std::string q = graph_id[{l.query_robot, l.query_id}];
+  const std::string c = graph_id[{l.candidate_robot, l.candidate_id}];
+  EXPECT_FALSE(q.empty() || c.empty()) << "the false loop's submaps are not in submap_ids.csv";
+  std::ifstream g2o(map_dir / "pose_graph.g2o");
+  for (std::string tag, a, b; std::getline(g2o, line);) {
+    std::stringstream(line) >> tag >> a >> b;
+    if (tag.rfind("EDGE", 0) == 0 && ((a == q && b == c) || (a == c && b == q))) return true;
+  }
+  return false;
+}
 
 // The submaps on the robots' latest paths in map: positions, ground truth and robot of each.
 struct PathPoints {
@@ -190,11 +271,15 @@ TEST(MapMergeRostest, EveryRobotsMapTfMatchesGroundTruth) {
 
   Inbox<dtif::TrunkDescriptor> descriptors;
   Inbox<dtif::LoopClosure> loops;
+  FalseLoop false_loop;
+  false_loop.ds = &ds;
+  false_loop.descriptors = &descriptors;
+  false_loop.loops = &loops;
   ros::Subscriber da =
       nh.subscribe("/alpha/descriptor", 50, &Inbox<dtif::TrunkDescriptor>::cb, &descriptors);
   ros::Subscriber db =
       nh.subscribe("/bravo/descriptor", 50, &Inbox<dtif::TrunkDescriptor>::cb, &descriptors);
-  ros::Subscriber ls = nh.subscribe("/loop_closures", 50, &Inbox<dtif::LoopClosure>::cb, &loops);
+  ros::Subscriber ls = nh.subscribe("/loop_closures", 50, &FalseLoop::cb, &false_loop);
   Paths paths;
   std::vector<ros::Subscriber> path_subs;
   for (const std::string robot : {"alpha", "bravo"}) {
@@ -204,6 +289,8 @@ TEST(MapMergeRostest, EveryRobotsMapTfMatchesGroundTruth) {
   ros::ServiceClient info_srv = nh.serviceClient<dtif::GetMapInfo>("/map_merge/get_map_info");
   ASSERT_TRUE(waitFor([&] { return info_srv.exists() && ls.getNumPublishers() > 0; }, 30.0))
       << "the nodelets did not come up";
+  // Advertised now: before, it would have counted as the loop closure nodelet's publisher.
+  false_loop.pub = nh.advertise<dtif::LoopClosure>("/loop_closures", 10);
 
   // Each robot's submap windows start at its first cloud received, and the paths are matched to
   // the dataset by stamp: the player waits until every topic of the bag has its subscriber (this
@@ -284,6 +371,9 @@ TEST(MapMergeRostest, EveryRobotsMapTfMatchesGroundTruth) {
   ASSERT_TRUE(lookupMapTfs(tf, odom_frame, &T_map_O_saved, 5.0));
   expectTfPlacesTheLatestSubmaps(ds, latest, T_map_O_saved, T_W_map_saved, " after save_map");
   expectTheSavedMap(dir / "map", ds, &info_srv, T_W_map_saved);
+  ASSERT_TRUE(false_loop.sent) << "no loop between the robots: no false loop was published";
+  EXPECT_FALSE(inSavedGraph(dir / "map", *false_loop.sent)) << "the back end used the false loop";
+  EXPECT_GE(r.loops_rejected, 1u);
   if (!std::getenv("DTIF_KEEP_TEST_OUTPUT")) {
     fs::remove_all(dir);
   }

@@ -49,6 +49,8 @@ inline int64_t datasetId(const Dataset& ds, const std::string& robot, double sta
 // One submap the nodelets published: its dataset id, odometry frame and T_O_S.
 struct SeenSubmap {
   int64_t dataset_id = -1;
+  int64_t submap_id = -1;  ///< as the nodelets number it
+  double stamp = 0.0;      ///< anchor time [s]
   std::string robot;
   std::string odom_frame;
   Pose T_O_S = Pose::Identity();
@@ -61,6 +63,8 @@ inline std::vector<SeenSubmap> seenSubmaps(
   for (const auto& d : msgs) {
     SeenSubmap s;
     s.robot = d->robot;
+    s.submap_id = d->submap_id;
+    s.stamp = d->header.stamp.toSec();
     s.dataset_id = datasetId(ds, as_robot.empty() ? d->robot : as_robot, d->header.stamp.toSec());
     s.odom_frame = d->header.frame_id;
     if (s.dataset_id < 0 || !ros_glue::fromMsg(d->odom_pose, &s.T_O_S)) continue;
