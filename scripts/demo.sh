@@ -17,7 +17,10 @@
 # remapped into its robot's namespace as README "Your own FAST-LIO2 units and bags" tells),
 # DTIF_DEMO_SUBMAP_CLOUD (1, the default: the extraction nodelets publish their submap clouds, so
 # the map merge nodelet measures the inventory's DBH on their points as dtif merge does, and
-# saves a merged cloud; 0: they do not, and the nodelet keeps the observations' median DBH).
+# saves a merged cloud; 0: they do not, and the nodelet keeps the observations' median DBH),
+# DTIF_DEMO_FALSE_LOOP (1: scripts/inject_false_loop.py publishes one false loop on /loop_closures
+# once half as many loops as dtif eval's have come, as dtif merge --inject-false-loop does offline;
+# the map's score then says whether the back end used it).
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 SCENE="${1:-${DTIF_REPO}/config/scenes/mixed.yaml}"
@@ -73,7 +76,7 @@ roslaunch -p "${DTIF_PORT}" dtif demo_bag.launch play:=false headless:=true bond
   publish_submap_cloud:="$([ "${DTIF_DEMO_SUBMAP_CLOUD:-1}" = 0 ] && echo false || echo true)" \
   loop_log:="${LOG}" > "${OUT}/ros/roslaunch.log" 2>&1 &
 LAUNCH_PID=$!
-trap 'kill -INT ${LAUNCH_PID} 2>/dev/null || true' EXIT
+trap 'kill -INT ${LAUNCH_PID} ${INJECT_PID:-} 2>/dev/null || true' EXIT
 # Ready when the loop log is open and the last robot's extraction nodelet subscribes its clouds.
 subscribed() {
   rostopic info "/${ROBOTS[-1]}/cloud_registered" 2>/dev/null | sed -n '/Subscribers:/,$p' \
@@ -93,6 +96,15 @@ fi
 # first message (the default 0.2 s lost alpha's first clouds on a loaded machine, and each robot's
 # submap windows start at its first cloud received).
 DELAY_S=2
+INJECT_PID=""
+if [ "${DTIF_DEMO_FALSE_LOOP:-0}" = 1 ]; then
+  HALF="$(/usr/bin/python3 -c 'import json, sys; print(max(1, json.load(open(sys.argv[1]))["accepted"] // 2))' \
+    "${OUT}/eval/summary.json")"
+  echo "dtif demo: a false loop goes to /loop_closures after ${HALF} loops (${OUT}/ros/false_loop.csv)"
+  /usr/bin/python3 "${DTIF_REPO}/scripts/inject_false_loop.py" --robots "${ROBOTS[@]}" \
+    --after "${HALF}" --out "${OUT}/ros/false_loop.csv" > "${OUT}/ros/false_loop.log" 2>&1 &
+  INJECT_PID=$!
+fi
 t0=$(date +%s.%N)
 if [ ${#BAGS[@]} -eq 1 ]; then
   rosbag play --clock --quiet --delay "${DELAY_S}" --rate "${RATE}" "${BAGS[0]}"
@@ -124,6 +136,7 @@ for _ in $(seq 1 60); do
   sleep 1
 done
 # The map merge nodelet's map (TF map -> odometry frames comes from the same solve).
+[ -z "${INJECT_PID}" ] || kill -INT "${INJECT_PID}" 2>/dev/null || true
 rosservice call /map_merge/get_map_info > "${OUT}/ros/map_info.yaml" 2>&1 || true
 rosservice call /map_merge/save_map "directory: '${OUT}/ros/map'" > "${OUT}/ros/save_map.log" 2>&1 \
   || true
@@ -147,7 +160,17 @@ cat "${OUT}/merge.txt"
 echo
 echo "=== Merged map of ${NAME}: map merge nodelet on the bag (save_map: ${OUT}/ros/map) ==="
 if [ -f "${OUT}/ros/map/merged_poses.csv" ]; then
-  /usr/bin/python3 "${DTIF_REPO}/scripts/score_ros_merge.py" "${OUT}/dataset" "${OUT}/ros/map"
+  FALSE_LOOP_ARGS=()
+  if [ -n "${INJECT_PID}" ]; then
+    if [ -f "${OUT}/ros/false_loop.csv" ]; then
+      FALSE_LOOP_ARGS=(--false-loop "${OUT}/ros/false_loop.csv")
+    else
+      echo "dtif demo: no false loop was injected (fewer loops than it waited for;" \
+        "${OUT}/ros/false_loop.log)" >&2
+    fi
+  fi
+  /usr/bin/python3 "${DTIF_REPO}/scripts/score_ros_merge.py" "${OUT}/dataset" "${OUT}/ros/map" \
+    "${FALSE_LOOP_ARGS[@]}"
   grep -E "loops_used|loops_rejected|solves|last_solve_ms|max_solve_ms|slice_submaps|slice_bytes" "${OUT}/ros/map_info.yaml" \
     | tr '\n' ' '
   echo

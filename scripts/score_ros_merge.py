@@ -5,7 +5,11 @@ all robots of each map frame and per robot (each aligned alone, odometry alone b
 when the dataset has stems.csv, its merged_stems.csv as dtif merge scores its own (each map
 frame placed by its poses' alignment; a stem matches the nearest true one within 0.5 m): listed,
 matched, precision, recall, duplicates, position and DBH errors.
-Usage: score_ros_merge.py <dataset_dir> <map_dir>"""
+With --false-loop (the CSV inject_false_loop.py wrote), it also says whether the loop injected
+on purpose is in the saved pose graph (pose_graph.g2o holds the odometry edges and the loops
+used; a loop the back end rejected is not there).
+Usage: score_ros_merge.py <dataset_dir> <map_dir> [--false-loop loop.csv]"""
+import argparse
 import csv
 import math
 import os
@@ -115,8 +119,31 @@ def score_stems(ds, mp, by_comp, gt):
             "pos": sum(pos) / max(matched, 1), "dbh": median(dbh) if dbh else 0.0}
 
 
+def false_loop_verdict(mp, loop_csv):
+    """'used' when the saved pose graph has an edge between the false loop's two submaps,
+    else 'rejected'."""
+    loop = next(csv.DictReader(open(loop_csv)))
+    gid = {(r["robot"], r["submap_id"]): r["id"] for r in csv.DictReader(open(mp + "/submap_ids.csv"))}
+    q = gid.get((loop["query_robot"], loop["query_id"]))
+    c = gid.get((loop["candidate_robot"], loop["candidate_id"]))
+    if q is None or c is None:
+        sys.exit("score_ros_merge.py: %s: a submap of the false loop is not in %s/submap_ids.csv"
+                 % (loop_csv, mp))
+    edges = {frozenset(line.split()[1:3]) for line in open(mp + "/pose_graph.g2o")
+             if line.startswith("EDGE")}
+    return "%s/%s -> %s/%s: %s" % (loop["query_robot"], loop["query_id"], loop["candidate_robot"],
+                                   loop["candidate_id"],
+                                   "USED (in the pose graph)" if frozenset((q, c)) in edges
+                                   else "rejected (not in the pose graph)")
+
+
 def main():
-    ds, mp = sys.argv[1], sys.argv[2]
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("dataset")
+    p.add_argument("map")
+    p.add_argument("--false-loop", default="", help="inject_false_loop.py's CSV of the loop")
+    args = p.parse_args()
+    ds, mp = args.dataset, args.map
     gt = {r["id"]: [float(r[k]) for k in ("tx", "ty", "tz")]
           for r in csv.DictReader(open(ds + "/ground_truth.csv"))}
     subs = list(csv.DictReader(open(ds + "/submaps.csv")))
@@ -152,6 +179,8 @@ def main():
         print("%12d  %7d  %9.3f  %6.3f  %4d (%.1f %%)  %23.3f  %21.2f" % (
             st["listed"], st["matched"], st["precision"], st["recall"], st["duplicates"],
             100 * st["duplicate_rate"], st["pos"], 100 * st["dbh"]))
+    if args.false_loop:
+        print("false loop " + false_loop_verdict(mp, args.false_loop))
 
 
 if __name__ == "__main__":
