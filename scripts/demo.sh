@@ -100,7 +100,8 @@ INJECT_PID=""
 if [ "${DTIF_DEMO_FALSE_LOOP:-0}" = 1 ]; then
   HALF="$(/usr/bin/python3 -c 'import json, sys; print(max(1, json.load(open(sys.argv[1]))["accepted"] // 2))' \
     "${OUT}/eval/summary.json")"
-  echo "dtif demo: a false loop goes to /loop_closures after ${HALF} loops (${OUT}/ros/false_loop.csv)"
+  echo "dtif demo: a false loop goes to /loop_closures once ${HALF} loops, one of them between" \
+    "two robots, have come (${OUT}/ros/false_loop.csv)"
   /usr/bin/python3 "${DTIF_REPO}/scripts/inject_false_loop.py" --robots "${ROBOTS[@]}" \
     --after "${HALF}" --out "${OUT}/ros/false_loop.csv" > "${OUT}/ros/false_loop.log" 2>&1 &
   INJECT_PID=$!
@@ -164,6 +165,7 @@ if [ -f "${OUT}/ros/map/merged_poses.csv" ]; then
   if [ -n "${INJECT_PID}" ]; then
     if [ -f "${OUT}/ros/false_loop.csv" ]; then
       FALSE_LOOP_ARGS=(--false-loop "${OUT}/ros/false_loop.csv")
+      sed -n 's/^.*\]: \(false loop after\)/dtif demo: \1/p' "${OUT}/ros/false_loop.log"
     else
       echo "dtif demo: no false loop was injected (fewer loops than it waited for;" \
         "${OUT}/ros/false_loop.log)" >&2
