@@ -83,8 +83,9 @@ class Injector:
         """(candidate submap of ra, query submap of rb), the query later, farthest apart on the
         map; without paths in one frame: ra's first submap and rb's latest."""
         best, best_d = None, -1.0
+        queries = self.positions(rb)
         for c in self.positions(ra):
-            for q in self.positions(rb):
+            for q in queries:
                 if q[0] <= c[0] or q[3] != c[3]:
                     continue
                 d = math.dist(c[2], q[2])

@@ -97,9 +97,10 @@ struct FalseLoop {
     if (sent || m->query_robot == m->candidate_robot) return;
     double farthest = -1.0;
     Loop l;
-    for (const test::SeenSubmap& c : test::seenSubmaps(*ds, descriptors->all())) {
+    const std::vector<test::SeenSubmap> seen = test::seenSubmaps(*ds, descriptors->all());
+    for (const test::SeenSubmap& c : seen) {
       if (c.robot != m->candidate_robot) continue;
-      for (const test::SeenSubmap& q : test::seenSubmaps(*ds, descriptors->all())) {
+      for (const test::SeenSubmap& q : seen) {
         if (q.robot != m->query_robot || q.stamp <= c.stamp) continue;
         const double d =
             (ds->T_W_S.at(q.dataset_id).translation() - ds->T_W_S.at(c.dataset_id).translation())
