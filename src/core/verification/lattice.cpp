@@ -7,10 +7,11 @@
 #include <cstdint>
 #include <limits>
 #include <numeric>
+#include <utility>
 
-#include "dtif/core/cells.h"
 #include "dtif/core/pose/rigid2d.h"
 #include "dtif/core/robust.h"
+#include "dtif/core/verification/trunk_grid.h"
 
 namespace dtif {
 namespace {
@@ -103,90 +104,6 @@ std::vector<std::pair<int, size_t>> localMaxima(const std::vector<int>& around, 
   return peaks;
 }
 
-/// cellIndex(v) without the libm call (floor is not inlined for this target): the same value
-/// for every double, as truncation towards zero is floor for v >= 0 and one more for a
-/// negative v that is not an integer. quickFit's lookups are most of a lattice search.
-inline int64_t cellIndexInline(double v) {
-  if (std::isnan(v)) return 0;
-  if (v >= static_cast<double>(kMaxCellIndex)) return kMaxCellIndex;
-  if (v <= -static_cast<double>(kMaxCellIndex)) return -kMaxCellIndex;
-  const int64_t t = static_cast<int64_t>(v);
-  return t - static_cast<int64_t>(v < static_cast<double>(t));
-}
-
-/// Candidate trunk centres in a dense grid of square cells, for nearest-trunk lookups within a
-/// cell side. The trunks are stored cell by cell (row-major, each cell's trunks by descending
-/// index), so that a lookup reads three contiguous runs, one per row of its 3 x 3 cells, in
-/// the order a per-cell list of the trunks inserted by ascending index would give.
-class TrunkGrid {
- public:
-  TrunkGrid(const Descriptor& c, double cell) : cell_(cell) {
-    Eigen::Vector2d lo(std::numeric_limits<double>::infinity(),
-                       std::numeric_limits<double>::infinity());
-    std::vector<Eigen::Vector2d> xy;
-    for (const TrunkLandmark& t : c.trunks) {
-      xy.emplace_back(t.x, t.y);
-      lo = lo.cwiseMin(xy.back());
-    }
-    if (xy.empty()) return;
-    origin_ = lo - Eigen::Vector2d(cell, cell);  // a margin cell below
-    int64_t w = 0, h = 0;
-    for (const Eigen::Vector2d& p : xy) {
-      w = std::max(w, cellOf(p.x() - origin_.x()) + 2);
-      h = std::max(h, cellOf(p.y() - origin_.y()) + 2);
-    }
-    w_ = w, h_ = h;
-    std::vector<int64_t> cell_of(xy.size());
-    start_.assign(static_cast<size_t>(w_ * h_) + 1, 0);
-    for (size_t j = 0; j < xy.size(); ++j) {
-      cell_of[j] = cellOf(xy[j].y() - origin_.y()) * w_ + cellOf(xy[j].x() - origin_.x());
-      ++start_[static_cast<size_t>(cell_of[j]) + 1];
-    }
-    for (size_t k = 1; k < start_.size(); ++k) start_[k] += start_[k - 1];
-    std::vector<int> fill(start_.begin(), start_.end() - 1);
-    xy_.resize(xy.size());
-    index_.resize(xy.size());
-    for (size_t j = xy.size(); j-- > 0;) {  // descending index within each cell
-      const int slot = fill[static_cast<size_t>(cell_of[j])]++;
-      xy_[static_cast<size_t>(slot)] = xy[j];
-      index_[static_cast<size_t>(slot)] = static_cast<int>(j);
-    }
-    by_index_ = std::move(xy);
-  }
-  /// Squared distance from p to the nearest trunk within radius (<= the cell side); -1: none.
-  /// Ties go to the trunk visited last.
-  double nearest2(const Eigen::Vector2d& p, double radius, int* index) const {
-    *index = -1;
-    if (xy_.empty()) return -1.0;
-    const int64_t ix = cellOf(p.x() - origin_.x()), iy = cellOf(p.y() - origin_.y());
-    const int64_t x0 = std::max<int64_t>(ix - 1, 0), x1 = std::min(ix + 1, w_ - 1);
-    if (x0 > x1) return -1.0;
-    double best = radius * radius;
-    int slot = -1;
-    for (int64_t y = std::max<int64_t>(iy - 1, 0); y <= std::min(iy + 1, h_ - 1); ++y) {
-      const int end = start_[static_cast<size_t>(y * w_ + x1 + 1)];
-      for (int k = start_[static_cast<size_t>(y * w_ + x0)]; k < end; ++k) {
-        const double d = (xy_[static_cast<size_t>(k)] - p).squaredNorm();
-        if (d <= best) best = d, slot = k;
-      }
-    }
-    if (slot < 0) return -1.0;
-    *index = index_[static_cast<size_t>(slot)];
-    return best;
-  }
-  const Eigen::Vector2d& at(int j) const { return by_index_[static_cast<size_t>(j)]; }
-
- private:
-  int64_t cellOf(double v) const { return cellIndexInline(v / cell_); }
-  double cell_;
-  Eigen::Vector2d origin_ = Eigen::Vector2d::Zero();
-  int64_t w_ = 0, h_ = 0;
-  std::vector<int> start_;           // per cell its first slot; one more for the end
-  std::vector<Eigen::Vector2d> xy_;  // by slot
-  std::vector<int> index_;           // trunk index by slot
-  std::vector<Eigen::Vector2d> by_index_;
-};
-
 /// Pairs each trunk of `sample` under T with its nearest candidate trunk within `radius` (not
 /// mutual) into `pairs`, then refits T by one round of 2-D Procrustes on them (>= 2 pairs).
 Pose pairAndRefit(const std::vector<Eigen::Vector2d>& sample, const TrunkGrid& grid, Pose T,
@@ -247,7 +164,10 @@ std::vector<std::pair<double, Pose>> rankLatticePoses(const Descriptor& q, const
   const double radius = params.match_radius_m;
   const double score_radius = params.fit_score_radius_m;
   const double yaw0 = std::atan2(T0.linear()(1, 0), T0.linear()(0, 0));
-  const TrunkGrid grid(c, radius);
+  std::vector<Eigen::Vector2d> c_xy;
+  c_xy.reserve(c.trunks.size());
+  for (const TrunkLandmark& t : c.trunks) c_xy.emplace_back(t.x, t.y);
+  const TrunkGrid grid(std::move(c_xy), radius);
   std::vector<Eigen::Vector2d> sample;  // at most kSample query trunks, evenly over the list
   const size_t stride = (q.trunks.size() + kSample - 1) / kSample;
   for (size_t i = 0; i < q.trunks.size(); i += stride)

@@ -6,11 +6,11 @@
 #include <cstdint>
 #include <sstream>
 
-#include "dtif/core/cells.h"
 #include "dtif/core/extraction/footprint.h"
 #include "dtif/core/pose/rigid2d.h"
 #include "dtif/core/verification/elevation.h"
 #include "dtif/core/verification/lattice.h"
+#include "dtif/core/verification/trunk_grid.h"
 
 namespace dtif {
 namespace {
@@ -66,41 +66,23 @@ void coLocated(const std::vector<P2>& a, const std::vector<P2>& b, double radius
   }
 }
 
-/// Mutually nearest trunk pairs within `radius` under T_c_q. Ties go as in a scan of every
-/// (i, j) in index order that takes the later of equal distances: to the larger index.
-/// Candidates come from a sorted list of grid cells a little larger than `radius` (the pairs
-/// within it lie in the 3 x 3 cells around), not from all nq x nc pairs.
-std::vector<std::pair<int, int>> mutualPairs(const std::vector<P2>& pq, const std::vector<P2>& pc,
+/// Mutually nearest trunk pairs within `radius` (<= the grid's reach) of the placed query
+/// trunks pq and the candidate trunks in `grid`. Ties go as in a scan of every (i, j) in index
+/// order that takes the later of equal distances: to the larger index (the order in which a
+/// run lists the candidates does not matter).
+std::vector<std::pair<int, int>> mutualPairs(const std::vector<P2>& pq, const TrunkGrid& grid,
                                              double radius) {
   const double r2 = radius * radius;
-  const double cell = radius * (1.0 + 1e-6);
-  struct Cell {
-    int64_t iy, ix;
-    int j;
-    bool operator<(const Cell& o) const {
-      return iy != o.iy ? iy < o.iy : (ix != o.ix ? ix < o.ix : j < o.j);
-    }
-  };
-  std::vector<Cell> cells;
-  cells.reserve(pc.size());
-  for (size_t j = 0; j < pc.size(); ++j) {
-    cells.push_back(
-        {cellIndex(pc[j].y() / cell), cellIndex(pc[j].x() / cell), static_cast<int>(j)});
-  }
-  std::sort(cells.begin(), cells.end());
-  std::vector<int> nq(pq.size(), -1), nc(pc.size(), -1);
-  std::vector<double> dc(pc.size(), r2);
+  std::vector<int> nq(pq.size(), -1), nc(grid.size(), -1);
+  std::vector<double> dc(grid.size(), r2);
   for (size_t i = 0; i < pq.size(); ++i) {
-    const int64_t iy = cellIndex(pq[i].y() / cell), ix = cellIndex(pq[i].x() / cell);
+    const TrunkGrid::Run run = grid.near(pq[i]);
     double best = r2;
-    for (int64_t y = iy - 1; y <= iy + 1; ++y) {
-      auto it = std::lower_bound(cells.begin(), cells.end(), Cell{y, ix - 1, -1});
-      for (; it != cells.end() && it->iy == y && it->ix <= ix + 1; ++it) {
-        const int j = it->j;
-        const double d = (pq[i] - pc[j]).squaredNorm();
-        if (d < best || (d == best && j > nq[i])) best = d, nq[i] = j;
-        if (d <= dc[j]) dc[j] = d, nc[j] = static_cast<int>(i);
-      }
+    for (int m = 0; m < run.size; ++m) {
+      const int j = run.index[m];
+      const double d = (pq[i] - run.xy[m]).squaredNorm();
+      if (d < best || (d == best && j > nq[i])) best = d, nq[i] = j;
+      if (d <= dc[j]) dc[j] = d, nc[j] = static_cast<int>(i);
     }
   }
   std::vector<std::pair<int, int>> out;
@@ -339,9 +321,10 @@ Refined guidedRefine(const Descriptor& q, const Descriptor& c, const Pose& T0, d
   Refined out;
   out.T = T0;
   const std::vector<P2> pc = xyOf(c.trunks);
+  const TrunkGrid grid(pc, radius);
   for (int it = 0; it < 5; ++it) {
     const std::vector<P2> pq = placedXy(q.trunks, out.T);
-    std::vector<std::pair<int, int>> pairs = mutualPairs(pq, pc, radius);
+    std::vector<std::pair<int, int>> pairs = mutualPairs(pq, grid, radius);
     if (pairs.size() < 2) break;
     if (pairs == out.pairs) break;
     out.pairs = pairs;
@@ -359,12 +342,13 @@ bool refineOnOwnTrunks(const Descriptor& q, const Descriptor& c, const VerifierP
   const Trunks& tq = q.observedTrunks();
   const Trunks& tc = c.observedTrunks();
   const std::vector<P2> pc = xyOf(tc);
+  const TrunkGrid grid(pc, params.own_match_radius_m);
   Pose T = v->T_c_q;
   std::vector<std::pair<int, int>> pairs;
   std::vector<PointPair2d> pts;
   for (int it = 0; it < 5; ++it) {
     const std::vector<P2> pq = placedXy(tq, T);
-    std::vector<std::pair<int, int>> now = mutualPairs(pq, pc, params.own_match_radius_m);
+    std::vector<std::pair<int, int>> now = mutualPairs(pq, grid, params.own_match_radius_m);
     if (static_cast<int>(now.size()) < params.own_min_pairs) return false;
     if (now == pairs) break;
     pairs = std::move(now);
