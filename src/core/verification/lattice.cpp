@@ -20,13 +20,24 @@ using P2 = Eigen::Vector2d;
 
 /// Votes of every (query, candidate) trunk pair for a translation, in square bins with one
 /// empty bin of margin on each side (the 3 x 3 neighbourhoods stay inside the array).
+/// The buffers are kept from one vote to the next (threadVotes): ~1 MB, four times a search.
 struct TranslationVotes {
   static constexpr double kBin = 0.5;  ///< bin side [m]
   double x0 = 0.0, y0 = 0.0;           ///< lower corner [m]
   size_t w = 0, h = 0;                 ///< bins per row, rows
   std::vector<int> n;                  ///< votes per bin
   std::vector<Eigen::Vector2d> sum;    ///< sum of the voted translations per bin [m]
+  std::vector<int> around;             ///< votes per 3 x 3 neighbourhood (neighbourhoodVotes)
+  std::vector<int> row3;               ///< votes per 1 x 3 neighbourhood (neighbourhoodVotes)
 };
+
+/// This thread's vote buffers: a lattice search votes four times, a query up to
+/// max_lattice_searches times. Out of line, so that the votes' loops do not look the
+/// thread-local up again at every vote.
+[[gnu::noinline]] TranslationVotes& threadVotes() {
+  thread_local TranslationVotes v;
+  return v;
+}
 
 /// Votes c_j - rq_i; false when the bins would exceed a bound on memory.
 bool voteTranslations(const std::vector<Eigen::Vector2d>& rq, const Descriptor& c,
@@ -54,33 +65,40 @@ bool voteTranslations(const std::vector<Eigen::Vector2d>& rq, const Descriptor& 
   v->x0 = x0, v->y0 = y0, v->w = w, v->h = h;
   v->n.assign(w * h, 0);
   v->sum.assign(w * h, Eigen::Vector2d::Zero());
+  int* n = v->n.data();
+  Eigen::Vector2d* sum = v->sum.data();
   for (const TrunkLandmark& b : c.trunks) {
     for (const Eigen::Vector2d& p : rq) {
       const Eigen::Vector2d t = Eigen::Vector2d(b.x, b.y) - p;
       const size_t k =
           static_cast<size_t>((t.y() - y0) / kBin) * w + static_cast<size_t>((t.x() - x0) / kBin);
-      ++v->n[k];
-      v->sum[k] += t;
+      ++n[k];
+      sum[k] += t;
     }
   }
   return true;
 }
 
-/// Votes in each bin's 3 x 3 neighbourhood (0 on the margin); `top` receives the highest.
-std::vector<int> neighbourhoodVotes(const TranslationVotes& v, int* top) {
-  const size_t w = v.w, h = v.h;
-  std::vector<int> around(w * h, 0);
+/// Votes in each bin's 3 x 3 neighbourhood into v->around (0 on the margin), as a sum of
+/// three rows of three; `top` receives the highest.
+void neighbourhoodVotes(TranslationVotes* v, int* top) {
+  const size_t w = v->w, h = v->h;
+  const int* n = v->n.data();
+  v->around.assign(w * h, 0);
+  v->row3.resize(w * h);  // only the inner columns are read
+  int* around = v->around.data();
+  int* row3 = v->row3.data();
+  for (size_t y = 0; y < h; ++y)
+    for (size_t x = 1; x + 1 < w; ++x)
+      row3[y * w + x] = n[y * w + x - 1] + n[y * w + x] + n[y * w + x + 1];
   *top = 0;
   for (size_t y = 1; y + 1 < h; ++y) {
     for (size_t x = 1; x + 1 < w; ++x) {
-      int a = 0;
-      for (size_t yy = y - 1; yy <= y + 1; ++yy)
-        for (size_t xx = x - 1; xx <= x + 1; ++xx) a += v.n[yy * w + xx];
+      const int a = row3[(y - 1) * w + x] + row3[y * w + x] + row3[(y + 1) * w + x];
       around[y * w + x] = a;
       *top = std::max(*top, a);
     }
   }
-  return around;
 }
 
 /// (votes, bin) of the local maxima of `around` with at least floor_votes (ties: first bin).
@@ -140,9 +158,17 @@ std::pair<double, Pose> quickFit(const std::vector<Eigen::Vector2d>& sample, con
 /// lookup per sample trunk (about half of quickFit's cost). The two differ only where the refit
 /// moves a trunk onto another nearest one; on the plantation replay (seeds 1-3, 204 searches)
 /// quickFit's best pose ranked first here in 95 % of the searches and 167th at worst.
-double coarseFit(const std::vector<Eigen::Vector2d>& sample, const TrunkGrid& grid, const Pose& T0,
-                 double radius, double score_radius, std::vector<std::pair<P2, P2>>* scratch) {
-  const Pose T = pairAndRefit(sample, grid, T0, radius, scratch);
+double coarseFit(const std::vector<Eigen::Vector2d>& sample, const std::vector<P2>& turned,
+                 const TrunkGrid& grid, const Pose& T0, double radius, double score_radius,
+                 std::vector<std::pair<P2, P2>>* scratch) {
+  scratch->clear();
+  const P2 shift = T0.translation().head<2>();
+  for (size_t i = 0; i < sample.size(); ++i) {
+    int j = -1;
+    grid.nearest2(turned[i] + shift, radius, &j);
+    if (j >= 0) scratch->emplace_back(sample[i], grid.at(j));
+  }
+  const Pose T = scratch->size() >= 2 ? rigid2d(*scratch, T0.translation().z()) : T0;
   double score = 0.0;
   for (const auto& [a, b] : *scratch)
     score += tukeyWeightOfSquare(
@@ -179,12 +205,17 @@ std::vector<std::pair<double, Pose>> rankLatticePoses(const Descriptor& q, const
   for (int turn = 0; turn < 4; ++turn) {
     const double yaw = yaw0 + turn * M_PI / 2.0;
     const Eigen::Matrix2d R = Eigen::Rotation2Dd(yaw).toRotationMatrix();
+    Pose turn_only = Pose::Identity();
+    turn_only.linear() = rotZ(yaw);
+    std::vector<P2> turned;
+    for (const P2& s : sample)
+      turned.push_back((turn_only * Eigen::Vector3d(s.x(), s.y(), 0.0)).head<2>());
     for (const Eigen::Vector2d& t : translationPeaks(q, c, R, params.min_inliers, kPeaksPerTurn)) {
       Pose T = Pose::Identity();
       T.linear() = rotZ(yaw);
       T.translation() = Eigen::Vector3d(t.x(), t.y(), T0.translation().z());
       coarse.emplace_back(
-          refine_all ? 0.0 : coarseFit(sample, grid, T, radius, score_radius, &pairs), T);
+          refine_all ? 0.0 : coarseFit(sample, turned, grid, T, radius, score_radius, &pairs), T);
     }
   }
   // The best `refine` by coarseFit; equal scores in the order of the peaks (turn, then votes).
@@ -236,10 +267,11 @@ std::vector<Eigen::Vector2d> translationPeaks(const Descriptor& q, const Descrip
   std::vector<Eigen::Vector2d> rq;
   for (const TrunkLandmark& a : q.trunks) rq.push_back(R * Eigen::Vector2d(a.x, a.y));
   if (rq.empty() || c.trunks.empty()) return {};
-  TranslationVotes v;
+  TranslationVotes& v = threadVotes();
   if (!voteTranslations(rq, c, &v)) return {};
   int top = 0;
-  const std::vector<int> around = neighbourhoodVotes(v, &top);
+  neighbourhoodVotes(&v, &top);
+  const std::vector<int>& around = v.around;
   // A site pairing under a third of the trunks that the best-paired site pairs cannot beat it
   // by the margin that verification demands (max_fit_ambiguity): a true site scores up to ~0.9
   // per pair, a wrong one ~0.2 (fit_score_radius_m 0.2 m, 0.15 m jitter).
