@@ -513,16 +513,32 @@ class SupportCounts {
 /// [first, second). A pair whose longest edges disagree could still give weak support through
 /// e2/e3 in Alg. 1; dtif drops that evidence on purpose: such edge-only coincidences are the
 /// bulk of random support.
-std::pair<size_t, size_t> lengthWindow(const std::vector<float>& len0, double l,
-                                       const MatcherParams& params) {
-  const double rel = params.edge_rel_tol, abs_tol = params.edge_abs_tol_m;
-  const double lo = std::min(l - abs_tol, l * (1.0 - rel));
-  const double hi = std::max(l + abs_tol, l / (1.0 - rel));
-  const auto from =
-      std::lower_bound(len0.begin(), len0.end(), lo, [](float x, double v) { return x < v; });
-  const auto to = std::upper_bound(from, len0.end(), hi, [](double v, float x) { return v < x; });
-  return {static_cast<size_t>(from - len0.begin()), static_cast<size_t>(to - len0.begin())};
-}
+/// The query triangles come sorted by longest edge too, and both bounds grow with l, so each
+/// window starts where the last one did and slides forward: a few steps instead of two binary
+/// searches (a mispredicted branch per halving) per query triangle. Any l below the last one
+/// is searched afresh; the windows are the same either way.
+class LengthWindows {
+ public:
+  LengthWindows(const std::vector<float>& len0, const MatcherParams& params)
+      : len0_(len0), rel_(params.edge_rel_tol), abs_(params.edge_abs_tol_m) {}
+  std::pair<size_t, size_t> operator()(double l) {
+    const double lo = std::min(l - abs_, l * (1.0 - rel_));
+    const double hi = std::max(l + abs_, l / (1.0 - rel_));
+    const size_t n = len0_.size();
+    if (!(l >= last_)) from_ = 0, to_ = 0;  // NaN too: from the start
+    last_ = l;
+    while (from_ < n && len0_[from_] < lo) ++from_;
+    to_ = std::max(to_, from_);
+    while (to_ < n && !(hi < len0_[to_])) ++to_;
+    return {from_, to_};
+  }
+
+ private:
+  const std::vector<float>& len0_;
+  double rel_, abs_;
+  double last_ = -std::numeric_limits<double>::infinity();
+  size_t from_ = 0, to_ = 0;
+};
 
 /// f(k, m[k]) for every k < n with m[k] != 0, in order. With SSE2, the nonzero bytes of 16 at
 /// a time become bits, visited lowest first: no branch per byte (about one mask byte in ten is
@@ -572,9 +588,10 @@ VertexSupport accumulateSupport(const std::vector<MatchTriangle>& tq,
   SupportScratch& scratch = supportScratch();
   SupportCounts counts(&scratch.packed, &sup);
   scratch.cols.assign(tc);
+  LengthWindows window_of(scratch.cols.v[0], params);
   for (size_t i = 0; i < tq.size(); ++i) {
     const MatchTriangle& mq = tq[i];
-    const auto [from, to] = lengthWindow(scratch.cols.v[0], mq.t.len[0], params);
+    const auto [from, to] = window_of(mq.t.len[0]);
     *triangle_pairs += to - from;
     if (!bounds[i].exact) {
       for (size_t j = from; j < to; ++j) {
