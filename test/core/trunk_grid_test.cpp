@@ -57,23 +57,22 @@ TEST(TrunkGrid, RunsHoldEveryTrunkWithinReachAndNearestMatchesAScan) {
   std::mt19937 rng(7);
   const double reach = 0.4;
   const std::vector<P2> xy = randomTrunks(&rng, 400, 40.0);
-  const TrunkGrid grid(xy, reach);
-  ASSERT_EQ(grid.size(), xy.size());
   std::uniform_real_distribution<double> u(-21.0, 21.0), near(-0.45, 0.45);
-  for (int k = 0; k < 4000; ++k) {
-    // Half the probes close to a trunk, so that most lookups find one.
-    const P2 p = k % 2 ? P2(u(rng), u(rng))
-                       : xy[static_cast<size_t>(k) % xy.size()] + P2(near(rng), near(rng));
-    expectRunHoldsAllWithin(grid, xy, p, reach);
-    for (const double radius : {reach, 0.25}) {
-      int j = -2;
-      const double d2 = grid.nearest2(p, radius, &j);
-      const int expected = nearestByScan(xy, p, radius);
-      ASSERT_EQ(j, expected);
-      if (j >= 0)
-        EXPECT_EQ(d2, (xy[static_cast<size_t>(j)] - p).squaredNorm());
-      else
-        EXPECT_EQ(d2, -1.0);
+  // Cells of side reach (lattice search), and coarser ones (~4 per trunk: 1 m here).
+  for (const double cells_per_trunk : {0.0, 4.0}) {
+    const TrunkGrid grid(xy, reach, cells_per_trunk);
+    ASSERT_EQ(grid.size(), xy.size());
+    for (int k = 0; k < 4000; ++k) {
+      // Half the probes close to a trunk, so that most lookups find one.
+      const P2 p = k % 2 ? P2(u(rng), u(rng))
+                         : xy[static_cast<size_t>(k) % xy.size()] + P2(near(rng), near(rng));
+      expectRunHoldsAllWithin(grid, xy, p, reach);
+      for (const double radius : {reach, 0.25}) {
+        int j = -2;
+        const double d2 = grid.nearest2(p, radius, &j);
+        ASSERT_EQ(j, nearestByScan(xy, p, radius));
+        EXPECT_EQ(d2, j >= 0 ? (xy[static_cast<size_t>(j)] - p).squaredNorm() : -1.0);
+      }
     }
   }
 }
@@ -85,16 +84,18 @@ TEST(TrunkGrid, ProbesOnCellBordersFindTrunksAtTheReach) {
   std::vector<P2> xy;
   for (int i = 0; i < 6; ++i)
     for (int k = 0; k < 6; ++k) xy.emplace_back(i * reach, k * 1.3 * reach);
-  const TrunkGrid grid(xy, reach);
-  for (const P2& t : xy) {
-    for (const double dx : {-reach, -0.5 * reach, 0.0, 0.5 * reach, reach}) {
-      for (const double dir : {-1.0, 0.0, 1.0}) {
-        P2 p = t + P2(dx, 0.0);
-        p.x() = std::nextafter(p.x(), p.x() + dir);
-        expectRunHoldsAllWithin(grid, xy, p, reach);
-        p = t + P2(0.0, dx);
-        p.y() = std::nextafter(p.y(), p.y() + dir);
-        expectRunHoldsAllWithin(grid, xy, p, reach);
+  for (const double cells_per_trunk : {0.0, 1.0}) {
+    const TrunkGrid grid(xy, reach, cells_per_trunk);
+    for (const P2& t : xy) {
+      for (const double dx : {-reach, -0.5 * reach, 0.0, 0.5 * reach, reach}) {
+        for (const double dir : {-1.0, 0.0, 1.0}) {
+          P2 p = t + P2(dx, 0.0);
+          p.x() = std::nextafter(p.x(), p.x() + dir);
+          expectRunHoldsAllWithin(grid, xy, p, reach);
+          p = t + P2(0.0, dx);
+          p.y() = std::nextafter(p.y(), p.y() + dir);
+          expectRunHoldsAllWithin(grid, xy, p, reach);
+        }
       }
     }
   }

@@ -16,8 +16,8 @@ namespace {
 constexpr double kMaxCellsPerSide = 2048.0;
 }  // namespace
 
-TrunkGrid::TrunkGrid(std::vector<Eigen::Vector2d> xy, double reach)
-    : cell_(reach), inv_cell_(1.0 / reach), by_index_(std::move(xy)) {
+TrunkGrid::TrunkGrid(std::vector<Eigen::Vector2d> xy, double reach, double cells_per_trunk)
+    : reach_(reach), cell_(reach), inv_cell_(1.0 / reach), by_index_(std::move(xy)) {
   constexpr double kInf = std::numeric_limits<double>::infinity();
   Eigen::Vector2d lo(kInf, kInf), hi(-kInf, -kInf);
   for (const Eigen::Vector2d& p : by_index_) lo = lo.cwiseMin(p), hi = hi.cwiseMax(p);
@@ -26,7 +26,12 @@ TrunkGrid::TrunkGrid(std::vector<Eigen::Vector2d> xy, double reach)
     by_index_.clear();  // no trunks, or none that a grid can hold: every lookup finds none
     return;
   }
-  if (span / cell_ > kMaxCellsPerSide) cell_ = span / kMaxCellsPerSide, inv_cell_ = 1.0 / cell_;
+  double cell = reach;
+  if (cells_per_trunk > 0.0)
+    cell =
+        std::max(cell, span / std::sqrt(cells_per_trunk * static_cast<double>(by_index_.size())));
+  cell = std::max(cell, span / kMaxCellsPerSide);
+  cell_ = cell, inv_cell_ = 1.0 / cell;
   // Two empty margin cells below and above: a point outside the grid is then more than a
   // cell side from every trunk, whichever way the cell borders round.
   origin_ = lo - Eigen::Vector2d(2.0 * cell_, 2.0 * cell_);
@@ -56,10 +61,10 @@ std::vector<int> TrunkGrid::scanOrder() const {
   return order;
 }
 
-/// Lists, per cell, the trunks within a cell side (plus a margin) of its square, visiting the
-/// trunks in scan order so that every run keeps it.
+/// Lists, per cell, the trunks within reach (plus a margin) of its square, visiting the trunks
+/// in scan order so that every run keeps it.
 void TrunkGrid::listNeighbours(const std::vector<int>& order) {
-  const double reach = cell_ * (1.0 + 1e-9) + 1e-9;
+  const double reach = reach_ * (1.0 + 1e-9) + 1e-9;
   const auto each_near = [&](const Eigen::Vector2d& p, auto&& visit) {
     const Eigen::Vector2d g = p - origin_;
     const int64_t cx = cellOf(g.x()), cy = cellOf(g.y());

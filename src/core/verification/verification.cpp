@@ -66,6 +66,10 @@ void coLocated(const std::vector<P2>& a, const std::vector<P2>& b, double radius
   }
 }
 
+/// A refinement looks up each query trunk at most five times: a grid of about as many cells
+/// as trunks costs less to build than a fine one, at a few more trunks per lookup.
+constexpr double kRefineCellsPerTrunk = 4.0;
+
 /// Mutually nearest trunk pairs within `radius` (<= the grid's reach) of the placed query
 /// trunks pq and the candidate trunks in `grid`. Ties go as in a scan of every (i, j) in index
 /// order that takes the later of equal distances: to the larger index (the order in which a
@@ -321,7 +325,7 @@ Refined guidedRefine(const Descriptor& q, const Descriptor& c, const Pose& T0, d
   Refined out;
   out.T = T0;
   const std::vector<P2> pc = xyOf(c.trunks);
-  const TrunkGrid grid(pc, radius);
+  const TrunkGrid grid(pc, radius, kRefineCellsPerTrunk);
   for (int it = 0; it < 5; ++it) {
     const std::vector<P2> pq = placedXy(q.trunks, out.T);
     std::vector<std::pair<int, int>> pairs = mutualPairs(pq, grid, radius);
@@ -342,7 +346,7 @@ bool refineOnOwnTrunks(const Descriptor& q, const Descriptor& c, const VerifierP
   const Trunks& tq = q.observedTrunks();
   const Trunks& tc = c.observedTrunks();
   const std::vector<P2> pc = xyOf(tc);
-  const TrunkGrid grid(pc, params.own_match_radius_m);
+  const TrunkGrid grid(pc, params.own_match_radius_m, kRefineCellsPerTrunk);
   Pose T = v->T_c_q;
   std::vector<std::pair<int, int>> pairs;
   std::vector<PointPair2d> pts;

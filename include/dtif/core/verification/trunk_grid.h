@@ -13,15 +13,20 @@ namespace dtif {
 class TrunkGrid {
  public:
   /// The trunks within `reach` [m] of a cell's square, in the order a scan of its 3 x 3 cells
-  /// would meet them (rows, then columns, then descending trunk index within a cell).
+  /// would meet them (rows, then columns, then descending trunk index within a cell). Cells
+  /// are never smaller than reach, so those 3 x 3 cells hold every such trunk.
   struct Run {
     const Eigen::Vector2d* xy = nullptr;
     const int* index = nullptr;
     int size = 0;
   };
 
-  /// xy: trunk centres, indexed as given; reach > 0: the largest lookup radius [m].
-  TrunkGrid(std::vector<Eigen::Vector2d> xy, double reach);
+  /// xy: trunk centres, indexed as given; reach > 0: the largest lookup radius [m], and the
+  /// cell side. cells_per_trunk > 0 coarsens the cells to about that many per trunk over the
+  /// trunks' extent (never below reach): a grid for a few hundred lookups then costs less to
+  /// build than its lookups, at a few more trunks per run. 0: cells of side reach, for the
+  /// ~10^5 lookups of a lattice search.
+  TrunkGrid(std::vector<Eigen::Vector2d> xy, double reach, double cells_per_trunk = 0.0);
 
   /// Every trunk within `reach` of p, and possibly some farther ones.
   Run near(const Eigen::Vector2d& p) const {
@@ -58,7 +63,7 @@ class TrunkGrid {
   std::vector<int> scanOrder() const;
   void listNeighbours(const std::vector<int>& order);
 
-  double cell_, inv_cell_;
+  double reach_, cell_, inv_cell_;
   Eigen::Vector2d origin_ = Eigen::Vector2d::Zero();
   int64_t w_ = 0, h_ = 0;
   std::vector<int> start_;                 // per cell its first run entry; one more for the end
