@@ -288,6 +288,9 @@ std::vector<Eigen::Vector2d> translationPeaks(const Descriptor& q, const Descrip
       for (size_t xx = k % w - 1; xx <= k % w + 1; ++xx) t += v.sum[yy * w + xx];
     out.push_back(t / static_cast<double>(votes));
   }
+  // Submap pairs vote into ~10^5 bins; an outsized pair's buffers are not held on to.
+  constexpr size_t kKeptBins = size_t{1} << 20;
+  if (v.n.capacity() > kKeptBins) v = TranslationVotes{};
   return out;
 }
 
