@@ -79,9 +79,11 @@ int collect(const std::string& out, const std::vector<std::string>& dirs) {
     const std::string tag = sceneTag(dir);
     const dtif::Dataset ds = dtif::readDataset(dir);
     size_t n = 0;
+    // The observer's loops are ignored; `auto...` takes them as every build since 7bc3e70
+    // passes them (one loop, or the best and an inter-robot one), so that
+    // scripts/build_before.sh can build this probe against the earlier commits too.
     dtif::runEvaluation(ds, params, dtif::EvalParams{}, {},
-                        [&](const dtif::Descriptor& d, const std::optional<dtif::Loop>&,
-                            const std::optional<dtif::Loop>&) {
+                        [&](const dtif::Descriptor& d, const auto&...) {
                           auto c = std::make_shared<dtif::Descriptor>(d);
                           c->robot = tag + "_" + d.robot;
                           n += all.insert(c);
