@@ -31,6 +31,7 @@
 #include <sstream>
 #include <thread>
 
+#include "dtif/io/csv.h"
 #include "dtif/io/dataset.h"
 #include "dtif/io/merge_files.h"
 #include "dtif/ros/msgs.h"
@@ -135,13 +136,8 @@ bool inSavedGraph(const fs::path& map_dir, const Loop& l) {
   std::string line;
   std::getline(ids, line);  // id,chain,robot,submap_id,stamp
   while (std::getline(ids, line)) {
-    std::stringstream row(line);
-    std::string id, chain, robot, submap;
-    std::getline(row, id, ',');
-    std::getline(row, chain, ',');
-    std::getline(row, robot, ',');
-    std::getline(row, submap, ',');
-    graph_id[{robot, std::stoll(submap)}] = id;
+    const std::vector<std::string> cell = splitCsvLine(line);
+    if (cell.size() >= 4) graph_id[{cell[2], std::stoll(cell[3])}] = cell[0];
   }
   const std::string q = graph_id[{l.query_robot, l.query_id}];
   const std::string c = graph_id[{l.candidate_robot, l.candidate_id}];
