@@ -349,6 +349,58 @@ TEST(MatcherStages, WeightedCorrespondencesKeepSupportedPairsHeaviestFirst) {
   EXPECT_EQ(top[1].iq, 2);  // 1 + 0.25 log 6 > 1 + 0.25 log 4
 }
 
+// The heaviest K by a full sort of all supported pairs (weight, then index): the definition
+// the histogram cut of weightedCorrespondences must reproduce exactly.
+std::vector<std::pair<int, int>> heaviestBySort(const matcher_stages::VertexSupport& sup,
+                                                const MatcherParams& p) {
+  std::vector<std::pair<double, uint32_t>> all;
+  for (uint32_t k : sup.touched) {
+    const int s = sup.strong[k], w = sup.weak[k];
+    if (s > 0 || w > p.weak_support_min)
+      all.emplace_back(1.0 + p.alpha_s * std::log1p(s) + p.alpha_w * std::log1p(w), k);
+  }
+  std::sort(all.begin(), all.end(), [](const auto& a, const auto& b) {
+    return a.first != b.first ? a.first > b.first : a.second < b.second;
+  });
+  all.resize(std::min(all.size(), static_cast<size_t>(p.max_correspondences)));
+  std::vector<std::pair<int, int>> out;
+  for (const auto& [w, k] : all) out.emplace_back(k / sup.nc, k % sup.nc);
+  return out;
+}
+
+TEST(MatcherStages, WeightedCorrespondencesCutMatchesAFullSort) {
+  // Many pairs of few distinct counts (ties at every cut, as in a lattice stand), some counts
+  // of 64 and more (outside the histogram), and cuts from 1 to more than all pairs.
+  HandCase h;
+  std::mt19937 rng(7);
+  matcher_stages::VertexSupport sup;
+  sup.nq = 334;  // 2,004 vertex pairs
+  sup.nc = 6;
+  sup.strong.assign(sup.nq * sup.nc, 0);
+  sup.weak.assign(sup.nq * sup.nc, 0);
+  for (size_t k = 0; k < sup.strong.size(); ++k) {
+    if (rng() % 5 == 0) continue;  // untouched
+    const uint32_t r = rng() % 100;
+    sup.strong[k] = static_cast<uint16_t>(r < 50 ? 0 : r < 97 ? rng() % 4 : 60 + rng() % 300);
+    sup.weak[k] = static_cast<uint16_t>(r == 98 ? 64 + rng() % 2000 : rng() % 8);
+    if (sup.strong[k] || sup.weak[k]) sup.touched.push_back(static_cast<uint32_t>(k));
+  }
+  // HandCase's descriptors hold 3 and 6 trunks; the correspondences' indices are what is
+  // compared here, so the trunks are repeated to cover every index.
+  h.q.trunks.resize(sup.nq, h.q.trunks[0]);
+  h.c.trunks.resize(sup.nc, h.c.trunks[0]);
+  MatcherParams p;
+  for (int keep : {1, 2, 17, 400, 1000, 1500, 100000}) {
+    p.max_correspondences = keep;
+    const auto got = matcher_stages::weightedCorrespondences(sup, h.q, h.c, p);
+    const auto want = heaviestBySort(sup, p);
+    ASSERT_EQ(got.size(), want.size()) << "keep " << keep;
+    for (size_t i = 0; i < got.size(); ++i) {
+      ASSERT_EQ(std::make_pair(got[i].iq, got[i].ic), want[i]) << "keep " << keep << " rank " << i;
+    }
+  }
+}
+
 TEST(Matcher, ParamsValidate) {
   EXPECT_EQ(MatcherParams{}.validate(), "");
   MatcherParams p;

@@ -613,42 +613,151 @@ VertexSupport accumulateSupport(const std::vector<MatchTriangle>& tq,
   return sup;
 }
 
+namespace {
+
+/// Eqs. (3.8)-(3.9) for a vertex pair's support counts (s, w): whether the pair counts, and
+/// its weight. log1p of the small counts comes from a table: the same values without a libm
+/// call per pair.
+class SupportWeight {
+ public:
+  explicit SupportWeight(const MatcherParams& p)
+      : alpha_s_(p.alpha_s), alpha_w_(p.alpha_w), weak_min_(p.weak_support_min) {}
+  bool counts(int s, int w) const { return (s > 0) | (w > weak_min_); }  // no branch
+  double operator()(int s, int w) const { return 1.0 + alpha_s_ * log1p(s) + alpha_w_ * log1p(w); }
+
+ private:
+  static double log1p(int n) {
+    static const std::array<double, 256> kTable = [] {
+      std::array<double, 256> t{};
+      for (size_t i = 0; i < t.size(); ++i) t[i] = std::log1p(static_cast<double>(i));
+      return t;
+    }();
+    return n < static_cast<int>(kTable.size()) ? kTable[static_cast<size_t>(n)]
+                                               : std::log1p(static_cast<double>(n));
+  }
+  double alpha_s_, alpha_w_;
+  int weak_min_;
+};
+
+/// Which supported pairs are among the `keep` heaviest (Eq. 3.10; ties by index, so the choice
+/// is total): decided per pair of counts (s, w) from a histogram of the counts, as a pair's
+/// weight is a function of its counts. A selection among the pairs themselves cost more: a
+/// lattice stand's candidate has ~15,000 supported pairs, all of counts below 64, of which
+/// 400 are kept. Pairs are then asked in index order (kept()).
+class HeaviestPairs {
+ public:
+  HeaviestPairs(const VertexSupport& sup, const SupportWeight& weight, size_t keep)
+      : sup_(sup), weight_(weight), code_(sup.touched.size()), verdict_(kCodes, kDrop) {
+    std::vector<uint32_t> hist(kCodes, 0);
+    std::vector<double> large;  // weights of counts of kSide and more
+    for (size_t i = 0; i < sup.touched.size(); ++i) {
+      const uint32_t k = sup.touched[i];
+      const int s = sup.strong[k], w = sup.weak[k];
+      uint16_t c = kUncounted;
+      if (s >= kSide || w >= kSide) {
+        if (weight.counts(s, w)) large.push_back(weight(s, w)), c = kLarge;
+      } else {
+        // No branch (a coin toss here): the cell when the pair counts, else kUncounted.
+        const int counted = weight.counts(s, w);
+        c = static_cast<uint16_t>(kUncounted + counted * (cell(s, w) - int{kUncounted}));
+      }
+      code_[i] = c;
+      ++hist[c];
+    }
+    verdict_[kLarge] = kWeigh;
+    if (sup.touched.size() - hist[kUncounted] <= keep) {
+      std::fill(verdict_.begin(), verdict_.begin() + kUncounted, kTake);
+      verdict_[kLarge] = kTake;
+      return;
+    }
+    cutAt(levels(hist, large), keep);
+    for (int s = 0; s < kSide; ++s) {
+      for (int w = 0; w < kSide; ++w) {
+        if (!hist[cell(s, w)]) continue;
+        verdict_[cell(s, w)] = verdictOf(weight(s, w));
+      }
+    }
+  }
+  /// Whether sup.touched[i] is kept; ask in order of i (the ties go to the first ones).
+  bool kept(size_t i) {
+    uint8_t v = verdict_[code_[i]];
+    if (v == kWeigh) {
+      const uint32_t k = sup_.touched[i];
+      v = verdictOf(weight_(sup_.strong[k], sup_.weak[k]));
+    }
+    if (v != kTie) return v == kTake;
+    if (ties_ == 0) return false;
+    --ties_;
+    return true;
+  }
+
+ private:
+  static constexpr int kSide = 64;
+  // Codes of a pair: its cell (s, w) below kSide, or one of these.
+  static constexpr uint16_t kUncounted = kSide * kSide, kLarge = kUncounted + 1;
+  static constexpr size_t kCodes = kLarge + 1;
+  enum : uint8_t { kDrop, kTake, kTie, kWeigh };
+  static uint16_t cell(int s, int w) { return static_cast<uint16_t>(s * kSide + w); }
+  uint8_t verdictOf(double x) const { return x > cut_ ? kTake : x == cut_ ? kTie : kDrop; }
+  /// (weight, pairs) of the counted pairs, heaviest first.
+  std::vector<std::pair<double, size_t>> levels(const std::vector<uint32_t>& hist,
+                                                const std::vector<double>& large) const {
+    std::vector<std::pair<double, size_t>> out;
+    for (int s = 0; s < kSide; ++s) {
+      for (int w = 0; w < kSide; ++w) {
+        if (hist[cell(s, w)]) out.emplace_back(weight_(s, w), hist[cell(s, w)]);
+      }
+    }
+    for (const double x : large) out.emplace_back(x, 1);
+    std::sort(out.begin(), out.end(),
+              [](const auto& a, const auto& b) { return a.first > b.first; });
+    return out;
+  }
+  /// The weight of the keep-th heaviest pair, and how many of that weight are kept.
+  void cutAt(const std::vector<std::pair<double, size_t>>& levels, size_t keep) {
+    size_t above = 0;
+    for (size_t i = 0; i < levels.size();) {
+      size_t n = 0, j = i;
+      for (; j < levels.size() && levels[j].first == levels[i].first; ++j) n += levels[j].second;
+      if (above + n >= keep) {
+        cut_ = levels[i].first;
+        ties_ = keep - above;
+        return;
+      }
+      above += n;
+      i = j;
+    }
+  }
+  const VertexSupport& sup_;
+  const SupportWeight& weight_;
+  std::vector<uint16_t> code_;    // per touched pair
+  std::vector<uint8_t> verdict_;  // per code
+  double cut_ = 0.0;
+  size_t ties_ = 0;
+};
+
+}  // namespace
+
 std::vector<Correspondence> weightedCorrespondences(const VertexSupport& support,
                                                     const Descriptor& query,
                                                     const Descriptor& candidate,
                                                     const MatcherParams& params) {
-  // (omega, flat index) of the supported pairs; only the kept ones become Correspondences.
+  const SupportWeight weight(params);
+  const size_t max_keep = static_cast<size_t>(params.max_correspondences);
+  HeaviestPairs heaviest(support, weight, max_keep);
+  // (omega, flat index) of the kept pairs, in index order, then heaviest first (Eq. 3.10); the
+  // flat index orders by query, then candidate trunk, so the order is total and deterministic.
   std::vector<std::pair<double, uint32_t>> weighted;
-  weighted.reserve(support.touched.size());
-  // log1p of the small counts, computed once: the same values, without a libm call per pair.
-  static const std::array<double, 256> kLog1p = [] {
-    std::array<double, 256> t{};
-    for (size_t n = 0; n < t.size(); ++n) t[n] = std::log1p(static_cast<double>(n));
-    return t;
-  }();
-  const auto log1p = [](int n) {
-    return n < static_cast<int>(kLog1p.size()) ? kLog1p[static_cast<size_t>(n)]
-                                               : std::log1p(static_cast<double>(n));
-  };
-  for (uint32_t k : support.touched) {
-    const int s = support.strong[k], w = support.weak[k];
-    if (!(s > 0 || w > params.weak_support_min)) continue;  // Eq. (3.8)
-    // Eq. (3.9)
-    weighted.emplace_back(1.0 + params.alpha_s * log1p(s) + params.alpha_w * log1p(w), k);
+  weighted.reserve(std::min(support.touched.size(), max_keep));
+  for (size_t i = 0; i < support.touched.size(); ++i) {
+    if (!heaviest.kept(i)) continue;
+    const uint32_t k = support.touched[i];
+    weighted.emplace_back(weight(support.strong[k], support.weak[k]), k);
   }
-  // Eq. (3.10), heaviest first; ties by index (the flat index orders by query, then candidate
-  // trunk) so the order is total and deterministic (the heaviest K sorted are then the first K
-  // of the whole list sorted).
-  // The order is strict (indices differ), so selecting the heaviest K and then sorting them
-  // gives partial_sort's result, in O(n + K log K) rather than O(n log K) (thousands of pairs
-  // in a lattice stand).
-  const size_t keep = std::min(weighted.size(), static_cast<size_t>(params.max_correspondences));
-  const auto heavier = [](const auto& a, const auto& b) {
+  std::sort(weighted.begin(), weighted.end(), [](const auto& a, const auto& b) {
     return a.first != b.first ? a.first > b.first : a.second < b.second;
-  };
-  if (keep < weighted.size())
-    std::nth_element(weighted.begin(), weighted.begin() + keep, weighted.end(), heavier);
-  std::sort(weighted.begin(), weighted.begin() + keep, heavier);
+  });
+  const size_t keep = weighted.size();
   std::vector<Correspondence> out(keep);
   const size_t nc = support.nc;
   for (size_t i = 0; i < keep; ++i) {
