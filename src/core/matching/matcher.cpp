@@ -456,7 +456,7 @@ __attribute__((noinline)) SupportScratch& supportScratch() {
 class SupportCounts {
  public:
   SupportCounts(std::vector<uint32_t>* table, VertexSupport* sup)
-      : sup_(*sup), n_(sup_.nq * sup_.nc) {
+      : sup_(*sup), nc_(sup_.nc), n_(sup_.nq * sup_.nc) {
     if (table->size() < n_) table->resize(n_, 0);
     packed_ = table->data();
   }
@@ -467,16 +467,11 @@ class SupportCounts {
   /// support to its three vertex pairs, else weak support to the ends of its consistent edges.
   /// Masks other than 0 and 7 come from pairs of Delaunay faces only: neighbour triangles share
   /// their edges many times over, and their partial matches would pile up weak support.
+  /// Every vertex pair gets its increment of the mask (kIncrements) at once, without a branch
+  /// per mask or edge: which edges agree follows no pattern.
   void add(const Triangle& q, const Triangle& c, int m) {
-    if (m == 7) {
-      for (int a = 0; a < 3; ++a) bump(kStrong, q.v[a], c.v[a]);  // Eq. (3.6)
-      return;
-    }
-    for (int a = 0; a < 3; ++a) {  // Eq. (3.7)
-      if (!(m & (1 << a))) continue;
-      bump(kWeak, q.v[kEdgeEnds[a][0]], c.v[kEdgeEnds[a][0]]);
-      bump(kWeak, q.v[kEdgeEnds[a][1]], c.v[kEdgeEnds[a][1]]);
-    }
+    const std::array<uint32_t, 3>& inc = kIncrements[m];
+    for (int j = 0; j < 3; ++j) bump(static_cast<size_t>(q.v[j]) * nc_ + c.v[j], inc[j]);
   }
   /// The counts into sup (touched: the non-zero entries by index), without branches.
   void out() {
@@ -497,14 +492,28 @@ class SupportCounts {
   }
 
  private:
-  static constexpr int kStrong = 0, kWeak = 16;  // the count's shift in a packed word
-  void bump(int shift, int iq, int ic) {
-    const size_t k = static_cast<size_t>(iq) * sup_.nc + ic;
+  /// Per mask, the packed increment (strong | weak << 16) of each vertex pair: Eq. (3.6) for
+  /// mask 7, else Eq. (3.7), one weak count per consistent edge the vertex ends.
+  static constexpr std::array<std::array<uint32_t, 3>, 8> kIncrements = [] {
+    std::array<std::array<uint32_t, 3>, 8> t{};
+    for (int m = 1; m < 8; ++m) {
+      for (int a = 0; a < 3; ++a) {
+        if (m == 7) t[m][a] = 1;
+        if (m == 7 || !(m & (1 << a))) continue;
+        t[m][kEdgeEnds[a][0]] += 1u << 16, t[m][kEdgeEnds[a][1]] += 1u << 16;
+      }
+    }
+    return t;
+  }();
+  /// Both counts of entry k raised by inc, each saturating at 65535 (as one count at a time).
+  void bump(size_t k, uint32_t inc) {
     const uint32_t v = packed_[k];
-    if ((v >> shift & 0xffffu) != 0xffffu) packed_[k] = v + (1u << shift);  // saturates
+    const uint32_t s = std::min((v & 0xffffu) + (inc & 0xffffu), 0xffffu);
+    const uint32_t w = std::min((v >> 16) + (inc >> 16), 0xffffu);
+    packed_[k] = s | w << 16;
   }
   VertexSupport& sup_;
-  size_t n_;
+  size_t nc_, n_;
   uint32_t* packed_ = nullptr;
   bool done_ = false;
 };
