@@ -246,9 +246,12 @@ int scale(const std::string& db, const std::vector<size_t>& sizes) {
       const bool found = det.query(*q, &qs).has_value();
       loops += found;
       t.push_back(cpuMs() - t0);
-      std::fprintf(stderr, "query %zu %s/%lld %.3f ms matched %zu loop %d\n", size,
-                   q->robot.c_str(), static_cast<long long>(q->submap_id), t.back(), qs.matched,
-                   static_cast<int>(found));
+      std::fprintf(stderr,
+                   "query %zu %s/%lld %.3f ms matched %zu loop %d (correspondences %.3f, solver "
+                   "%.3f, verification %.3f ms; %zu lattice searches)\n",
+                   size, q->robot.c_str(), static_cast<long long>(q->submap_id), t.back(),
+                   qs.matched, static_cast<int>(found), qs.match_ms, qs.solver_ms, qs.verify_ms,
+                   qs.lattice_searches);
       screen += qs.screen_ms, match += qs.match_ms, solver += qs.solver_ms;
       verify += qs.verify_ms, matched += static_cast<double>(qs.matched);
     }
