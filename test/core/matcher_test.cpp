@@ -320,6 +320,35 @@ TEST(MatcherStages, AccumulateSupportCountsStrongAndWeakVertexSupport) {
   for (uint16_t w : sup_nb.weak) EXPECT_EQ(w, 0);
 }
 
+TEST(MatcherStages, AccumulateSupportCountsExactlyAndSaturatesAt65535) {
+  // n copies of the query's triangle against n of the candidate's same triangle (strong, every
+  // vertex pair n^2 times) or of its other one (weak through e1 and e2: vertex 0 ends both, so it
+  // gets 2 n^2, vertices 1 and 2 get n^2). The counts are exact below 65535 and stop there.
+  HandCase h;
+  const MatcherParams p;
+  const MatchTriangle q{makeCanonicalTriangle(h.q.trunks, 0, 1, 2), true};
+  const MatchTriangle same{makeCanonicalTriangle(h.c.trunks, 0, 1, 2), true};
+  const MatchTriangle other{makeCanonicalTriangle(h.c.trunks, 3, 4, 5), true};
+  auto at = [](const std::vector<uint16_t>& m, int iq, int ic) { return m[iq * 6 + ic]; };
+  for (const int n : {100, 150, 200, 300}) {
+    const std::vector<MatchTriangle> tq(n, q), tc_same(n, same), tc_other(n, other);
+    const auto expect = [](uint64_t v) {
+      return static_cast<uint16_t>(std::min<uint64_t>(v, 65535));
+    };
+    const uint64_t n2 = static_cast<uint64_t>(n) * n;
+    size_t pairs = 0;
+    const auto strong = matcher_stages::accumulateSupport(tq, tc_same, 3, 6, p, &pairs);
+    for (int v = 0; v < 3; ++v) {
+      EXPECT_EQ(at(strong.strong, q.t.v[v], same.t.v[v]), expect(n2)) << n;
+    }
+    const auto weak = matcher_stages::accumulateSupport(tq, tc_other, 3, 6, p, &pairs);
+    EXPECT_EQ(at(weak.weak, q.t.v[0], other.t.v[0]), expect(2 * n2)) << n;
+    EXPECT_EQ(at(weak.weak, q.t.v[1], other.t.v[1]), expect(n2)) << n;
+    EXPECT_EQ(at(weak.weak, q.t.v[2], other.t.v[2]), expect(n2)) << n;
+    EXPECT_EQ(at(weak.strong, q.t.v[0], other.t.v[0]), 0) << n;
+  }
+}
+
 TEST(MatcherStages, WeightedCorrespondencesKeepSupportedPairsHeaviestFirst) {
   HandCase h;
   MatcherParams p;  // weak_support_min = 2

@@ -455,8 +455,9 @@ __attribute__((noinline)) SupportScratch& supportScratch() {
 /// lattice stands' counts mispredicted (a first touch is a coin toss there).
 class SupportCounts {
  public:
-  SupportCounts(std::vector<uint32_t>* table, VertexSupport* sup)
-      : sup_(*sup), nc_(sup_.nc), n_(sup_.nq * sup_.nc) {
+  /// `saturating`: whether a count could reach 65535 (else plain adds give the same values).
+  SupportCounts(std::vector<uint32_t>* table, VertexSupport* sup, bool saturating)
+      : sup_(*sup), nc_(sup_.nc), n_(sup_.nq * sup_.nc), saturating_(saturating) {
     if (table->size() < n_) table->resize(n_, 0);
     packed_ = table->data();
   }
@@ -507,6 +508,10 @@ class SupportCounts {
   }();
   /// Both counts of entry k raised by inc, each saturating at 65535 (as one count at a time).
   void bump(size_t k, uint32_t inc) {
+    if (!saturating_) {
+      packed_[k] += inc;
+      return;
+    }
     const uint32_t v = packed_[k];
     const uint32_t s = std::min((v & 0xffffu) + (inc & 0xffffu), 0xffffu);
     const uint32_t w = std::min((v >> 16) + (inc >> 16), 0xffffu);
@@ -514,9 +519,22 @@ class SupportCounts {
   }
   VertexSupport& sup_;
   size_t nc_, n_;
+  bool saturating_;
   uint32_t* packed_ = nullptr;
   bool done_ = false;
 };
+
+/// The most triangles of `tri` that any one of the n trunks is a vertex of.
+uint64_t mostTrianglesPerTrunk(const std::vector<MatchTriangle>& tri, size_t n) {
+  std::vector<uint32_t> per(n, 0);
+  uint32_t most = 0;
+  for (const MatchTriangle& m : tri) {
+    for (const int v : m.t.v) {
+      if (v >= 0 && static_cast<size_t>(v) < n) most = std::max(most, ++per[v]);
+    }
+  }
+  return most;
+}
 
 /// The candidate triangles (sorted by len[0]) whose longest edge can pass Cons_l with l:
 /// [first, second). A pair whose longest edges disagree could still give weak support through
@@ -595,7 +613,10 @@ VertexSupport accumulateSupport(const std::vector<MatchTriangle>& tq,
   sup.nq = nq;
   sup.nc = nc;
   SupportScratch& scratch = supportScratch();
-  SupportCounts counts(&scratch.packed, &sup);
+  // A vertex pair's count rises at most once per pair of triangles that hold its two trunks,
+  // by at most 2 (weak: a vertex ends two edges). Below 65535 that way, no count saturates.
+  const uint64_t reach = 2 * mostTrianglesPerTrunk(tq, nq) * mostTrianglesPerTrunk(tc, nc);
+  SupportCounts counts(&scratch.packed, &sup, reach >= 0xffffu);
   scratch.cols.assign(tc);
   LengthWindows window_of(scratch.cols.v[0], params);
   for (size_t i = 0; i < tq.size(); ++i) {
