@@ -191,6 +191,33 @@ TEST(PoseStages, TimsSkipSharedTrunksCoincidentPointsAndLengthMismatches) {
   EXPECT_DOUBLE_EQ(tims[1].w, 6.0);  // sqrt(4 * 9)
 }
 
+TEST(PoseStages, TimsKeptExactlyWhenTheirLengthsDifferByAtMostBeta) {
+  // Length differences within 1e-7 m of beta_R, lengths from 1 m to 10 km, random directions:
+  // a TIM is kept exactly when |hypot(d^q) - hypot(d^c)| <= beta_R, whatever shortcut decides
+  // the far ones first.
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  const PoseEstimatorParams p;
+  const std::vector<double> w{1.0, 1.0};
+  int kept = 0;
+  for (int trial = 0; trial < 100000; ++trial) {
+    const double len = std::pow(10.0, 4.0 * unit(rng));
+    const double diff = p.beta_yaw_m + (unit(rng) - 0.5) * 2e-7;
+    const double a = 2.0 * M_PI * unit(rng), b = 2.0 * M_PI * unit(rng);
+    const Eigen::Vector3d q(len * std::cos(a), len * std::sin(a), 0.0);
+    const double lc = len + (trial % 2 ? diff : -diff);
+    const Eigen::Vector3d c(lc * std::cos(b), lc * std::sin(b), 0.0);
+    const std::vector<Correspondence> corrs{corr(0, 0, {0, 0, 0}, {0, 0, 0}), corr(1, 1, q, c)};
+    const bool want =
+        std::fabs(std::hypot(q.x(), q.y()) - std::hypot(c.x(), c.y())) <= p.beta_yaw_m;
+    const size_t got = pose_stages::translationInvariantMeasurements(corrs, w, p).size();
+    ASSERT_EQ(got, want ? 1u : 0u) << "trial " << trial;
+    kept += want;
+  }
+  EXPECT_GT(kept, 40000);  // both sides of the boundary are exercised
+  EXPECT_LT(kept, 60000);
+}
+
 TEST(PoseStages, EstimateYawIsExactOnCleanTimsAndReportsConsensus) {
   std::mt19937 rng(11);
   const Pose T = test::poseXyYaw(4.0, -2.0, 0.0, -2.5);

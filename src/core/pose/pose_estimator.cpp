@@ -261,6 +261,7 @@ std::vector<Tim> translationInvariantMeasurements(const std::vector<Corresponden
                                                   const PoseEstimatorParams& params) {
   const int k = static_cast<int>(corrs.size());
   const double beta_r = params.beta_yaw_m;
+  const double far2 = 2.0 * (beta_r + 1e-6) * (beta_r + 1e-6);  // see the length test below
   const int64_t total_pairs = static_cast<int64_t>(k) * (k - 1) / 2;
   std::vector<Tim> tims;
   tims.reserve(std::min<int64_t>(total_pairs, params.max_tim_pairs));
@@ -272,8 +273,12 @@ std::vector<Tim> translationInvariantMeasurements(const std::vector<Corresponden
     const double cx = corrs[a].pc.x() - corrs[b].pc.x(), cy = corrs[a].pc.y() - corrs[b].pc.y();
     // Most TIMs fail the length test below by far: decided on sqrt, which is within a few
     // ulps of hypot (the margin), before the costlier hypot that the kept ones are measured by
-    // (and before their weight's sqrt).
-    const double sq = std::sqrt(qx * qx + qy * qy), sc = std::sqrt(cx * cx + cy * cy);
+    // (and before their weight's sqrt). Before that, without a square root: |√Q - √C| is at
+    // least |Q - C| / √(2 (Q + C)), so beyond `far` the sqrt test fails too. Its 1e-6 m of
+    // margin covers that test's 1e-12 (1 + √Q + √C) for lengths below 10^5 m and the rounding.
+    const double qq = qx * qx + qy * qy, cc = cx * cx + cy * cy;
+    if (qq + cc < 1e10 && (qq - cc) * (qq - cc) > far2 * (qq + cc)) return;
+    const double sq = std::sqrt(qq), sc = std::sqrt(cc);
     if (std::fabs(sq - sc) > beta_r + 1e-12 * (1.0 + sq + sc)) return;
     const double lq = std::hypot(qx, qy), lc = std::hypot(cx, cy);
     if (lq < 1e-9 || lc < 1e-9) return;
