@@ -165,6 +165,31 @@ long ransacCircle(const std::vector<Eigen::Vector2d>& xy, const CircleFitParams&
   return best_score;
 }
 
+// The Gauss-Newton normal equations of a step, A = sum w J J^T and g = sum w J e with
+// J = (jx, jy, -1): the lower triangle of A, as Eigen's A += w * J * J.transpose() sums it
+// (element (i, j) adds (w J_i) J_j), and g's (w J_i) e. In scalars: Eigen's stores of the
+// products to the stack stalled the next point's loads (store forwarding). LDLT reads only the
+// lower triangle.
+struct NormalSums {
+  double a00 = 0.0, a10 = 0.0, a20 = 0.0, a11 = 0.0, a21 = 0.0, a22 = 0.0;
+  double g0 = 0.0, g1 = 0.0, g2 = 0.0;
+
+  // One point: distance d to the centre, residual e, Tukey weight w, Jacobian (jx, jy).
+  void add(double d, double e, double w, double jx, double jy) {
+    if (d < 1e-9 || w <= 0.0) return;
+    const double wx = w * jx, wy = w * jy, wz = -w;  // w * J (J_2 = -1: exact)
+    a00 += wx * jx, a10 += wy * jx, a20 += wz * jx;
+    a11 += wy * jy, a21 += wz * jy, a22 += w;  // wz * -1 = w exactly
+    g0 += wx * e, g1 += wy * e, g2 += wz * e;
+  }
+  Eigen::Matrix3d a() const {
+    Eigen::Matrix3d m;
+    m << a00, a10, a20, a10, a11, a21, a20, a21, a22;
+    return m;
+  }
+  Eigen::Vector3d g() const { return Eigen::Vector3d(g0, g1, g2); }
+};
+
 // Per point of a Gauss-Newton step about the circle (cx, cy, r): distance d to the centre,
 // residual e = d - r, Tukey weight w (constant c) and the Jacobian's (jx, jy) = -(dx, dy) / d.
 struct PointTerms {
@@ -205,6 +230,15 @@ void pointTerms(const std::vector<Eigen::Vector2d>& xy, double cx, double cy, do
     t->d[m] = d, t->e[m] = d - r, t->w[m] = tukeyWeight(d - r, c);
     t->jx[m] = -dx / d, t->jy[m] = -dy / d;
   }
+}
+
+// The normal equations of the terms' points, in point order.
+NormalSums normalSums(const PointTerms& t, size_t n) {
+  NormalSums s;
+  const double *d = t.d.data(), *e = t.e.data(), *w = t.w.data();
+  const double *jx = t.jx.data(), *jy = t.jy.data();
+  for (size_t m = 0; m < n; ++m) s.add(d[m], e[m], w[m], jx[m], jy[m]);
+  return s;
 }
 
 // The points a Gauss-Newton step can weigh, in their order: those within c_tukey + kSlack of
@@ -258,16 +292,9 @@ Circle refineCircle(const std::vector<Eigen::Vector2d>& xy, const Circle& start,
   for (int it = 0; it < 15; ++it) {
     near.update(xy, cx, cy, r, c_tukey);
     pointTerms(near.xy, cx, cy, r, c_tukey, &t);
-    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
-    Eigen::Vector3d g = Eigen::Vector3d::Zero();
-    for (size_t m = 0; m < near.xy.size(); ++m) {
-      if (t.d[m] < 1e-9) continue;
-      const double e = t.e[m], w = t.w[m];
-      if (w <= 0.0) continue;
-      const Eigen::Vector3d J(t.jx[m], t.jy[m], -1.0);
-      A += w * J * J.transpose();
-      g += w * J * e;
-    }
+    const NormalSums sums = normalSums(t, near.xy.size());
+    Eigen::Matrix3d A = sums.a();
+    const Eigen::Vector3d g = sums.g();
     if (A.trace() <= 0.0) break;
     A.diagonal() *= 1.0 + 1e-6;  // damping keeps a near-singular arc well posed
     const Eigen::Vector3d step = -A.ldlt().solve(g);
