@@ -577,20 +577,29 @@ StemBase stemBase(const LocalPoints& /*pts: read through grid.sorted*/,
 void fitCandidate(const LocalPoints& pts, const std::vector<float>& h, const GroundGrid& grid,
                   const TrunkCandidates& cand, int l, const TrunkExtractorParams& p,
                   std::vector<FoundTrunk>* found, TrunkExtractionStats* st) {
-  std::vector<Eigen::Vector2d> band;
-  std::vector<float> h_band;
+  // The candidate's points in the fit band, in candidate order. Branch-free (every point
+  // written, the count advanced by the test): a point's height follows no pattern.
+  thread_local std::vector<Eigen::Vector2d> band_of_thread;  // kept between candidates
+  thread_local std::vector<float> h_band_of_thread;
+  std::vector<Eigen::Vector2d>& band = band_of_thread;
+  std::vector<float>& h_band = h_band_of_thread;
   const uint32_t* idx = cand.points.data() + cand.start[l];
   const size_t np = cand.start[l + 1] - cand.start[l];
+  band.resize(np), h_band.resize(np);
+  Eigen::Vector2d* bp = band.data();
+  float* hp = h_band.data();
+  const double lo = p.fit_min_h_m, hi = p.fit_max_h_m;
+  size_t nb = 0;
   for (size_t k = 0; k < np; ++k) {
     prefetchGather(h.data(), idx, k, np), prefetchGather(pts.x.data(), idx, k, np);
     prefetchGather(pts.y.data(), idx, k, np);
     const uint32_t i = idx[k];
-    const double hi = h[i];
-    if (hi >= p.fit_min_h_m && hi <= p.fit_max_h_m) {
-      band.emplace_back(pts.x[i], pts.y[i]);
-      h_band.push_back(h[i]);
-    }
+    const float hk = h[i];
+    bp[nb] = Eigen::Vector2d(pts.x[i], pts.y[i]);
+    hp[nb] = hk;
+    nb += (hk >= lo) & (hk <= hi);
   }
+  band.resize(nb), h_band.resize(nb);
   CircleFitParams cfp = circleFitParams(p);
   for (int attempt = 0; attempt < p.max_fits_per_candidate; ++attempt) {
     if (band.size() < static_cast<size_t>(p.min_fit_points)) break;
