@@ -91,30 +91,35 @@ struct Circle {
 // Inliers minus inside points among the scored points m0..m1-1 of a hypothesis (squared
 // distances to its centre against in_lo, in_hi, inside). Two lanes at a time where SSE2 is: the
 // same IEEE operations per point (x86-64 has no fused multiply-add here), so the same counts.
+// The lanes' counts stay in a register: a comparison's mask is -1 per lane, so adding the
+// inside mask and subtracting the inlier mask counts inliers minus inside points.
 long scoreBlock(const double* sx, const double* sy, size_t m0, size_t m1, double cx, double cy,
                 double in_lo, double in_hi, double inside) {
-  int64_t in = 0, out = 0;
+  int64_t score = 0;
   size_t m = m0;
 #ifdef __SSE2__
   const __m128d vcx = _mm_set1_pd(cx), vcy = _mm_set1_pd(cy);
   const __m128d vlo = _mm_set1_pd(in_lo), vhi = _mm_set1_pd(in_hi), vin = _mm_set1_pd(inside);
+  __m128i lanes = _mm_setzero_si128();  // inliers minus inside points, per lane
   for (; m + 2 <= m1; m += 2) {
     const __m128d dx = _mm_sub_pd(_mm_loadu_pd(sx + m), vcx);
     const __m128d dy = _mm_sub_pd(_mm_loadu_pd(sy + m), vcy);
     const __m128d d2 = _mm_add_pd(_mm_mul_pd(dx, dx), _mm_mul_pd(dy, dy));
-    const int inl = _mm_movemask_pd(_mm_and_pd(_mm_cmpgt_pd(d2, vlo), _mm_cmplt_pd(d2, vhi)));
-    const int ins = _mm_movemask_pd(_mm_cmplt_pd(d2, vin));
-    in += (inl & 1) + (inl >> 1);  // two-bit masks (popcount is a call on baseline x86-64)
-    out += (ins & 1) + (ins >> 1);
+    const __m128d inl = _mm_and_pd(_mm_cmpgt_pd(d2, vlo), _mm_cmplt_pd(d2, vhi));
+    const __m128d ins = _mm_cmplt_pd(d2, vin);
+    lanes = _mm_add_epi64(lanes, _mm_sub_epi64(_mm_castpd_si128(ins), _mm_castpd_si128(inl)));
   }
+  int64_t lane[2];
+  _mm_storeu_si128(reinterpret_cast<__m128i*>(lane), lanes);
+  score += lane[0] + lane[1];
 #endif
   for (; m < m1; ++m) {
     const double dx = sx[m] - cx, dy = sy[m] - cy;
     const double d2 = dx * dx + dy * dy;
-    in += static_cast<int64_t>((d2 > in_lo) & (d2 < in_hi));
-    out += static_cast<int64_t>(d2 < inside);
+    score += static_cast<int64_t>((d2 > in_lo) & (d2 < in_hi));
+    score -= static_cast<int64_t>(d2 < inside);
   }
-  return static_cast<long>(in - out);
+  return static_cast<long>(score);
 }
 
 // RANSAC over 3-point circles with an adaptive stop. Score: inliers minus points well inside
