@@ -11,6 +11,7 @@
 #endif
 
 #include "dtif/core/extraction/extraction_stages.h"
+#include "dtif/core/extraction/lazy_mt19937.h"
 #include "dtif/core/extraction/trunk_extractor.h"
 #include "dtif/core/robust.h"
 
@@ -128,7 +129,7 @@ long ransacCircle(const std::vector<Eigen::Vector2d>& xy, const CircleFitParams&
                   Circle* best) {
   const size_t n = xy.size();
   const size_t stride = std::max<size_t>(1, n / static_cast<size_t>(params.score_points));
-  std::mt19937 rng(params.seed);
+  LazyMt19937 rng(params.seed);  // std::mt19937(params.seed)'s numbers
   std::uniform_int_distribution<size_t> pick(0, n - 1);
   const double tol = params.inlier_m;
   long best_score = -1;
