@@ -208,6 +208,38 @@ TEST(ExtractionStages, ColumnsAndCandidatesOfTwoCylinders) {
   EXPECT_EQ(clusterColumns(slabColumns(pts, h, wide), wide).count, 1);
 }
 
+// A failing column joins the candidate of its first passing neighbour in the order (dy, dx) =
+// (-1, -1), (-1, 0), ..., (1, 1), whichever candidate is numbered first; through the dense grid
+// and through the hash.
+TEST(ExtractionStages, FailingColumnJoinsItsFirstPassingNeighbour) {
+  // Columns 0 and 1 pass, two cells apart (separate candidates at a one-cell gap); 2 fails and
+  // touches both, 1 at (dx, dy) = (1, -1), 0 at (-1, 0); 3 fails and touches only 0; 4 fails,
+  // alone.
+  const std::vector<std::pair<int64_t, int64_t>> cells = {{1, 1}, {3, 0}, {2, 1}, {0, 2}, {6, 2}};
+  TrunkExtractorParams p;
+  p.cluster_gap_m = 0.1;
+  for (const bool dense : {true, false}) {
+    VoxelColumns cols;
+    if (dense) cols.gw = 7, cols.gh = 3, cols.grid.assign(21, -1);
+    cols.index = CellHash(cells.size());
+    for (size_t c = 0; c < cells.size(); ++c) {
+      cols.ix.push_back(cells[c].first), cols.iy.push_back(cells[c].second);
+      cols.pass.push_back(c < 2);
+      cols.slab.push_back(static_cast<uint32_t>(10 + c));
+      cols.slab_col.push_back(static_cast<int>(c));
+      if (dense) cols.grid[cells[c].second * 7 + cells[c].first] = static_cast<int>(c);
+      bool inserted;
+      if (!dense)
+        cols.index.findOrInsert(cellKey(cells[c].first, cells[c].second), static_cast<int>(c),
+                                &inserted);
+    }
+    const TrunkCandidates cand = clusterColumns(cols, p);
+    ASSERT_EQ(cand.count, 2);
+    EXPECT_EQ(cand.start, (std::vector<uint32_t>{0, 2, 4}));
+    EXPECT_EQ(cand.points, (std::vector<uint32_t>{10, 13, 11, 12})) << "dense " << dense;
+  }
+}
+
 // The heights pass that also selects the slab gives the heights and the slab (in point order)
 // of the separate stages, and its columns are slabColumns'.
 TEST(ExtractionStages, HeightsAndSlabInOnePassMatchTheSeparateStages) {
