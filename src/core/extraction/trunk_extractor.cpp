@@ -160,10 +160,11 @@ void checkDensity(const TrunkExtractorParams& p, Checks* c) {
 // What lies around a stem of local centre (cx, cy) and radius r. The arrays only grow (kept per
 // thread between stems); the counts say how much of them is filled.
 struct BaseRing {
-  std::vector<double> bx, by, bz;  // ground points of the ring (|h| <= base_max_dh_m) [m]
-  size_t ground = 0;               // their count
-  std::vector<uint32_t> ring;      // every point over the ring, by its place in grid.sorted
-  size_t over = 0;                 // their count
+  std::vector<double> bx, by, bz;   // ground points of the ring (|h| <= base_max_dh_m) [m]
+  std::vector<uint32_t> on_ground;  // the same, by their place in grid.sorted
+  size_t ground = 0;                // their count
+  std::vector<uint32_t> ring;       // every point over the ring, by its place in grid.sorted
+  size_t over = 0;                  // their count
   double stem_low = std::numeric_limits<double>::infinity();  // lowest stem point [m]
 
   void clear() {
@@ -172,8 +173,16 @@ struct BaseRing {
   }
   // Room for n more points of each kind: the gathering writes every point and keeps some.
   void room(size_t n) {
-    if (bx.size() < ground + n) bx.resize(ground + n), by.resize(ground + n), bz.resize(ground + n);
+    if (on_ground.size() < ground + n) on_ground.resize(ground + n);
     if (ring.size() < over + n) ring.resize(over + n);
+  }
+  // The ground points' coordinates, from their places (a few of the points gathered).
+  void groundPoints(const GroundGrid& grid) {
+    if (bx.size() < ground) bx.resize(ground), by.resize(ground), bz.resize(ground);
+    for (size_t g = 0; g < ground; ++g) {
+      const GroundGrid::SortedPoint& q = grid.sorted[on_ground[g]];
+      bx[g] = q.x, by[g] = q.y, bz[g] = q.z;
+    }
   }
 };
 
@@ -197,18 +206,17 @@ struct RingTests {
   double x0, y0;
 };
 
-// A ring point written at every point, kept by the count: its index, and its coordinates as the
-// ground's (they are kept only when it is on the ground). stem_low: the lowest stem point.
+// Point k written at every point as a ring point and as a ground point, kept by the counts.
+// stem_low: the lowest stem point.
 struct RingOut {
-  double *bx, *by, *bz;
-  uint32_t* ring;
+  uint32_t *ground_at, *ring;
   size_t ground, over;
   double stem_low;
 
-  void put(uint32_t k, double x, double y, double z, bool in_ring, bool on_ground) {
+  void put(uint32_t k, bool in_ring, bool on_ground) {
     ring[over] = k;
     over += in_ring;
-    bx[ground] = x, by[ground] = y, bz[ground] = z;
+    ground_at[ground] = k;
     ground += in_ring & on_ground;
   }
 };
@@ -248,9 +256,8 @@ uint32_t gatherPairs(const GroundGrid::SortedPoint* sorted, size_t ns, uint32_t 
                                   _mm_mul_pd(vc, _mm_sub_pd(y, vy0)));
     const __m128 h = _mm_and_ps(_mm_cvtpd_ps(_mm_sub_pd(z, at)), abs_mask);
     const int high = _mm_movemask_pd(_mm_cmpgt_pd(_mm_cvtps_pd(h), vdh));
-    out->put(k, _mm_cvtsd_f64(x), _mm_cvtsd_f64(y), _mm_cvtsd_f64(z), in_ring & 1, !(high & 1));
-    out->put(k + 1, _mm_cvtsd_f64(_mm_unpackhi_pd(x, x)), _mm_cvtsd_f64(_mm_unpackhi_pd(y, y)),
-             _mm_cvtsd_f64(_mm_unpackhi_pd(z, z)), in_ring >> 1, !(high >> 1));
+    out->put(k, in_ring & 1, !(high & 1));
+    out->put(k + 1, in_ring >> 1, !(high >> 1));
   }
   const double lane_low = std::min(_mm_cvtsd_f64(low), _mm_cvtsd_f64(_mm_unpackhi_pd(low, low)));
   out->stem_low = std::min(out->stem_low, lane_low);
@@ -267,8 +274,7 @@ void gatherCell(const GroundGrid& grid, size_t c, RingTests t, BaseRing* b) {
   // gather from the height array, in point order.
   t.pl = grid.plane[c];
   grid.cellCentre(c, &t.x0, &t.y0);
-  RingOut out{b->bx.data(), b->by.data(), b->bz.data(), b->ring.data(),
-              b->ground,    b->over,      b->stem_low};
+  RingOut out{b->on_ground.data(), b->ring.data(), b->ground, b->over, b->stem_low};
   const GroundGrid::SortedPoint* sorted = grid.sorted.data();
   constexpr double kInf = std::numeric_limits<double>::infinity();
   for (uint32_t k = gatherPairs(sorted, grid.sorted.size(), k0, k1, t, &out); k < k1; ++k) {
@@ -280,7 +286,7 @@ void gatherCell(const GroundGrid& grid, size_t c, RingTests t, BaseRing* b) {
     out.stem_low = std::min(out.stem_low, d2 < t.r_stem2 ? static_cast<double>(q.z) : kInf);
     const bool in_ring = (d2 >= t.r_in2) & (d2 <= t.r_out2);  // d2 is never NaN
     const float h = static_cast<float>(q.z - t.pl.at(q.x - t.x0, q.y - t.y0));
-    out.put(k, q.x, q.y, q.z, in_ring, !(std::abs(h) > t.max_dh));
+    out.put(k, in_ring, !(std::abs(h) > t.max_dh));
   }
   b->ground = out.ground, b->over = out.over, b->stem_low = out.stem_low;
 }
@@ -302,6 +308,7 @@ void gatherBaseRing(const GroundGrid& grid, double cx, double cy, double r,
       gatherCell(grid, static_cast<size_t>(gy) * grid.nx + gx, t, b);
     }
   }
+  b->groundPoints(grid);
 }
 
 // Removes the fit's inliers from the band (and their heights) before the next attempt.
