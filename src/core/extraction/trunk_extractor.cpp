@@ -239,9 +239,11 @@ uint32_t gatherPairs(const GroundGrid::SortedPoint* sorted, size_t ns, uint32_t 
   __m128d low = inf;
   for (; k + 2 <= k1; k += 2) {
     prefetchAhead(sorted, k, ns);  // the row's next cells
-    // (x0, y0, z0, x1) and (y1, z1): the pair's 24 bytes, nothing past them.
+    // (x0, y0, z0, x1) and (y1, z1): the pair's 24 bytes, nothing past them (the 8 bytes
+    // through __m128i, which may alias floats, not through a double).
     const __m128 p = _mm_loadu_ps(&sorted[k].x);
-    const __m128 q = _mm_castpd_ps(_mm_load_sd(reinterpret_cast<const double*>(&sorted[k + 1].y)));
+    const __m128 q =
+        _mm_castsi128_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(&sorted[k + 1].y)));
     const __m128 yz = _mm_shuffle_ps(p, q, _MM_SHUFFLE(1, 0, 2, 1));  // y0 z0 y1 z1
     const __m128d x = _mm_cvtps_pd(_mm_shuffle_ps(p, p, _MM_SHUFFLE(3, 3, 3, 0)));
     const __m128d y = _mm_cvtps_pd(_mm_shuffle_ps(yz, yz, _MM_SHUFFLE(3, 3, 2, 0)));
