@@ -8,6 +8,8 @@
 #include <cmath>
 #include <random>
 
+#include "dtif/core/extraction/lazy_mt19937.h"
+
 namespace dtif {
 namespace {
 
@@ -206,6 +208,38 @@ TEST(ExtractionStages, ColumnsAndCandidatesOfTwoCylinders) {
   EXPECT_EQ(clusterColumns(slabColumns(pts, h, wide), wide).count, 1);
 }
 
+// A failing column joins the candidate of its first passing neighbour in the order (dy, dx) =
+// (-1, -1), (-1, 0), ..., (1, 1), whichever candidate is numbered first; through the dense grid
+// and through the hash.
+TEST(ExtractionStages, FailingColumnJoinsItsFirstPassingNeighbour) {
+  // Columns 0 and 1 pass, two cells apart (separate candidates at a one-cell gap); 2 fails and
+  // touches both, 1 at (dx, dy) = (1, -1), 0 at (-1, 0); 3 fails and touches only 0; 4 fails,
+  // alone.
+  const std::vector<std::pair<int64_t, int64_t>> cells = {{1, 1}, {3, 0}, {2, 1}, {0, 2}, {6, 2}};
+  TrunkExtractorParams p;
+  p.cluster_gap_m = 0.1;
+  for (const bool dense : {true, false}) {
+    VoxelColumns cols;
+    if (dense) cols.gw = 7, cols.gh = 3, cols.grid.assign(21, -1);
+    cols.index = CellHash(cells.size());
+    for (size_t c = 0; c < cells.size(); ++c) {
+      cols.ix.push_back(cells[c].first), cols.iy.push_back(cells[c].second);
+      cols.pass.push_back(c < 2);
+      cols.slab.push_back(static_cast<uint32_t>(10 + c));
+      cols.slab_col.push_back(static_cast<int>(c));
+      if (dense) cols.grid[cells[c].second * 7 + cells[c].first] = static_cast<int>(c);
+      bool inserted;
+      if (!dense)
+        cols.index.findOrInsert(cellKey(cells[c].first, cells[c].second), static_cast<int>(c),
+                                &inserted);
+    }
+    const TrunkCandidates cand = clusterColumns(cols, p);
+    ASSERT_EQ(cand.count, 2);
+    EXPECT_EQ(cand.start, (std::vector<uint32_t>{0, 2, 4}));
+    EXPECT_EQ(cand.points, (std::vector<uint32_t>{10, 13, 11, 12})) << "dense " << dense;
+  }
+}
+
 // The heights pass that also selects the slab gives the heights and the slab (in point order)
 // of the separate stages, and its columns are slabColumns'.
 TEST(ExtractionStages, HeightsAndSlabInOnePassMatchTheSeparateStages) {
@@ -258,6 +292,21 @@ TEST(ExtractionStages, CircleFitOnANoisyHalfArc) {
   EXPECT_NEAR(coarse.r, 0.18, 0.006);
   cp.score_points = 0;  // invalid: no fit rather than a division by zero
   EXPECT_FALSE(fitCircleRobust(xy, cp).ok);
+}
+
+TEST(ExtractionStages, LazyMt19937GivesStdMt19937sNumbers) {
+  // Seeds of the extraction's form and the edges of the range; 1500 draws cross the first
+  // block (624 words, seeded and twisted lazily) and the next two (twisted whole).
+  for (const uint32_t seed : {0u, 1u, 5489u, 0x9e3779b9u ^ 131u, 0xffffffffu}) {
+    std::mt19937 ref(seed);
+    LazyMt19937 lazy(seed);
+    for (int i = 0; i < 1500; ++i) ASSERT_EQ(lazy(), ref()) << "seed " << seed << " draw " << i;
+  }
+  // Through a distribution, as ransacCircle draws: the same indices.
+  std::mt19937 ref(77);
+  LazyMt19937 lazy(77);
+  std::uniform_int_distribution<size_t> a(0, 36), b(0, 36);
+  for (int i = 0; i < 500; ++i) ASSERT_EQ(a(lazy), b(ref)) << "draw " << i;
 }
 
 TEST(ExtractionStages, CircleFitParamsComeFromTheExtractorsParams) {

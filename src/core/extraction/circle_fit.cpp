@@ -11,6 +11,7 @@
 #endif
 
 #include "dtif/core/extraction/extraction_stages.h"
+#include "dtif/core/extraction/lazy_mt19937.h"
 #include "dtif/core/extraction/trunk_extractor.h"
 #include "dtif/core/robust.h"
 
@@ -91,30 +92,35 @@ struct Circle {
 // Inliers minus inside points among the scored points m0..m1-1 of a hypothesis (squared
 // distances to its centre against in_lo, in_hi, inside). Two lanes at a time where SSE2 is: the
 // same IEEE operations per point (x86-64 has no fused multiply-add here), so the same counts.
+// The lanes' counts stay in a register: a comparison's mask is -1 per lane, so adding the
+// inside mask and subtracting the inlier mask counts inliers minus inside points.
 long scoreBlock(const double* sx, const double* sy, size_t m0, size_t m1, double cx, double cy,
                 double in_lo, double in_hi, double inside) {
-  int64_t in = 0, out = 0;
+  int64_t score = 0;
   size_t m = m0;
 #ifdef __SSE2__
   const __m128d vcx = _mm_set1_pd(cx), vcy = _mm_set1_pd(cy);
   const __m128d vlo = _mm_set1_pd(in_lo), vhi = _mm_set1_pd(in_hi), vin = _mm_set1_pd(inside);
+  __m128i lanes = _mm_setzero_si128();  // inliers minus inside points, per lane
   for (; m + 2 <= m1; m += 2) {
     const __m128d dx = _mm_sub_pd(_mm_loadu_pd(sx + m), vcx);
     const __m128d dy = _mm_sub_pd(_mm_loadu_pd(sy + m), vcy);
     const __m128d d2 = _mm_add_pd(_mm_mul_pd(dx, dx), _mm_mul_pd(dy, dy));
-    const int inl = _mm_movemask_pd(_mm_and_pd(_mm_cmpgt_pd(d2, vlo), _mm_cmplt_pd(d2, vhi)));
-    const int ins = _mm_movemask_pd(_mm_cmplt_pd(d2, vin));
-    in += (inl & 1) + (inl >> 1);  // two-bit masks (popcount is a call on baseline x86-64)
-    out += (ins & 1) + (ins >> 1);
+    const __m128d inl = _mm_and_pd(_mm_cmpgt_pd(d2, vlo), _mm_cmplt_pd(d2, vhi));
+    const __m128d ins = _mm_cmplt_pd(d2, vin);
+    lanes = _mm_add_epi64(lanes, _mm_sub_epi64(_mm_castpd_si128(ins), _mm_castpd_si128(inl)));
   }
+  int64_t lane[2];
+  _mm_storeu_si128(reinterpret_cast<__m128i*>(lane), lanes);
+  score += lane[0] + lane[1];
 #endif
   for (; m < m1; ++m) {
     const double dx = sx[m] - cx, dy = sy[m] - cy;
     const double d2 = dx * dx + dy * dy;
-    in += static_cast<int64_t>((d2 > in_lo) & (d2 < in_hi));
-    out += static_cast<int64_t>(d2 < inside);
+    score += static_cast<int64_t>((d2 > in_lo) & (d2 < in_hi));
+    score -= static_cast<int64_t>(d2 < inside);
   }
-  return static_cast<long>(in - out);
+  return static_cast<long>(score);
 }
 
 // RANSAC over 3-point circles with an adaptive stop. Score: inliers minus points well inside
@@ -123,7 +129,7 @@ long ransacCircle(const std::vector<Eigen::Vector2d>& xy, const CircleFitParams&
                   Circle* best) {
   const size_t n = xy.size();
   const size_t stride = std::max<size_t>(1, n / static_cast<size_t>(params.score_points));
-  std::mt19937 rng(params.seed);
+  LazyMt19937 rng(params.seed);  // std::mt19937(params.seed)'s numbers
   std::uniform_int_distribution<size_t> pick(0, n - 1);
   const double tol = params.inlier_m;
   long best_score = -1;
@@ -165,10 +171,37 @@ long ransacCircle(const std::vector<Eigen::Vector2d>& xy, const CircleFitParams&
   return best_score;
 }
 
-// Per point of a Gauss-Newton step about the circle (cx, cy, r): distance d to the centre,
-// residual e = d - r, Tukey weight w (constant c) and the Jacobian's (jx, jy) = -(dx, dy) / d.
+// The Gauss-Newton normal equations of a step, A = sum w J J^T and g = sum w J e with
+// J = (jx, jy, -1): the lower triangle of A, as Eigen's A += w * J * J.transpose() sums it
+// (element (i, j) adds (w J_i) J_j), and g's (w J_i) e. In scalars: Eigen's stores of the
+// products to the stack stalled the next point's loads (store forwarding). LDLT reads only the
+// lower triangle.
+struct NormalSums {
+  double a00 = 0.0, a10 = 0.0, a20 = 0.0, a11 = 0.0, a21 = 0.0, a22 = 0.0;
+  double g0 = 0.0, g1 = 0.0, g2 = 0.0;
+
+  // One point: residual e, Tukey weight w, Jacobian (jx, jy); a point the step skips comes with
+  // all four +0 and adds only zeros, which change no sum (a sum from +0 is never -0).
+  void add(double e, double w, double jx, double jy) {
+    const double wx = w * jx, wy = w * jy, wz = -w;  // w * J (J_2 = -1: exact)
+    a00 += wx * jx, a10 += wy * jx, a20 += wz * jx;
+    a11 += wy * jy, a21 += wz * jy, a22 += w;  // wz * -1 = w exactly
+    g0 += wx * e, g1 += wy * e, g2 += wz * e;
+  }
+  Eigen::Matrix3d a() const {
+    Eigen::Matrix3d m;
+    m << a00, a10, a20, a10, a11, a21, a20, a21, a22;
+    return m;
+  }
+  Eigen::Vector3d g() const { return Eigen::Vector3d(g0, g1, g2); }
+};
+
+// Per point of a Gauss-Newton step about the circle (cx, cy, r): residual e = d - r (d: the
+// distance to the centre), Tukey weight w (constant c) and the Jacobian's (jx, jy) =
+// -(dx, dy) / d; all four +0 for a point the step skips (d < 1e-9 or w <= 0), so that the sums
+// need no test (a branch that the weights' pattern defeated).
 struct PointTerms {
-  std::vector<double> d, e, w, jx, jy;
+  std::vector<double> e, w, jx, jy;
 };
 
 // The terms of every point, two at a time where SSE2 is: the same IEEE operations as
@@ -177,11 +210,12 @@ struct PointTerms {
 void pointTerms(const std::vector<Eigen::Vector2d>& xy, double cx, double cy, double r, double c,
                 PointTerms* t) {
   const size_t n = xy.size();
-  t->d.resize(n), t->e.resize(n), t->w.resize(n), t->jx.resize(n), t->jy.resize(n);
+  t->e.resize(n), t->w.resize(n), t->jx.resize(n), t->jy.resize(n);
   size_t m = 0;
 #ifdef __SSE2__
   const __m128d vcx = _mm_set1_pd(cx), vcy = _mm_set1_pd(cy), vr = _mm_set1_pd(r);
   const __m128d vc = _mm_set1_pd(c), one = _mm_set1_pd(1.0), sign = _mm_set1_pd(-0.0);
+  const __m128d tiny = _mm_set1_pd(1e-9), zero = _mm_setzero_pd();
   for (; m + 2 <= n; m += 2) {
     // xy is an array of (x, y) pairs: two points are four doubles.
     const __m128d p0 = _mm_loadu_pd(xy[m].data()), p1 = _mm_loadu_pd(xy[m + 1].data());
@@ -192,19 +226,29 @@ void pointTerms(const std::vector<Eigen::Vector2d>& xy, double cx, double cy, do
     const __m128d u = _mm_div_pd(e, vc);
     const __m128d tt = _mm_sub_pd(one, _mm_mul_pd(u, u));
     const __m128d in = _mm_cmplt_pd(_mm_andnot_pd(sign, e), vc);  // |e| < c
-    _mm_storeu_pd(&t->d[m], d);
-    _mm_storeu_pd(&t->e[m], e);
-    _mm_storeu_pd(&t->w[m], _mm_and_pd(in, _mm_mul_pd(tt, tt)));
-    _mm_storeu_pd(&t->jx[m], _mm_div_pd(_mm_xor_pd(dx, sign), d));
-    _mm_storeu_pd(&t->jy[m], _mm_div_pd(_mm_xor_pd(dy, sign), d));
+    const __m128d w = _mm_and_pd(in, _mm_mul_pd(tt, tt));
+    const __m128d keep = _mm_and_pd(_mm_cmpnlt_pd(d, tiny), _mm_cmpnle_pd(w, zero));
+    _mm_storeu_pd(&t->e[m], _mm_and_pd(keep, e));
+    _mm_storeu_pd(&t->w[m], _mm_and_pd(keep, w));
+    _mm_storeu_pd(&t->jx[m], _mm_and_pd(keep, _mm_div_pd(_mm_xor_pd(dx, sign), d)));
+    _mm_storeu_pd(&t->jy[m], _mm_and_pd(keep, _mm_div_pd(_mm_xor_pd(dy, sign), d)));
   }
 #endif
   for (; m < n; ++m) {
     const double dx = xy[m].x() - cx, dy = xy[m].y() - cy;
-    const double d = planarDist(dx, dy);
-    t->d[m] = d, t->e[m] = d - r, t->w[m] = tukeyWeight(d - r, c);
-    t->jx[m] = -dx / d, t->jy[m] = -dy / d;
+    const double d = planarDist(dx, dy), w = tukeyWeight(d - r, c);
+    const bool keep = !(d < 1e-9) && !(w <= 0.0);
+    t->e[m] = keep ? d - r : 0.0, t->w[m] = keep ? w : 0.0;
+    t->jx[m] = keep ? -dx / d : 0.0, t->jy[m] = keep ? -dy / d : 0.0;
   }
+}
+
+// The normal equations of the terms' points, in point order.
+NormalSums normalSums(const PointTerms& t, size_t n) {
+  NormalSums s;
+  const double *e = t.e.data(), *w = t.w.data(), *jx = t.jx.data(), *jy = t.jy.data();
+  for (size_t m = 0; m < n; ++m) s.add(e[m], w[m], jx[m], jy[m]);
+  return s;
 }
 
 // The points a Gauss-Newton step can weigh, in their order: those within c_tukey + kSlack of
@@ -218,11 +262,9 @@ class NearPoints {
   void update(const std::vector<Eigen::Vector2d>& all, double cx, double cy, double r,
               double c_tukey) {
     if (gathered_ && moved_ < kSlack - kRounding) return;
-    xy.clear();
-    const double reach = c_tukey + kSlack;
-    for (const Eigen::Vector2d& q : all) {
-      if (std::abs(planarDist(q.x() - cx, q.y() - cy) - r) < reach) xy.push_back(q);
-    }
+    xy.resize(all.size());
+    const size_t n = gather(all, cx, cy, r, c_tukey + kSlack);
+    xy.resize(n);
     gathered_ = true;
     moved_ = 0.0;
   }
@@ -231,6 +273,36 @@ class NearPoints {
   }
 
  private:
+  // The points within reach of the circle into xy (sized for all), their count returned.
+  // Branch-free (each point written, the count advanced by its test), two at a time where SSE2
+  // is: the same IEEE operations as planarDist.
+  size_t gather(const std::vector<Eigen::Vector2d>& all, double cx, double cy, double r,
+                double reach) {
+    Eigen::Vector2d* out = xy.data();
+    size_t n = 0, m = 0;
+#ifdef __SSE2__
+    const __m128d vcx = _mm_set1_pd(cx), vcy = _mm_set1_pd(cy), vr = _mm_set1_pd(r);
+    const __m128d vreach = _mm_set1_pd(reach), sign = _mm_set1_pd(-0.0);
+    for (; m + 2 <= all.size(); m += 2) {
+      const __m128d p0 = _mm_loadu_pd(all[m].data()), p1 = _mm_loadu_pd(all[m + 1].data());
+      const __m128d dx = _mm_sub_pd(_mm_unpacklo_pd(p0, p1), vcx);
+      const __m128d dy = _mm_sub_pd(_mm_unpackhi_pd(p0, p1), vcy);
+      const __m128d d = _mm_sqrt_pd(_mm_add_pd(_mm_mul_pd(dx, dx), _mm_mul_pd(dy, dy)));
+      const int near =
+          _mm_movemask_pd(_mm_cmplt_pd(_mm_andnot_pd(sign, _mm_sub_pd(d, vr)), vreach));
+      _mm_storeu_pd(out[n].data(), p0);
+      n += near & 1;
+      _mm_storeu_pd(out[n].data(), p1);
+      n += near >> 1;
+    }
+#endif
+    for (; m < all.size(); ++m) {
+      out[n] = all[m];
+      n += std::abs(planarDist(all[m].x() - cx, all[m].y() - cy) - r) < reach;
+    }
+    return n;
+  }
+
   static constexpr double kSlack = 0.05;     // [m]
   static constexpr double kRounding = 1e-6;  // far above the rounding of d - r [m]
   bool gathered_ = false;
@@ -258,16 +330,9 @@ Circle refineCircle(const std::vector<Eigen::Vector2d>& xy, const Circle& start,
   for (int it = 0; it < 15; ++it) {
     near.update(xy, cx, cy, r, c_tukey);
     pointTerms(near.xy, cx, cy, r, c_tukey, &t);
-    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
-    Eigen::Vector3d g = Eigen::Vector3d::Zero();
-    for (size_t m = 0; m < near.xy.size(); ++m) {
-      if (t.d[m] < 1e-9) continue;
-      const double e = t.e[m], w = t.w[m];
-      if (w <= 0.0) continue;
-      const Eigen::Vector3d J(t.jx[m], t.jy[m], -1.0);
-      A += w * J * J.transpose();
-      g += w * J * e;
-    }
+    const NormalSums sums = normalSums(t, near.xy.size());
+    Eigen::Matrix3d A = sums.a();
+    const Eigen::Vector3d g = sums.g();
     if (A.trace() <= 0.0) break;
     A.diagonal() *= 1.0 + 1e-6;  // damping keeps a near-singular arc well posed
     const Eigen::Vector3d step = -A.ldlt().solve(g);

@@ -50,17 +50,21 @@ std::vector<int> labelPassingColumns(const VoxelColumns& cols, const TrunkExtrac
   return col_label;
 }
 
-// Failing columns touching a labelled column join its candidate.
+// Failing columns touching a labelled column join its candidate: that of the first passing
+// neighbour in the order (dy, dx) = (-1, -1), (-1, 0), ..., (1, 1). Found from the passing
+// columns, which are few, instead of by a search around every failing column (most columns).
 void attachFailingColumns(const VoxelColumns& cols, std::vector<int>* col_label) {
-  for (size_t c = 0; c < cols.size(); ++c) {
-    if (cols.pass[c]) continue;
-    for (int dy = -1; dy <= 1 && (*col_label)[c] < 0; ++dy) {
+  // rank[c]: the order of the first passing neighbour of c found so far; 9: none.
+  std::vector<uint8_t> rank(cols.size(), 9);
+  for (size_t o = 0; o < cols.size(); ++o) {
+    if (!cols.pass[o]) continue;
+    for (int dy = -1; dy <= 1; ++dy) {
       for (int dx = -1; dx <= 1; ++dx) {
-        const int o = cols.find(cols.ix[c] + dx, cols.iy[c] + dy);
-        if (o >= 0 && cols.pass[o]) {
-          (*col_label)[c] = (*col_label)[o];
-          break;
-        }
+        const int c = cols.find(cols.ix[o] - dx, cols.iy[o] - dy);  // o lies at (dx, dy) of c
+        const uint8_t r = static_cast<uint8_t>((dy + 1) * 3 + (dx + 1));
+        if (c < 0 || cols.pass[c] || r >= rank[c]) continue;
+        rank[c] = r;
+        (*col_label)[c] = (*col_label)[o];
       }
     }
   }

@@ -157,11 +157,33 @@ void checkDensity(const TrunkExtractorParams& p, Checks* c) {
   c->require(p.density_min_trunks >= 1, "density_min_trunks must be >= 1");
 }
 
-// What lies around a stem of local centre (cx, cy) and radius r.
+// What lies around a stem of local centre (cx, cy) and radius r. The arrays only grow (kept per
+// thread between stems); the counts say how much of them is filled.
 struct BaseRing {
-  std::vector<double> bx, by, bz;  // ground points of the ring (|h| <= base_max_dh_m) [m]
-  std::vector<uint32_t> ring;      // every point over the ring, by its place in grid.sorted
+  std::vector<double> bx, by, bz;   // ground points of the ring (|h| <= base_max_dh_m) [m]
+  std::vector<uint32_t> on_ground;  // the same, by their place in grid.sorted
+  size_t ground = 0;                // their count
+  std::vector<uint32_t> ring;       // every point over the ring, by its place in grid.sorted
+  size_t over = 0;                  // their count
   double stem_low = std::numeric_limits<double>::infinity();  // lowest stem point [m]
+
+  void clear() {
+    ground = over = 0;
+    stem_low = std::numeric_limits<double>::infinity();
+  }
+  // Room for n more points of each kind: the gathering writes every point and keeps some.
+  void room(size_t n) {
+    if (on_ground.size() < ground + n) on_ground.resize(ground + n);
+    if (ring.size() < over + n) ring.resize(over + n);
+  }
+  // The ground points' coordinates, from their places (a few of the points gathered).
+  void groundPoints(const GroundGrid& grid) {
+    if (bx.size() < ground) bx.resize(ground), by.resize(ground), bz.resize(ground);
+    for (size_t g = 0; g < ground; ++g) {
+      const GroundGrid::SortedPoint& q = grid.sorted[on_ground[g]];
+      bx[g] = q.x, by[g] = q.y, bz[g] = q.z;
+    }
+  }
 };
 
 // True when no point of ground cell (gx, gy) can lie within r_out (the ring's and the stem
@@ -176,40 +198,119 @@ bool outsideRing(const GroundGrid& grid, int gx, int gy, double cx, double cy, d
   return dx * dx + dy * dy > reach * reach;
 }
 
-BaseRing gatherBaseRing(const GroundGrid& grid, double cx, double cy, double r,
-                        const TrunkExtractorParams& p) {
-  BaseRing b;
+// What places a point of one ground cell: the stem's centre, the squared radii of its shell
+// and of the ring, the ground band, and the cell's plane about the cell's centre (x0, y0).
+struct RingTests {
+  double cx, cy, r_stem2, r_in2, r_out2, max_dh;
+  GroundPlane pl;
+  double x0, y0;
+};
+
+// Point k written at every point as a ring point and as a ground point, kept by the counts.
+// stem_low: the lowest stem point.
+struct RingOut {
+  uint32_t *ground_at, *ring;
+  size_t ground, over;
+  double stem_low;
+
+  void put(uint32_t k, bool in_ring, bool on_ground) {
+    ring[over] = k;
+    over += in_ring;
+    ground_at[ground] = k;
+    ground += in_ring & on_ground;
+  }
+};
+
+// Points k0.. of a cell two at a time, as gatherCell's loop takes them one by one: the same
+// IEEE operations per point (x86-64 has no fused multiply-add here). The stem's lowest point is
+// a minimum per lane, merged after: the same value (only the sign of a zero could differ, which
+// no comparison of it sees). Returns the first point not taken (k1 or k1 - 1).
+uint32_t gatherPairs(const GroundGrid::SortedPoint* sorted, size_t ns, uint32_t k0, uint32_t k1,
+                     const RingTests& t, RingOut* out) {
+  uint32_t k = k0;
+#ifdef __SSE2__
+  const __m128d vcx = _mm_set1_pd(t.cx), vcy = _mm_set1_pd(t.cy), vx0 = _mm_set1_pd(t.x0);
+  const __m128d vy0 = _mm_set1_pd(t.y0), va = _mm_set1_pd(t.pl.a), vb = _mm_set1_pd(t.pl.b);
+  const __m128d vc = _mm_set1_pd(t.pl.c), vstem = _mm_set1_pd(t.r_stem2);
+  const __m128d vin = _mm_set1_pd(t.r_in2), vout = _mm_set1_pd(t.r_out2);
+  const __m128d vdh = _mm_set1_pd(t.max_dh);
+  const __m128d inf = _mm_set1_pd(std::numeric_limits<double>::infinity());
+  const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
+  __m128d low = inf;
+  for (; k + 2 <= k1; k += 2) {
+    prefetchAhead(sorted, k, ns);  // the row's next cells
+    // (x0, y0, z0, x1) and (y1, z1): the pair's 24 bytes, nothing past them (the 8 bytes
+    // through __m128i, which may alias floats, not through a double).
+    const __m128 p = _mm_loadu_ps(&sorted[k].x);
+    const __m128 q =
+        _mm_castsi128_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(&sorted[k + 1].y)));
+    const __m128 yz = _mm_shuffle_ps(p, q, _MM_SHUFFLE(1, 0, 2, 1));  // y0 z0 y1 z1
+    const __m128d x = _mm_cvtps_pd(_mm_shuffle_ps(p, p, _MM_SHUFFLE(3, 3, 3, 0)));
+    const __m128d y = _mm_cvtps_pd(_mm_shuffle_ps(yz, yz, _MM_SHUFFLE(3, 3, 2, 0)));
+    const __m128d z = _mm_cvtps_pd(_mm_shuffle_ps(yz, yz, _MM_SHUFFLE(3, 3, 3, 1)));
+    const __m128d dx = _mm_sub_pd(x, vcx), dy = _mm_sub_pd(y, vcy);
+    const __m128d d2 = _mm_add_pd(_mm_mul_pd(dx, dx), _mm_mul_pd(dy, dy));
+    const __m128d on_stem = _mm_cmplt_pd(d2, vstem);
+    low = _mm_min_pd(_mm_or_pd(_mm_and_pd(on_stem, z), _mm_andnot_pd(on_stem, inf)), low);
+    const int in_ring = _mm_movemask_pd(_mm_and_pd(_mm_cmpge_pd(d2, vin), _mm_cmple_pd(d2, vout)));
+    // pl.at(x - x0, y - y0) = (a + b (x - x0)) + c (y - y0); h rounded to float, as stored.
+    const __m128d at = _mm_add_pd(_mm_add_pd(va, _mm_mul_pd(vb, _mm_sub_pd(x, vx0))),
+                                  _mm_mul_pd(vc, _mm_sub_pd(y, vy0)));
+    const __m128 h = _mm_and_ps(_mm_cvtpd_ps(_mm_sub_pd(z, at)), abs_mask);
+    const int high = _mm_movemask_pd(_mm_cmpgt_pd(_mm_cvtps_pd(h), vdh));
+    out->put(k, in_ring & 1, !(high & 1));
+    out->put(k + 1, in_ring >> 1, !(high >> 1));
+  }
+  const double lane_low = std::min(_mm_cvtsd_f64(low), _mm_cvtsd_f64(_mm_unpackhi_pd(low, low)));
+  out->stem_low = std::min(out->stem_low, lane_low);
+#endif
+  return k;
+}
+
+// The points of ground cell c in the ring: every one is written and the counts advance by its
+// tests (branch-free: whether a point is in the ring or on the ground follows no pattern).
+void gatherCell(const GroundGrid& grid, size_t c, RingTests t, BaseRing* b) {
+  const uint32_t k0 = grid.start[c], k1 = grid.start[c + 1];
+  b->room(k1 - k0);
+  // The points' heights from their cell's plane, as heightsAboveGround computes them: no
+  // gather from the height array, in point order.
+  t.pl = grid.plane[c];
+  grid.cellCentre(c, &t.x0, &t.y0);
+  RingOut out{b->on_ground.data(), b->ring.data(), b->ground, b->over, b->stem_low};
+  const GroundGrid::SortedPoint* sorted = grid.sorted.data();
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  for (uint32_t k = gatherPairs(sorted, grid.sorted.size(), k0, k1, t, &out); k < k1; ++k) {
+    const GroundGrid::SortedPoint& q = sorted[k];
+    const double dx = q.x - t.cx, dy = q.y - t.cy;
+    const double d2 = dx * dx + dy * dy;
+    // std::min(stem_low, z) on the stem, else no change: the chain from point to point is one
+    // minimum, not a minimum and a select.
+    out.stem_low = std::min(out.stem_low, d2 < t.r_stem2 ? static_cast<double>(q.z) : kInf);
+    const bool in_ring = (d2 >= t.r_in2) & (d2 <= t.r_out2);  // d2 is never NaN
+    const float h = static_cast<float>(q.z - t.pl.at(q.x - t.x0, q.y - t.y0));
+    out.put(k, in_ring, !(std::abs(h) > t.max_dh));
+  }
+  b->ground = out.ground, b->over = out.over, b->stem_low = out.stem_low;
+}
+
+void gatherBaseRing(const GroundGrid& grid, double cx, double cy, double r,
+                    const TrunkExtractorParams& p, BaseRing* b) {
+  b->clear();
   const double r_in = r + p.base_ring_inner_m, r_out = r + p.base_ring_outer_m;
   // Lowest point on the stem itself: a base counts as seen only if the stem is visible
   // down to the ground (not hidden by shrubs or below the sensor's field of view).
   const double r_stem2 = (r + p.stem_shell_m) * (r + p.stem_shell_m);
+  const RingTests t{cx, cy, r_stem2, r_in * r_in, r_out * r_out, p.base_max_dh_m, {}, 0.0, 0.0};
   int gx0, gy0, gx1, gy1;
   grid.cellOf(cx - r_out, cy - r_out, &gx0, &gy0);
   grid.cellOf(cx + r_out, cy + r_out, &gx1, &gy1);
   for (int gy = gy0; gy <= gy1; ++gy) {
     for (int gx = gx0; gx <= gx1; ++gx) {
       if (outsideRing(grid, gx, gy, cx, cy, std::max(r_out, r + p.stem_shell_m))) continue;
-      const size_t c = static_cast<size_t>(gy) * grid.nx + gx;
-      // The points' heights from their cell's plane, as heightsAboveGround computes them: no
-      // gather from the height array, in point order.
-      const GroundPlane& pl = grid.plane[c];
-      double x0, y0;
-      grid.cellCentre(c, &x0, &y0);
-      for (uint32_t k = grid.start[c]; k < grid.start[c + 1]; ++k) {
-        prefetchAhead(grid.sorted.data(), k, grid.sorted.size());  // the row's next cells
-        const GroundGrid::SortedPoint& q = grid.sorted[k];
-        const double dx = q.x - cx, dy = q.y - cy;
-        const double d2 = dx * dx + dy * dy;
-        if (d2 < r_stem2) b.stem_low = std::min(b.stem_low, static_cast<double>(q.z));
-        if (d2 < r_in * r_in || d2 > r_out * r_out) continue;
-        b.ring.push_back(k);
-        const float h = static_cast<float>(q.z - pl.at(q.x - x0, q.y - y0));
-        if (std::abs(h) > p.base_max_dh_m) continue;
-        b.bx.push_back(q.x), b.by.push_back(q.y), b.bz.push_back(q.z);
-      }
+      gatherCell(grid, static_cast<size_t>(gy) * grid.nx + gx, t, b);
     }
   }
-  return b;
+  b->groundPoints(grid);
 }
 
 // Removes the fit's inliers from the band (and their heights) before the next attempt.
@@ -446,18 +547,22 @@ StemBase stemBase(const LocalPoints& /*pts: read through grid.sorted*/,
   // Robust plane through the ground points in a ring around the stem, evaluated at the
   // centre. The grid ground only gates which points count as ground. (The paper's 0.44 m z
   // error comes from a weaker base estimate, Sec. 4.B.)
-  const BaseRing b = gatherBaseRing(grid, cx, cy, r, p);
+  thread_local BaseRing ring_of_thread;  // kept between stems
+  BaseRing& b = ring_of_thread;
+  gatherBaseRing(grid, cx, cy, r, p, &b);
   StemBase base;
   int cgx, cgy;
   grid.cellOf(cx, cy, &cgx, &cgy);
   const bool ground_seen = grid.seen[static_cast<size_t>(cgy) * grid.nx + cgx];
-  base.ring_seen = b.bx.size() >= static_cast<size_t>(p.min_base_points);
+  base.ring_seen = b.ground >= static_cast<size_t>(p.min_base_points);
   bool ground_below = false;
   if (base.ring_seen) {
-    const std::vector<double> w(b.bx.size(), 1.0);
+    thread_local std::vector<double> w_of_thread;
+    std::vector<double>& w = w_of_thread;
+    if (w.size() < b.ground) w.assign(b.ground, 1.0);  // only ever ones
     // Tighter than the grid's: litter and grass sit on the ground surface, noise is cm.
     const GroundPlane pl =
-        fitGroundPlane(b.bx.data(), b.by.data(), b.bz.data(), w.data(), b.bx.size(), cx, cy,
+        fitGroundPlane(b.bx.data(), b.by.data(), b.bz.data(), w.data(), b.ground, cx, cy,
                        p.base_plane_c_up_m, p.base_plane_c_down_m, /*iterations=*/6);
     base.z = pl.a;
     // Ground is the lowest surface: returns well below the fitted plane around the stem
@@ -465,8 +570,8 @@ StemBase stemBase(const LocalPoints& /*pts: read through grid.sorted*/,
     // scene this flags 26 of the 66 seen bases that are 0.45-1.6 m too high, and 9 of the
     // 673 good ones.
     int below = 0;
-    for (const uint32_t k : b.ring) {
-      const GroundGrid::SortedPoint& q = grid.sorted[k];
+    for (size_t m = 0; m < b.over; ++m) {
+      const GroundGrid::SortedPoint& q = grid.sorted[b.ring[m]];
       below += q.z < pl.at(q.x - cx, q.y - cy) - p.base_below_m;
     }
     ground_below = below > p.max_base_below_points;
@@ -481,20 +586,29 @@ StemBase stemBase(const LocalPoints& /*pts: read through grid.sorted*/,
 void fitCandidate(const LocalPoints& pts, const std::vector<float>& h, const GroundGrid& grid,
                   const TrunkCandidates& cand, int l, const TrunkExtractorParams& p,
                   std::vector<FoundTrunk>* found, TrunkExtractionStats* st) {
-  std::vector<Eigen::Vector2d> band;
-  std::vector<float> h_band;
+  // The candidate's points in the fit band, in candidate order. Branch-free (every point
+  // written, the count advanced by the test): a point's height follows no pattern.
+  thread_local std::vector<Eigen::Vector2d> band_of_thread;  // kept between candidates
+  thread_local std::vector<float> h_band_of_thread;
+  std::vector<Eigen::Vector2d>& band = band_of_thread;
+  std::vector<float>& h_band = h_band_of_thread;
   const uint32_t* idx = cand.points.data() + cand.start[l];
   const size_t np = cand.start[l + 1] - cand.start[l];
+  band.resize(np), h_band.resize(np);
+  Eigen::Vector2d* bp = band.data();
+  float* hp = h_band.data();
+  const double lo = p.fit_min_h_m, hi = p.fit_max_h_m;
+  size_t nb = 0;
   for (size_t k = 0; k < np; ++k) {
     prefetchGather(h.data(), idx, k, np), prefetchGather(pts.x.data(), idx, k, np);
     prefetchGather(pts.y.data(), idx, k, np);
     const uint32_t i = idx[k];
-    const double hi = h[i];
-    if (hi >= p.fit_min_h_m && hi <= p.fit_max_h_m) {
-      band.emplace_back(pts.x[i], pts.y[i]);
-      h_band.push_back(h[i]);
-    }
+    const float hk = h[i];
+    bp[nb] = Eigen::Vector2d(pts.x[i], pts.y[i]);
+    hp[nb] = hk;
+    nb += (hk >= lo) & (hk <= hi);
   }
+  band.resize(nb), h_band.resize(nb);
   CircleFitParams cfp = circleFitParams(p);
   for (int attempt = 0; attempt < p.max_fits_per_candidate; ++attempt) {
     if (band.size() < static_cast<size_t>(p.min_fit_points)) break;
