@@ -202,6 +202,16 @@ std::string memoryPerEntry(const D&, Ignored...) {
   return "-";
 }
 
+/// QueryStats::lattice_searches, -1 for a build without it (the "before" probe's).
+template <class S>
+auto latticeSearches(const S& s) -> decltype(static_cast<long long>(s.lattice_searches)) {
+  return static_cast<long long>(s.lattice_searches);
+}
+template <class S, class... Ignored>
+long long latticeSearches(const S&, Ignored...) {
+  return -1;
+}
+
 /// The database's entries, then perturbed copies of them (other robots) up to n.
 std::vector<DescPtr> fill(const std::vector<DescPtr>& real, size_t n,
                           const dtif::DtifParams& params) {
@@ -248,10 +258,10 @@ int scale(const std::string& db, const std::vector<size_t>& sizes) {
       t.push_back(cpuMs() - t0);
       std::fprintf(stderr,
                    "query %zu %s/%lld %.3f ms matched %zu loop %d (correspondences %.3f, solver "
-                   "%.3f, verification %.3f ms; %zu lattice searches)\n",
+                   "%.3f, verification %.3f ms; %lld lattice searches)\n",
                    size, q->robot.c_str(), static_cast<long long>(q->submap_id), t.back(),
                    qs.matched, static_cast<int>(found), qs.match_ms, qs.solver_ms, qs.verify_ms,
-                   qs.lattice_searches);
+                   latticeSearches(qs));
       screen += qs.screen_ms, match += qs.match_ms, solver += qs.solver_ms;
       verify += qs.verify_ms, matched += static_cast<double>(qs.matched);
     }
