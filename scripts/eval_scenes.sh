@@ -29,8 +29,9 @@ for scene in "${SCENES[@]}"; do
   grep '^| dtif |' "${dir}/eval/table.md" | sed "s/^| dtif |/| ${name} |/" >> "${TABLE}.rows"
 done
 {
-  grep '^| Method |' "${OUT}/${name}/eval/table.md" | sed 's/^| Method |/| Scene |/'
-  grep '^|---' "${OUT}/${name}/eval/table.md"
+  # The first table's header only (table.md also holds the per-robot levelling table).
+  grep -m1 '^| Method |' "${OUT}/${name}/eval/table.md" | sed 's/^| Method |/| Scene |/'
+  grep -m1 '^|---' "${OUT}/${name}/eval/table.md"
   cat "${TABLE}.rows"
 } > "${TABLE}"
 rm -f "${TABLE}.rows"
