@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <numeric>
 #include <random>
 #include <set>
@@ -233,6 +234,81 @@ TEST(PoseStages, EstimateYawIsExactOnCleanTimsAndReportsConsensus) {
   for (const auto& m : tims) total += m.w;
   EXPECT_NEAR(yaw.consensus, total, 1e-9);        // every TIM agrees
   EXPECT_LT(yaw.runner_up, 0.5 * yaw.consensus);  // short TIMs only, far from the yaw
+}
+
+/// gncTlsYaw as it computed before 2026-11-29: each TIM's weight by branches, the terms summed
+/// through weightedYaw's expression. *steps counts its steps with a weight strictly between 0
+/// and 1 somewhere.
+double referenceGncYaw(const std::vector<pose_stages::Tim>& tims, double beta,
+                       const PoseEstimatorParams& p, int* mixed_steps) {
+  const auto yaw_of = [&](const auto& weight) {
+    double sc = 0.0, ss = 0.0;
+    for (const auto& m : tims) {
+      const double u = weight(m);
+      sc += u * m.w * (m.qx * m.cx + m.qy * m.cy);
+      ss += u * m.w * (m.qx * m.cy - m.qy * m.cx);
+    }
+    return std::atan2(ss, sc);
+  };
+  const auto r2_of = [](const pose_stages::Tim& m, double c, double s) {
+    const double rx = m.cx - (c * m.qx - s * m.qy), ry = m.cy - (s * m.qx + c * m.qy);
+    return rx * rx + ry * ry;
+  };
+  const double c2 = beta * beta;
+  double theta = yaw_of([](const pose_stages::Tim&) { return 1.0; });
+  double max_r2 = 0.0;
+  for (const auto& m : tims) max_r2 = std::max(max_r2, r2_of(m, std::cos(theta), std::sin(theta)));
+  if (max_r2 <= c2) return theta;
+  double mu = c2 / std::max(2.0 * max_r2 - c2, 1e-12);
+  for (int it = 0; it < p.gnc_max_iterations; ++it) {
+    const double c = std::cos(theta), s = std::sin(theta);
+    const double lo = mu / (mu + 1.0) * c2, hi = (mu + 1.0) / mu * c2;
+    bool binary = true;
+    const double next = yaw_of([&](const pose_stages::Tim& m) {
+      const double r2 = r2_of(m, c, s);
+      if (r2 >= hi) return 0.0;
+      if (r2 <= lo) return 1.0;
+      binary = false;
+      return beta * std::sqrt(mu * (mu + 1.0) / r2) - mu;
+    });
+    *mixed_steps += !binary;
+    const double step = std::fabs(std::atan2(std::sin(next - theta), std::cos(next - theta)));
+    theta = next;
+    if (binary && step < 1e-9) break;
+    mu *= p.gnc_factor;
+  }
+  return theta;
+}
+
+TEST(PoseStages, GncYawIsBitForBitTheWeightByWeightForm) {
+  std::mt19937 rng(2029);
+  const PoseEstimatorParams p;
+  int mixed_steps = 0, cases = 0;
+  // Odd and even counts (two TIMs per SSE2 step, then the rest one by one), clean and outlier
+  // laden, exact and noisy.
+  for (int n : {2, 3, 4, 9, 30, 61}) {
+    for (double outliers : {0.0, 0.4, 0.8}) {
+      for (double noise : {0.0, 0.05}) {
+        const Pose T =
+            test::poseXyYaw(3.0, -1.0, 0.0, std::uniform_real_distribution<>(-3, 3)(rng));
+        const auto corrs = makeCorrs(rng, T, n, outliers, noise);
+        std::vector<double> w;
+        for (const Correspondence& c : corrs) w.push_back(c.w);
+        const auto tims = pose_stages::translationInvariantMeasurements(corrs, w, p);
+        if (tims.empty()) continue;
+        for (double beta : {0.05, p.beta_yaw_m, 2.0}) {
+          const double got = pose_stages::gncTlsYaw(tims, beta, p);
+          const double want = referenceGncYaw(tims, beta, p, &mixed_steps);
+          EXPECT_EQ(std::memcmp(&got, &want, sizeof got), 0)
+              << "n " << n << ", outliers " << outliers << ", beta " << beta << ": " << got
+              << " vs " << want;
+          ++cases;
+        }
+      }
+    }
+  }
+  EXPECT_GT(cases, 80);
+  EXPECT_GT(mixed_steps, 100);  // the weights strictly between 0 and 1 were exercised
 }
 
 /// The yaw sweep's consensus and runner-up as consensusYaw computed them with std::sort and

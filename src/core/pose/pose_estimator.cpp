@@ -8,6 +8,9 @@
 #include <cstring>
 #include <numeric>
 #include <sstream>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 #include "dtif/core/pose/pose_estimator_stages.h"
 #include "dtif/core/pose/rigid2d.h"
@@ -47,35 +50,73 @@ double tlsCost(const std::vector<Tim>& tims, double theta, double beta2) {
   return cost;
 }
 
-/// GNC-TLS (Yang et al. 2020) for Eq. (3.14): continuation on mu from a convex surrogate to
-/// the truncated least squares cost; each step is the closed-form weighted rotation.
-double gncTlsYaw(const std::vector<Tim>& tims, double beta, const PoseEstimatorParams& p) {
-  const double c2 = beta * beta;
-  double theta = weightedYaw(tims, [](const Tim&) { return 1.0; });
-  double max_r2 = 0.0;
-  {
-    const double c = std::cos(theta), s = std::sin(theta);
-    for (const Tim& m : tims) max_r2 = std::max(max_r2, timResidual2(m, c, s));
+/// GNC's weight of a TIM of squared residual r2 (Yang et al.: 0 beyond hi, 1 below lo, else
+/// beta sqrt(mu (mu + 1) / r2) - mu); *binary false when it is none of 0 and 1.
+inline double gncWeight(double r2, double lo, double hi, double beta, double mu, bool* binary) {
+  if (r2 >= hi) return 0.0;
+  if (r2 <= lo) return 1.0;
+  *binary = false;
+  return beta * std::sqrt(mu * (mu + 1.0) / r2) - mu;
+}
+
+/// The TIMs' values that a GNC step reads, as columns; dot and cross are weightedYaw's d^q . d^c
+/// and d^q x d^c, the same for every step.
+struct TimColumns {
+  std::vector<double> qx, qy, cx, cy, w, dot, cross;
+  explicit TimColumns(const std::vector<Tim>& tims) {
+    for (std::vector<double>* v : {&qx, &qy, &cx, &cy, &w, &dot, &cross}) v->resize(tims.size());
+    for (size_t i = 0; i < tims.size(); ++i) {
+      const Tim& m = tims[i];
+      qx[i] = m.qx, qy[i] = m.qy, cx[i] = m.cx, cy[i] = m.cy, w[i] = m.w;
+      dot[i] = m.qx * m.cx + m.qy * m.cy;
+      cross[i] = m.qx * m.cy - m.qy * m.cx;
+    }
   }
-  if (max_r2 <= c2) return theta;  // every measurement is already an inlier
-  double mu = c2 / std::max(2.0 * max_r2 - c2, 1e-12);
-  for (int it = 0; it < p.gnc_max_iterations; ++it) {
-    const double c = std::cos(theta), s = std::sin(theta);
-    const double lo = mu / (mu + 1.0) * c2, hi = (mu + 1.0) / mu * c2;
-    bool binary = true;
-    const double next = weightedYaw(tims, [&](const Tim& m) {
-      const double r2 = timResidual2(m, c, s);
-      if (r2 >= hi) return 0.0;
-      if (r2 <= lo) return 1.0;
-      binary = false;
-      return beta * std::sqrt(mu * (mu + 1.0) / r2) - mu;
-    });
-    const double step = std::fabs(wrapAngle(next - theta));
-    theta = next;
-    if (binary && step < 1e-9) break;
-    mu *= p.gnc_factor;
+};
+
+/// One GNC step: weightedYaw with GNC's weights at the yaw of (c, s). The weights of two TIMs at
+/// a time (SSE2: the same operations, so the same values, as gncWeight and timResidual2), their
+/// terms summed one by one in TIM order as weightedYaw sums them: a mispredicted branch per
+/// weight and the square root and division one at a time made most of a step.
+double gncStep(const TimColumns& t, double c, double s, double lo, double hi, double beta,
+               double mu, bool* binary) {
+  const size_t n = t.w.size();
+  double sc = 0.0, ss = 0.0;
+  size_t i = 0;
+#ifdef __SSE2__
+  const __m128d C = _mm_set1_pd(c), S = _mm_set1_pd(s), LO = _mm_set1_pd(lo), HI = _mm_set1_pd(hi),
+                B = _mm_set1_pd(beta), MU = _mm_set1_pd(mu), K = _mm_set1_pd(mu * (mu + 1.0)),
+                ONE = _mm_set1_pd(1.0);
+  int middle = 0;
+  for (; i + 2 <= n; i += 2) {
+    const __m128d qx = _mm_loadu_pd(&t.qx[i]), qy = _mm_loadu_pd(&t.qy[i]);
+    const __m128d rx =
+        _mm_sub_pd(_mm_loadu_pd(&t.cx[i]), _mm_sub_pd(_mm_mul_pd(C, qx), _mm_mul_pd(S, qy)));
+    const __m128d ry =
+        _mm_sub_pd(_mm_loadu_pd(&t.cy[i]), _mm_add_pd(_mm_mul_pd(S, qx), _mm_mul_pd(C, qy)));
+    const __m128d r2 = _mm_add_pd(_mm_mul_pd(rx, rx), _mm_mul_pd(ry, ry));
+    const __m128d high = _mm_cmpge_pd(r2, HI), low = _mm_cmple_pd(r2, LO);
+    const __m128d mid = _mm_sub_pd(_mm_mul_pd(B, _mm_sqrt_pd(_mm_div_pd(K, r2))), MU);
+    // 0 where high, else 1 where low, else mid.
+    const __m128d u = _mm_andnot_pd(high, _mm_or_pd(_mm_and_pd(low, ONE), _mm_andnot_pd(low, mid)));
+    middle |= _mm_movemask_pd(_mm_or_pd(high, low)) ^ 3;
+    const __m128d uw = _mm_mul_pd(u, _mm_loadu_pd(&t.w[i]));
+    double a[2], b[2];
+    _mm_storeu_pd(a, _mm_mul_pd(uw, _mm_loadu_pd(&t.dot[i])));
+    _mm_storeu_pd(b, _mm_mul_pd(uw, _mm_loadu_pd(&t.cross[i])));
+    sc += a[0], sc += a[1];
+    ss += b[0], ss += b[1];
   }
-  return theta;
+  if (middle) *binary = false;
+#endif
+  for (; i < n; ++i) {
+    const double rx = t.cx[i] - (c * t.qx[i] - s * t.qy[i]);
+    const double ry = t.cy[i] - (s * t.qx[i] + c * t.qy[i]);
+    const double u = gncWeight(rx * rx + ry * ry, lo, hi, beta, mu, binary);
+    sc += u * t.w[i] * t.dot[i];
+    ss += u * t.w[i] * t.cross[i];
+  }
+  return std::atan2(ss, sc);
 }
 
 /// Global maximiser of the weighted TIM consensus over the circle. Every TIM is an inlier
@@ -213,6 +254,30 @@ double refineYaw(const std::vector<Tim>& tims, double theta, double beta2) {
 }  // namespace
 
 namespace pose_stages {
+
+double gncTlsYaw(const std::vector<Tim>& tims, double beta, const PoseEstimatorParams& p) {
+  const double c2 = beta * beta;
+  double theta = weightedYaw(tims, [](const Tim&) { return 1.0; });
+  double max_r2 = 0.0;
+  {
+    const double c = std::cos(theta), s = std::sin(theta);
+    for (const Tim& m : tims) max_r2 = std::max(max_r2, timResidual2(m, c, s));
+  }
+  if (max_r2 <= c2) return theta;  // every measurement is already an inlier
+  double mu = c2 / std::max(2.0 * max_r2 - c2, 1e-12);
+  const TimColumns columns(tims);
+  for (int it = 0; it < p.gnc_max_iterations; ++it) {
+    const double c = std::cos(theta), s = std::sin(theta);
+    const double lo = mu / (mu + 1.0) * c2, hi = (mu + 1.0) / mu * c2;
+    bool binary = true;
+    const double next = gncStep(columns, c, s, lo, hi, beta, mu, &binary);
+    const double step = std::fabs(wrapAngle(next - theta));
+    theta = next;
+    if (binary && step < 1e-9) break;
+    mu *= p.gnc_factor;
+  }
+  return theta;
+}
 
 Location tlsLocation(const std::vector<Eigen::Vector2d>& obs, const std::vector<double>& w,
                      double beta) {

@@ -38,6 +38,11 @@ struct YawEstimate {
   double runner_up = 0.0;  ///< best consensus > 10 deg away from it
 };
 
+/// GNC-TLS (Yang et al. 2020) for Eq. (3.14) alone: continuation on mu from a convex surrogate
+/// to the truncated least squares cost of TIM residuals beyond beta; each step the closed-form
+/// weighted rotation. The yaw it reaches (not wrapped) [rad]. Exposed for unit tests.
+double gncTlsYaw(const std::vector<Tim>& tims, double beta, const PoseEstimatorParams& params);
+
 /// Eq. (3.14): GNC-TLS, guarded by the exact 1-D consensus sweep over the circle; of the two
 /// refined yaws the one with the lower TLS cost. `tims` must not be empty.
 YawEstimate estimateYaw(const std::vector<Tim>& tims, const PoseEstimatorParams& params);
