@@ -177,6 +177,54 @@ TEST(Footprint, MarksOfOnePassEqualMarksPerPoint) {
   }
 }
 
+#ifdef __SSE2__
+TEST(Footprint, MarksOfFourPointsAtATimeEqualMarksPerPoint) {
+  // add4 (extraction's first pass, four points per step) against add: the same cells and the
+  // same report of a band point outside the box, at cells of 2^k m (the cell from the floors)
+  // and not (add lane by lane), on a stand and on points a float step around whole and half
+  // metres, with points around both ends of the band.
+  Cloud cloud = bumpyStand(4);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  for (int i = -24; i <= 24; ++i) {
+    const float v = 0.5f * static_cast<float>(i);
+    for (const float x : {std::nextafter(v, -1e9f), v, std::nextafter(v, 1e9f)}) {
+      for (const float y : {std::nextafter(v + 20.0f, -1e9f), v + 20.0f}) {
+        const float ground = 0.8f * std::sin(0.3f * x) + 0.05f * y;
+        for (const float h : {0.3f, 3.0f, 1.0f})
+          cloud.push_back(pcl::PointXYZ(x, y, ground + h + 0.02f * u(rng)));
+      }
+    }
+  }
+  std::vector<float> sx, sy, sz;
+  for (size_t i = 0; i < cloud.size(); i += 4)
+    sx.push_back(cloud[i].x), sy.push_back(cloud[i].y), sz.push_back(cloud[i].z);
+  for (const double cell_m : {1.0, 2.0, 4.0, 0.5, 0.3}) {
+    for (const double hi_x : {20.0, 5.0}) {
+      HeightCellMarks four, each;
+      const Eigen::Vector2d lo(-20.0, 0.0), hi(hi_x, 40.0);
+      ASSERT_TRUE(four.init(sx, sy, sz, cell_m, lo, hi));
+      ASSERT_TRUE(each.init(sx, sy, sz, cell_m, lo, hi));
+      HeightCellMarks::Pass pass = four.pass();
+      size_t i = 0;
+      for (; i + 4 <= cloud.size(); i += 4) {
+        const auto lane = [&](float pcl::PointXYZ::*c) {
+          return _mm_set_ps(cloud[i + 3].*c, cloud[i + 2].*c, cloud[i + 1].*c, cloud[i].*c);
+        };
+        pass.add4(lane(&pcl::PointXYZ::x), lane(&pcl::PointXYZ::y), lane(&pcl::PointXYZ::z));
+      }
+      for (; i < cloud.size(); ++i) pass.add(cloud[i].x, cloud[i].y, cloud[i].z);
+      four.finish(pass);
+      for (const pcl::PointXYZ& q : cloud) each.add(q.x, q.y, q.z);
+      EXPECT_EQ(four.complete(), each.complete()) << "cell " << cell_m << ", box to " << hi_x;
+      EXPECT_EQ(four.complete(), hi_x > 10.0);
+      EXPECT_GT(each.cells().size(), 20u);
+      EXPECT_EQ(four.cells(), each.cells()) << "cell " << cell_m << ", box to " << hi_x;
+    }
+  }
+}
+#endif
+
 TEST(Footprint, MarksRefuseFarCoordinates) {
   // Beyond 1e6 m the margins of the tiles lose metres in float: trunkHeightCells is used.
   HeightCellMarks marks;

@@ -379,6 +379,40 @@ class PointLanes {
 };
 #endif
 
+#ifdef __SSE2__
+// Whether four points (lanes of x, y, z) are all finite, inside b (PointLanes::inside, in
+// double) and of sane magnitude (not PointLanes::absurd).
+bool fourUsable(__m128 x, __m128 y, __m128 z, const __m128d& cxy, const __m128d& cz,
+                const __m128d& hs) {
+  const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
+  const __m128 ax = _mm_and_ps(x, abs_mask), ay = _mm_and_ps(y, abs_mask),
+               az = _mm_and_ps(z, abs_mask);
+  const __m128 sane = _mm_set1_ps(1e8f);  // finite (no NaN, no inf) and not absurd
+  if (_mm_movemask_ps(_mm_and_ps(_mm_and_ps(_mm_cmple_ps(ax, sane), _mm_cmple_ps(ay, sane)),
+                                 _mm_cmple_ps(az, sane))) != 15) {
+    return false;
+  }
+  const __m128d sign = _mm_set1_pd(-0.0);
+  const __m128d cx = _mm_unpacklo_pd(cxy, cxy), cy = _mm_unpackhi_pd(cxy, cxy);
+  const auto in = [&](__m128 v, const __m128d& c) {  // |v - c| <= hs, four lanes, in double
+    const __m128d lo2 = _mm_andnot_pd(sign, _mm_sub_pd(_mm_cvtps_pd(v), c));
+    const __m128d hi2 = _mm_andnot_pd(sign, _mm_sub_pd(_mm_cvtps_pd(_mm_movehl_ps(v, v)), c));
+    return _mm_movemask_pd(_mm_cmple_pd(lo2, hs)) | _mm_movemask_pd(_mm_cmple_pd(hi2, hs)) << 2;
+  };
+  return (in(x, cx) & in(y, cy) & in(z, cz)) == 15;
+}
+
+float horizontalMin(__m128 v) {
+  v = _mm_min_ps(v, _mm_movehl_ps(v, v));
+  return _mm_cvtss_f32(_mm_min_ss(v, _mm_shuffle_ps(v, v, 1)));
+}
+
+float horizontalMax(__m128 v) {
+  v = _mm_max_ps(v, _mm_movehl_ps(v, v));
+  return _mm_cvtss_f32(_mm_max_ss(v, _mm_shuffle_ps(v, v, 1)));
+}
+#endif
+
 // toLocalPoints of a cloud whose finite points all lie inside b, and (marks not null) each
 // finite point added to the footprint's marks, in one pass over the cloud, the largest array
 // extraction reads. *finite counts the finite points. false when a finite point lies outside b
@@ -401,14 +435,15 @@ bool firstPass(const Cloud& cloud, const PointBounds& b, LocalPoints* pts, Heigh
   const __m128d cxy = _mm_set_pd(b.centre.y(), b.centre.x()), cz = _mm_set1_pd(b.centre.z());
   const __m128d hs = _mm_set1_pd(b.half_side_m);
   __m128 origin = _mm_setzero_ps(), lo = _mm_set1_ps(kInf), hi = _mm_set1_ps(-kInf);
-  for (size_t i = 0; i < size; ++i) {
+  // One point; false when it is finite and outside b.
+  const auto one = [&](size_t i) {
     const PointLanes q(P[i]);
-    if (!q.finite()) continue;
+    if (!q.finite()) return true;
     ++nf;
     if (!q.inside(cxy, cz, hs)) return false;
     if (marking) marker.add(P[i].x, P[i].y, P[i].z);
     // As toLocalPoints: absurd magnitudes would overflow the cell indices.
-    if (q.absurd()) continue;
+    if (q.absurd()) return true;
     if (!have_origin) {
       ox = std::floor(P[i].x), oy = std::floor(P[i].y), oz = std::floor(P[i].z);
       origin = _mm_set_ps(0.0f, oz, oy, ox), have_origin = true;
@@ -418,9 +453,43 @@ bool firstPass(const Cloud& cloud, const PointBounds& b, LocalPoints* pts, Heigh
     _mm_store_ss(Z + n, _mm_movehl_ps(l, l));
     lo = _mm_min_ps(l, lo), hi = _mm_max_ps(l, hi);  // std::min(lo, l), std::max(hi, l)
     ++n;
+    return true;
+  };
+  size_t i = 0;
+  for (; i < size && !have_origin; ++i) {
+    if (!one(i)) return false;
   }
-  float minx = _mm_cvtss_f32(lo), miny = _mm_cvtss_f32(_mm_shuffle_ps(lo, lo, 1));
-  float maxx = _mm_cvtss_f32(hi), maxy = _mm_cvtss_f32(_mm_shuffle_ps(hi, hi, 1));
+  // Then four points at a time (point i + j in lane j), where all four are finite, inside b and
+  // of sane magnitude (in survey data, every block), else one by one as above. The minima and
+  // maxima per lane are joined at the end: the same values (only the sign of a zero extent may
+  // differ, which no cell index depends on).
+  const __m128 ox4 = _mm_set1_ps(ox), oy4 = _mm_set1_ps(oy), oz4 = _mm_set1_ps(oz);
+  __m128 lox = _mm_set1_ps(kInf), loy = lox, hix = _mm_set1_ps(-kInf), hiy = hix;
+  for (; i + 4 <= size; i += 4) {
+    __m128 x = _mm_loadu_ps(P[i].data), y = _mm_loadu_ps(P[i + 1].data);
+    __m128 z = _mm_loadu_ps(P[i + 2].data), w = _mm_loadu_ps(P[i + 3].data);
+    _MM_TRANSPOSE4_PS(x, y, z, w);
+    if (!fourUsable(x, y, z, cxy, cz, hs)) {
+      for (size_t k = i; k < i + 4; ++k) {
+        if (!one(k)) return false;
+      }
+      continue;
+    }
+    nf += 4;
+    if (marking) marker.add4(x, y, z);
+    const __m128 lx = _mm_sub_ps(x, ox4), ly = _mm_sub_ps(y, oy4);
+    _mm_storeu_ps(X + n, lx), _mm_storeu_ps(Y + n, ly), _mm_storeu_ps(Z + n, _mm_sub_ps(z, oz4));
+    lox = _mm_min_ps(lx, lox), loy = _mm_min_ps(ly, loy);
+    hix = _mm_max_ps(lx, hix), hiy = _mm_max_ps(ly, hiy);
+    n += 4;
+  }
+  for (; i < size; ++i) {
+    if (!one(i)) return false;
+  }
+  float minx = std::min(_mm_cvtss_f32(lo), horizontalMin(lox));
+  float miny = std::min(_mm_cvtss_f32(_mm_shuffle_ps(lo, lo, 1)), horizontalMin(loy));
+  float maxx = std::max(_mm_cvtss_f32(hi), horizontalMax(hix));
+  float maxy = std::max(_mm_cvtss_f32(_mm_shuffle_ps(hi, hi, 1)), horizontalMax(hiy));
 #else
   const double cx = b.centre.x(), cy = b.centre.y(), cz = b.centre.z(), hs = b.half_side_m;
   float minx = kInf, maxx = -kInf, miny = kInf, maxy = -kInf;

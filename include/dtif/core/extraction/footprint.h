@@ -5,6 +5,9 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 #include <utility>
 #include <vector>
 
@@ -89,8 +92,59 @@ class HeightCellMarks {
       marks_[select(band & box, static_cast<size_t>(cx * ch_ + cy), sink_)] = 1;
     }
 
+#ifdef __SSE2__
+    /// add() of four finite points, lanes of x, y and z: the same marks and flag. The floors,
+    /// tiles, band and cells four at a time (int32 lanes: init bounds the box to 1e6 m), the
+    /// ground reads, indices and marks one by one; one by one all of it made ~70 % of the
+    /// extraction's first pass.
+    void add4(__m128 x, __m128 y, __m128 z) {
+      if (shift_ < 0) {  // cells not of 2^k m: add() lane by lane
+        alignas(16) float px[4], py[4], pz[4];
+        _mm_store_ps(px, x), _mm_store_ps(py, y), _mm_store_ps(pz, z);
+        for (int j = 0; j < 4; ++j) add(px[j], py[j], pz[j]);
+        return;
+      }
+      const __m128i fx = floor4(x), fy = floor4(y);
+      alignas(16) int32_t tx[4], ty[4], cx[4], cy[4];
+      _mm_store_si128(reinterpret_cast<__m128i*>(tx),
+                      _mm_sub_epi32(_mm_srai_epi32(fx, 1), _mm_set1_epi32(int32_t(tx0_))));
+      _mm_store_si128(reinterpret_cast<__m128i*>(ty),
+                      _mm_sub_epi32(_mm_srai_epi32(fy, 1), _mm_set1_epi32(int32_t(ty0_))));
+      const __m128i shift = _mm_cvtsi32_si128(shift_);
+      _mm_store_si128(reinterpret_cast<__m128i*>(cx),
+                      _mm_sub_epi32(_mm_sra_epi32(fx, shift), _mm_set1_epi32(int32_t(cx0_))));
+      _mm_store_si128(reinterpret_cast<__m128i*>(cy),
+                      _mm_sub_epi32(_mm_sra_epi32(fy, shift), _mm_set1_epi32(int32_t(cy0_))));
+      alignas(16) float g[4];
+      bool tile[4];
+      for (int j = 0; j < 4; ++j) {
+        tile[j] = (static_cast<uint64_t>(int64_t{tx[j]}) < static_cast<uint64_t>(tw_)) &
+                  (static_cast<uint64_t>(int64_t{ty[j]}) < static_cast<uint64_t>(th_));
+        g[j] = ground_[select(tile[j], static_cast<size_t>(int64_t{ty[j]} * tw_ + tx[j]), 0)];
+      }
+      // h >= kMin and h <= kMax as float comparisons with the bounds' nearest floats inside.
+      const __m128 h = _mm_sub_ps(z, _mm_load_ps(g));
+      const int in_band = _mm_movemask_ps(
+          _mm_and_ps(_mm_cmpge_ps(h, _mm_set1_ps(kMinF)), _mm_cmple_ps(h, _mm_set1_ps(kMaxF))));
+      for (int j = 0; j < 4; ++j) {
+        const bool band = tile[j] & ((in_band >> j) & 1);
+        const bool box = (static_cast<uint64_t>(int64_t{cx[j]}) < static_cast<uint64_t>(cw_)) &
+                         (static_cast<uint64_t>(int64_t{cy[j]}) < static_cast<uint64_t>(ch_));
+        outside_ |= band & !box;
+        marks_[select(band & box, static_cast<size_t>(int64_t{cx[j]} * ch_ + cy[j]), sink_)] = 1;
+      }
+    }
+#endif
+
    private:
     friend class HeightCellMarks;
+#ifdef __SSE2__
+    // floorOf of four floats (|v| < 2^31): truncation, one less where that rose above v.
+    static __m128i floor4(__m128 v) {
+      const __m128i i = _mm_cvttps_epi32(v);
+      return _mm_add_epi32(i, _mm_castps_si128(_mm_cmplt_ps(v, _mm_cvtepi32_ps(i))));
+    }
+#endif
     // c ? a : b by a mask: the compiler made a branch of the conditional.
     static size_t select(bool c, size_t a, size_t b) {
       const size_t m = size_t{0} - static_cast<size_t>(c);
@@ -135,6 +189,10 @@ class HeightCellMarks {
     return i - (v < static_cast<float>(i));
   }
   static constexpr double kMin = 0.3, kMax = 3.0;  // the band, as trunkHeightCells compares it
+  // For a float h, h >= kMin exactly when h >= kMinF, and h <= kMax when h <= kMaxF: the
+  // nearest floats at or inside the band (0.3f lies above 0.3; 3 is a float).
+  static constexpr float kMinF = 0.3f, kMaxF = 3.0f;
+  static_assert(static_cast<double>(kMinF) >= kMin && static_cast<double>(kMaxF) <= kMax);
   // The tile grid (ground_), the cell grid (marks_, column-major) and whether a point fell
   // outside; pass() hands out a copy pointing at the vectors.
   Pass grid_;
