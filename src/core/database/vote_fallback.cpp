@@ -14,11 +14,14 @@ std::vector<Correspondence> voteCorrespondences(const Descriptor& q, const Descr
   const std::vector<VotePeak> peaks = votePoses(q, c, params.matcher, kPeaks);
   const double radius = params.verification.match_radius_m;
   std::vector<Fit> fits;
-  for (const VotePeak& pk : peaks) {
-    Pose T = Pose::Identity();
-    T.linear() = rotZ(pk.yaw);
-    T.translation() = Eigen::Vector3d(pk.t.x(), pk.t.y(), 0.0);
-    fits.push_back(fitPose(q, c, T, radius, radius));
+  if (!peaks.empty()) {
+    const RefineTargets targets(c, radius);  // one grid for the peaks' fits
+    for (const VotePeak& pk : peaks) {
+      Pose T = Pose::Identity();
+      T.linear() = rotZ(pk.yaw);
+      T.translation() = Eigen::Vector3d(pk.t.x(), pk.t.y(), 0.0);
+      fits.push_back(fitPose(q, c, targets, T, radius));
+    }
   }
   size_t best = 0;
   for (size_t k = 1; k < fits.size(); ++k)

@@ -243,8 +243,13 @@ std::vector<std::pair<double, Pose>> rankLatticePoses(const Descriptor& q, const
 
 Fit fitPose(const Descriptor& q, const Descriptor& c, const Pose& T0, double radius,
             double score_radius) {
+  return fitPose(q, c, RefineTargets(c, radius), T0, score_radius);
+}
+
+Fit fitPose(const Descriptor& q, const Descriptor& c, const RefineTargets& targets, const Pose& T0,
+            double score_radius) {
   Fit f;
-  const Refined r = guidedRefine(q, c, T0, radius);
+  const Refined r = guidedRefine(q, targets, T0);
   f.T = r.T;
   f.pairs = r.pairs;
   std::vector<double> residual;
@@ -305,9 +310,10 @@ std::pair<Fit, double> resolveByFit(const Descriptor& q, const Descriptor& c, co
   // Every lattice pose ranked by quickFit; the best few are fitted exactly.
   size_t full = 0;
   const std::vector<std::pair<double, Pose>> ranked = rankLatticePoses(q, c, T0, params, &full);
-  std::vector<Fit> fits{fitPose(q, c, T0, radius, score_radius)};
+  const RefineTargets targets(c, radius);  // one grid for the fits below
+  std::vector<Fit> fits{fitPose(q, c, targets, T0, score_radius)};
   for (size_t k = 0; k < full; ++k)
-    fits.push_back(fitPose(q, c, ranked[k].second, radius, score_radius));
+    fits.push_back(fitPose(q, c, targets, ranked[k].second, score_radius));
   std::stable_sort(fits.begin(), fits.end(),
                    [](const Fit& x, const Fit& y) { return x.score > y.score; });
   const Fit& best = fits.front();

@@ -321,11 +321,19 @@ double inlierWeightShare(const std::vector<Correspondence>& corrs, const PoseEst
   return total_w > 0 ? inlier_w / total_w : 0.0;
 }
 
+RefineTargets::RefineTargets(const Descriptor& c, double r)
+    : xy(xyOf(c.trunks)), radius(r), grid(xy, r, kRefineCellsPerTrunk) {}
+
 Refined guidedRefine(const Descriptor& q, const Descriptor& c, const Pose& T0, double radius) {
+  return guidedRefine(q, RefineTargets(c, radius), T0);
+}
+
+Refined guidedRefine(const Descriptor& q, const RefineTargets& c, const Pose& T0) {
   Refined out;
   out.T = T0;
-  const std::vector<P2> pc = xyOf(c.trunks);
-  const TrunkGrid grid(pc, radius, kRefineCellsPerTrunk);
+  const std::vector<P2>& pc = c.xy;
+  const TrunkGrid& grid = c.grid;
+  const double radius = c.radius;
   for (int it = 0; it < 5; ++it) {
     const std::vector<P2> pq = placedXy(q.trunks, out.T);
     std::vector<std::pair<int, int>> pairs = mutualPairs(pq, grid, radius);

@@ -25,6 +25,9 @@ struct Fit {
 };
 Fit fitPose(const Descriptor& q, const Descriptor& c, const Pose& T0, double radius,
             double score_radius);
+/// The same with c's refinement targets made once (their radius is the refinement's).
+Fit fitPose(const Descriptor& q, const Descriptor& c, const RefineTargets& targets, const Pose& T0,
+            double score_radius);
 
 /// Lattice-consistent translations for the rotation R: every (query, candidate) trunk pair
 /// votes for c_j - R q_i in 0.5 m bins; the bins whose 3 x 3 neighbourhood holds a local

@@ -10,6 +10,7 @@
 #include "dtif/core/descriptor/descriptor.h"
 #include "dtif/core/matching/matcher.h"
 #include "dtif/core/pose/pose_estimator.h"
+#include "dtif/core/verification/trunk_grid.h"
 
 namespace dtif {
 
@@ -226,11 +227,23 @@ struct Refined {
   double rms_xy = 0.0;                     ///< of the pairs [m]; the elevation is refineElevation's
 };
 
+/// A candidate's trunk centres and their lookup grid for guidedRefine within `radius` [m]: made
+/// once for the several poses a lattice search or the vote fallback refines against one
+/// candidate (the grid cost about as much as a refinement).
+struct RefineTargets {
+  RefineTargets(const Descriptor& c, double radius);
+  std::vector<Eigen::Vector2d> xy;  ///< c's trunk centres, by index
+  double radius;                    ///< the grid's reach [m]
+  TrunkGrid grid;
+};
+
 /// Guided matching: re-associate every trunk by mutual nearest neighbour (within radius [m])
 /// under the current pose, then solve Eq. (3.11) by least squares on those pairs (2-D
 /// Procrustes for yaw and t_xy; t_z is refineElevation's); a few rounds until the pairs stop
 /// changing.
 Refined guidedRefine(const Descriptor& q, const Descriptor& c, const Pose& T0, double radius);
+/// The same against targets made for the candidate (and the radius).
+Refined guidedRefine(const Descriptor& q, const RefineTargets& c, const Pose& T0);
 
 /// An accumulated descriptor's trunks carry its neighbours' sightings through odometry, and with
 /// them the odometry's drift over its span (0.17-0.22 m of loop translation in very_sparse).
