@@ -73,6 +73,72 @@ inline int64_t packBin(int64_t iyaw, int64_t ix, int64_t iy) {
   return (iyaw << 52) | ((ix + kHalf) << 26) | (iy + kHalf);
 }
 
+/// The accumulator's bins for params.
+struct VoteGrid {
+  int64_t n_yaw;
+  double yaw_bin;  ///< [rad]
+  double xy_bin;   ///< [m]
+};
+VoteGrid voteGrid(const MatcherParams& params) {
+  const int64_t n_yaw = std::clamp<int64_t>(std::llround(360.0 / params.vote_yaw_bin_deg), 1, 4095);
+  return {n_yaw, kTwoPi / static_cast<double>(n_yaw), params.vote_xy_bin_m};
+}
+
+/// f(a, b) for the length-compatible candidate pairs b of every query pair a, by a sliding
+/// window over both sorted lists (Cons_l). The radii do not vote: where stems are partly hidden
+/// their fitted radii are off by half or more (dense_slope: 9 of 32 pairs of common trunks pass
+/// Cons_r on both ends).
+template <class F>
+void forCompatible(const std::vector<pair_vote_stages::TrunkPair>& pq,
+                   const std::vector<pair_vote_stages::TrunkPair>& pc, const MatcherParams& params,
+                   const F& f) {
+  size_t lo = 0;
+  for (const pair_vote_stages::TrunkPair& a : pq) {
+    const double tol = std::max(params.edge_abs_tol_m, params.edge_rel_tol * a.len);
+    while (lo < pc.size() && pc[lo].len < a.len - tol) ++lo;
+    for (size_t k = lo; k < pc.size() && pc[k].len <= a.len + tol; ++k) f(a, pc[k]);
+  }
+}
+
+size_t countCompatible(const std::vector<pair_vote_stages::TrunkPair>& pq,
+                       const std::vector<pair_vote_stages::TrunkPair>& pc,
+                       const MatcherParams& params) {
+  size_t n = 0;
+  forCompatible(pq, pc, params, [&](const auto&, const auto&) { ++n; });
+  return n;
+}
+
+/// f(iyaw, ix, iy, cy, sy, t) for every vote, in one fixed order (accumulateVotes and
+/// countVotes sum a bin's votes in it, bit for bit the same).
+template <class F>
+void forEachVote(const std::vector<pair_vote_stages::TrunkPair>& pq,
+                 const std::vector<pair_vote_stages::TrunkPair>& pc, const MatcherParams& params,
+                 const VoteGrid& grid, const F& f) {
+  const double xy_bin = grid.xy_bin;
+  // Translations beyond the packing range are no poses of overlapping submaps.
+  const double max_t = 3.0e4 * xy_bin;
+  // A proposal: T_c_q turns by yaw (in yaw bin iyaw; cos cy, sin sy) and maps the query
+  // pair's midpoint onto the candidate's.
+  auto vote = [&](int64_t iyaw, double cy, double sy, const Eigen::Vector2d& mq,
+                  const Eigen::Vector2d& mc) {
+    const Eigen::Vector2d t(mc.x() - (cy * mq.x() - sy * mq.y()),
+                            mc.y() - (sy * mq.x() + cy * mq.y()));
+    if (!(std::abs(t.x()) < max_t && std::abs(t.y()) < max_t)) return;
+    f(iyaw, floorIndex(t.x() / xy_bin), floorIndex(t.y() / xy_bin), cy, sy, t);
+  };
+  const YawBins bins(grid.n_yaw, grid.yaw_bin);
+  forCompatible(pq, pc, params, [&](const auto& a, const auto& b) {
+    // yaw = direction of b - direction of a pairs a.i with b.i and a.j with b.j;
+    // yaw + pi pairs a.i with b.j and a.j with b.i.
+    const double cy = b.cos_a * a.cos_a + b.sin_a * a.sin_a;
+    const double sy = b.sin_a * a.cos_a - b.cos_a * a.sin_a;
+    const double yaw = approxAtan2(sy, cy);
+    vote(bins.of(yaw, [&] { return std::atan2(sy, cy); }), cy, sy, a.mid, b.mid);
+    const double turned = yaw < 0.0 ? yaw + M_PI : yaw - M_PI;
+    vote(bins.of(turned, [&] { return std::atan2(-sy, -cy); }), -cy, -sy, a.mid, b.mid);
+  });
+}
+
 }  // namespace
 
 namespace pair_vote_stages {
@@ -157,52 +223,17 @@ VoteAccumulator accumulateVotes(const std::vector<TrunkPair>& pq, const std::vec
 void accumulateVotes(const std::vector<TrunkPair>& pq, const std::vector<TrunkPair>& pc,
                      const MatcherParams& params, VoteAccumulator* out) {
   VoteAccumulator& acc = *out;
-  const int64_t n_yaw = std::clamp<int64_t>(std::llround(360.0 / params.vote_yaw_bin_deg), 1, 4095);
-  const double yaw_bin = kTwoPi / static_cast<double>(n_yaw);
-  const double xy_bin = params.vote_xy_bin_m;
-  acc.n_yaw = n_yaw;
-  acc.yaw_bin = yaw_bin;
-  acc.xy_bin = xy_bin;
-  // Translations beyond the packing range are no poses of overlapping submaps.
-  const double max_t = 3.0e4 * xy_bin;
-  // Length-compatible candidate pairs by a sliding window over both sorted lists (Cons_l),
-  // counted first so that the accumulator is sized once. The radii do not vote: where stems are
-  // partly hidden their fitted radii are off by half or more (dense_slope: 9 of 32 pairs of
-  // common trunks pass Cons_r on both ends).
-  auto forCompatible = [&](const auto& f) {
-    size_t lo = 0;
-    for (const TrunkPair& a : pq) {
-      const double tol = std::max(params.edge_abs_tol_m, params.edge_rel_tol * a.len);
-      while (lo < pc.size() && pc[lo].len < a.len - tol) ++lo;
-      for (size_t k = lo; k < pc.size() && pc[k].len <= a.len + tol; ++k) f(a, pc[k]);
-    }
-  };
-  size_t n_compatible = 0;
-  forCompatible([&](const TrunkPair&, const TrunkPair&) { ++n_compatible; });
+  const VoteGrid grid = voteGrid(params);
+  acc.n_yaw = grid.n_yaw, acc.yaw_bin = grid.yaw_bin, acc.xy_bin = grid.xy_bin;
   // Most votes scatter into bins of their own; the table grows from a guess (a memset of a
   // table sized for every vote would cost more than the votes).
-  acc.reserve(std::min<size_t>(2 * n_compatible, size_t{1} << 14));
-  // A proposal: T_c_q turns by yaw (in yaw bin iyaw; cos cy, sin sy) and maps the query
-  // pair's midpoint onto the candidate's.
-  auto vote = [&](int64_t iyaw, double cy, double sy, const Eigen::Vector2d& mq,
-                  const Eigen::Vector2d& mc) {
-    const Eigen::Vector2d t(mc.x() - (cy * mq.x() - sy * mq.y()),
-                            mc.y() - (sy * mq.x() + cy * mq.y()));
-    if (!(std::abs(t.x()) < max_t && std::abs(t.y()) < max_t)) return;
-    VoteBin& b = acc.at(iyaw, floorIndex(t.x() / xy_bin), floorIndex(t.y() / xy_bin));
-    b.count += 1.0, b.cos_sum += cy, b.sin_sum += sy, b.t_sum += t;
-  };
-  const YawBins bins(n_yaw, yaw_bin);
-  forCompatible([&](const TrunkPair& a, const TrunkPair& b) {
-    // yaw = direction of b - direction of a pairs a.i with b.i and a.j with b.j;
-    // yaw + pi pairs a.i with b.j and a.j with b.i.
-    const double cy = b.cos_a * a.cos_a + b.sin_a * a.sin_a;
-    const double sy = b.sin_a * a.cos_a - b.cos_a * a.sin_a;
-    const double yaw = approxAtan2(sy, cy);
-    vote(bins.of(yaw, [&] { return std::atan2(sy, cy); }), cy, sy, a.mid, b.mid);
-    const double turned = yaw < 0.0 ? yaw + M_PI : yaw - M_PI;
-    vote(bins.of(turned, [&] { return std::atan2(-sy, -cy); }), -cy, -sy, a.mid, b.mid);
-  });
+  acc.reserve(std::min<size_t>(2 * countCompatible(pq, pc, params), size_t{1} << 14));
+  forEachVote(
+      pq, pc, params, grid,
+      [&](int64_t iyaw, int64_t ix, int64_t iy, double cy, double sy, const Eigen::Vector2d& t) {
+        VoteBin& b = acc.at(iyaw, ix, iy);
+        b.count += 1.0, b.cos_sum += cy, b.sin_sum += sy, b.t_sum += t;
+      });
 }
 
 std::vector<ScoredSeed> scoreSeeds(const VoteAccumulator& acc) {
