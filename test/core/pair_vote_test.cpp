@@ -3,9 +3,11 @@
 
 #include <gtest/gtest.h>
 
+#include <cstring>
 #include <limits>
 #include <memory>
 #include <random>
+#include <tuple>
 
 #include "core/match_test_utils.h"
 #include "dtif/core/database/loop_detector.h"
@@ -211,6 +213,93 @@ TEST(PairVoteStages, SelectPeaksSuppressesNeighboursAcrossTheYawWrap) {
   EXPECT_EQ(peaks[1].votes, 6.0);
   EXPECT_NEAR(peaks[1].yaw, -0.02, 1e-12);
   EXPECT_EQ(pair_vote_stages::selectPeaks(scored, 180, 1).size(), 1u);
+}
+
+/// Bit-for-bit equality of two doubles (== would take -0.0 for 0.0).
+bool sameBits(double a, double b) { return std::memcmp(&a, &b, sizeof a) == 0; }
+
+/// votePoses' path (countVotes, then scoreSeeds on the counts) against the full accumulator
+/// on the same pairs: the same seeds in the same order, with bit-identical sums.
+void expectCountedSeedsAsAccumulated(const Descriptor& q, const Descriptor& c,
+                                     const MatcherParams& params) {
+  using namespace pair_vote_stages;
+  const auto pq = trunkPairs(q, params.vote_max_pair_m), pc = trunkPairs(c, params.vote_max_pair_m);
+  const VoteAccumulator acc = accumulateVotes(pq, pc, params);
+  const std::vector<ScoredSeed> want = scoreSeeds(acc);
+  VoteCounts counts;
+  ASSERT_TRUE(countVotes(pq, pc, params, &counts));
+  std::vector<VoteBin> seeds;
+  const std::vector<ScoredSeed> got = scoreSeeds(counts, pq, pc, params, &seeds);
+  ASSERT_EQ(got.size(), want.size());
+  for (size_t k = 0; k < got.size(); ++k) {
+    const VoteBin &g = *got[k].seed, &w = *want[k].seed;
+    EXPECT_EQ(std::make_tuple(g.iyaw, g.ix, g.iy), std::make_tuple(w.iyaw, w.ix, w.iy)) << k;
+    EXPECT_EQ(g.count, w.count) << k;
+    const VoteBin &gs = got[k].sum, &ws = want[k].sum;
+    EXPECT_EQ(gs.count, ws.count) << k;
+    EXPECT_TRUE(sameBits(gs.cos_sum, ws.cos_sum) && sameBits(gs.sin_sum, ws.sin_sum) &&
+                sameBits(gs.t_sum.x(), ws.t_sum.x()) && sameBits(gs.t_sum.y(), ws.t_sum.y()))
+        << k;
+  }
+}
+
+TEST(PairVoteStages, CountedSeedsAreTheAccumulatorsBitForBit) {
+  const MatcherParams params;
+  // Overlaps and disjoint places of a dense stand: most bins hold one vote, so most seeds are
+  // ties at one vote, ranked by position.
+  for (const SparseOverlap& s : sparseOverlaps(8, 21)) {
+    expectCountedSeedsAsAccumulated(s.q, s.c, params);
+    expectCountedSeedsAsAccumulated(s.q, sparseOverlaps(1, 22)[0].c, params);
+  }
+  // The true pose in the lowest yaw bins: its many votes there hold few seeds, so the bins of
+  // one vote taken reach into higher yaw bins.
+  std::mt19937 stand_rng(24);
+  const Trunks stand = test::randomStand(stand_rng, 60, 60, 600);
+  const test::ObservationNoise clean;
+  const Descriptor low_q =
+      describe(observe(stand_rng, stand, {30, 30}, poseXyYaw(30, 30, 0, 0.01), clean), 0);
+  const Descriptor low_c =
+      describe(observe(stand_rng, stand, {31, 30}, poseXyYaw(31, 30, 0, 0.0), clean), 1);
+  expectCountedSeedsAsAccumulated(low_q, low_c, params);
+  // A plantation: hundreds of bins of several votes, ties at the lowest count taken.
+  std::mt19937 rng(23);
+  const Trunks grid = test::plantation(rng, 40, 40, 3.0, 0.05);
+  test::ObservationNoise nz;
+  const Descriptor pq = describe(observe(rng, grid, {20, 20}, poseXyYaw(20, 20, 0, 0.3), nz), 0);
+  const Descriptor pc = describe(observe(rng, grid, {22, 19}, poseXyYaw(22, 19, 0, 2.1), nz), 1);
+  expectCountedSeedsAsAccumulated(pq, pc, params);
+  // Coarser and finer bins (not a power of two: the translation bins divide), fewer than 64
+  // bins in all.
+  MatcherParams coarse = params, fine = params;
+  coarse.vote_xy_bin_m = 1.3, coarse.vote_yaw_bin_deg = 7.0;
+  fine.vote_xy_bin_m = 0.1, fine.vote_yaw_bin_deg = 0.5;
+  expectCountedSeedsAsAccumulated(pq, pc, coarse);
+  expectCountedSeedsAsAccumulated(pq, pc, fine);
+  const Descriptor few = trunksOnly({{0, 0, 0, .1}, {2, 0, 0, .1}, {0, 3, 0, .1}, {4, 4, 0, .1}});
+  expectCountedSeedsAsAccumulated(few, few, params);
+}
+
+TEST(PairVoteStages, CountVotesRefusesMoreVotesThanACountHolds) {
+  // A 1 m grid: thousands of pairs of a few lengths, over a million votes; votePoses takes
+  // the full accumulator then, with its peaks.
+  Trunks grid;
+  for (int x = 0; x < 10; ++x)
+    for (int y = 0; y < 10; ++y) grid.push_back({double(x), double(y), 0, .1});
+  const Descriptor d = trunksOnly(grid);
+  const MatcherParams params;
+  const auto pairs = pair_vote_stages::trunkPairs(d, params.vote_max_pair_m);
+  pair_vote_stages::VoteCounts counts;
+  EXPECT_FALSE(pair_vote_stages::countVotes(pairs, pairs, params, &counts));
+  const pair_vote_stages::VoteAccumulator acc =
+      pair_vote_stages::accumulateVotes(pairs, pairs, params);
+  const auto want = pair_vote_stages::selectPeaks(pair_vote_stages::scoreSeeds(acc), acc.n_yaw, 4);
+  const auto got = votePoses(d, d, params, 4);
+  ASSERT_EQ(got.size(), want.size());
+  for (size_t k = 0; k < got.size(); ++k) {
+    EXPECT_EQ(got[k].yaw, want[k].yaw);
+    EXPECT_EQ(got[k].t, want[k].t);
+    EXPECT_EQ(got[k].votes, want[k].votes);
+  }
 }
 
 /// The fallback is what finds these pairs: without it the triangles give no hypothesis for most

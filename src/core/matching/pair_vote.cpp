@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <tuple>
 
 #include "dtif/core/matching/pair_vote_stages.h"
 
@@ -73,6 +74,19 @@ inline int64_t packBin(int64_t iyaw, int64_t ix, int64_t iy) {
   return (iyaw << 52) | ((ix + kHalf) << 26) | (iy + kHalf);
 }
 
+/// A bin of VoteCounts: 12 bits of yaw, 16 per translation axis (|ix|, |iy| < 3e4 by max_t),
+/// ordered as (iyaw, ix, iy) and never 0.
+inline uint64_t compactBin(int64_t iyaw, int64_t ix, int64_t iy) {
+  constexpr int64_t kHalf = int64_t{1} << 15;
+  return static_cast<uint64_t>((iyaw << 32) | ((ix + kHalf) << 16) | (iy + kHalf));
+}
+inline void unpackCompactBin(uint64_t bin, pair_vote_stages::VoteBin* b) {
+  constexpr int64_t kHalf = int64_t{1} << 15;
+  b->iyaw = static_cast<int64_t>(bin >> 32);
+  b->ix = static_cast<int64_t>((bin >> 16) & 0xFFFF) - kHalf;
+  b->iy = static_cast<int64_t>(bin & 0xFFFF) - kHalf;
+}
+
 /// The accumulator's bins for params.
 struct VoteGrid {
   int64_t n_yaw;
@@ -108,30 +122,42 @@ size_t countCompatible(const std::vector<pair_vote_stages::TrunkPair>& pq,
   return n;
 }
 
-/// f(iyaw, ix, iy, cy, sy, t) for every vote, in one fixed order (accumulateVotes and
-/// countVotes sum a bin's votes in it, bit for bit the same).
-template <class F>
+/// The turn (cos cy, sin sy) of a pair's proposal: yaw = direction of b - direction of a pairs
+/// a.i with b.i and a.j with b.j; yaw + pi (-cy, -sy) pairs a.i with b.j and a.j with b.i.
+inline void pairTurn(const pair_vote_stages::TrunkPair& a, const pair_vote_stages::TrunkPair& b,
+                     double* cy, double* sy) {
+  *cy = b.cos_a * a.cos_a + b.sin_a * a.sin_a;
+  *sy = b.sin_a * a.cos_a - b.cos_a * a.sin_a;
+}
+
+/// A proposal's translation: T_c_q turns by (cy, sy) and maps the query pair's midpoint mq
+/// onto the candidate's mc.
+inline Eigen::Vector2d proposalT(double cy, double sy, const Eigen::Vector2d& mq,
+                                 const Eigen::Vector2d& mc) {
+  return Eigen::Vector2d(mc.x() - (cy * mq.x() - sy * mq.y()),
+                         mc.y() - (sy * mq.x() + cy * mq.y()));
+}
+
+/// f(iyaw, ix, iy, cy, sy, t) for every vote, skip() for one out of the packing range: two per
+/// length-compatible pair, in one fixed order (accumulateVotes and scoreSeeds(VoteCounts) sum
+/// a bin's votes in it, bit for bit the same).
+template <class F, class Skip>
 void forEachVote(const std::vector<pair_vote_stages::TrunkPair>& pq,
                  const std::vector<pair_vote_stages::TrunkPair>& pc, const MatcherParams& params,
-                 const VoteGrid& grid, const F& f) {
+                 const VoteGrid& grid, const F& f, const Skip& skip) {
   const double xy_bin = grid.xy_bin;
   // Translations beyond the packing range are no poses of overlapping submaps.
   const double max_t = 3.0e4 * xy_bin;
-  // A proposal: T_c_q turns by yaw (in yaw bin iyaw; cos cy, sin sy) and maps the query
-  // pair's midpoint onto the candidate's.
   auto vote = [&](int64_t iyaw, double cy, double sy, const Eigen::Vector2d& mq,
                   const Eigen::Vector2d& mc) {
-    const Eigen::Vector2d t(mc.x() - (cy * mq.x() - sy * mq.y()),
-                            mc.y() - (sy * mq.x() + cy * mq.y()));
-    if (!(std::abs(t.x()) < max_t && std::abs(t.y()) < max_t)) return;
+    const Eigen::Vector2d t = proposalT(cy, sy, mq, mc);
+    if (!(std::abs(t.x()) < max_t && std::abs(t.y()) < max_t)) return skip();
     f(iyaw, floorIndex(t.x() / xy_bin), floorIndex(t.y() / xy_bin), cy, sy, t);
   };
   const YawBins bins(grid.n_yaw, grid.yaw_bin);
   forCompatible(pq, pc, params, [&](const auto& a, const auto& b) {
-    // yaw = direction of b - direction of a pairs a.i with b.i and a.j with b.j;
-    // yaw + pi pairs a.i with b.j and a.j with b.i.
-    const double cy = b.cos_a * a.cos_a + b.sin_a * a.sin_a;
-    const double sy = b.sin_a * a.cos_a - b.cos_a * a.sin_a;
+    double cy, sy;
+    pairTurn(a, b, &cy, &sy);
     const double yaw = approxAtan2(sy, cy);
     vote(bins.of(yaw, [&] { return std::atan2(sy, cy); }), cy, sy, a.mid, b.mid);
     const double turned = yaw < 0.0 ? yaw + M_PI : yaw - M_PI;
@@ -233,7 +259,49 @@ void accumulateVotes(const std::vector<TrunkPair>& pq, const std::vector<TrunkPa
       [&](int64_t iyaw, int64_t ix, int64_t iy, double cy, double sy, const Eigen::Vector2d& t) {
         VoteBin& b = acc.at(iyaw, ix, iy);
         b.count += 1.0, b.cos_sum += cy, b.sin_sum += sy, b.t_sum += t;
-      });
+      },
+      [] {});
+}
+
+void VoteCounts::reset(size_t n) {
+  size_t cap = 16;
+  shift_ = 60;
+  while (cap < 2 * n) cap *= 2, --shift_;  // at most half full
+  slots_.assign(cap, 0);
+  mask_ = cap - 1;
+  votes_.clear();
+  votes_.reserve(n);
+  multi_.clear();
+  yaw_votes_.assign(static_cast<size_t>(n_yaw), 0);
+}
+
+std::vector<uint64_t> VoteCounts::multiVoteBins() const {
+  std::vector<uint64_t> out;
+  out.reserve(multi_.size());
+  for (uint32_t k : multi_) out.push_back(slots_[k]);
+  return out;
+}
+
+size_t VoteCounts::bytes() const {
+  return (slots_.capacity() + votes_.capacity()) * sizeof(uint64_t) +
+         (multi_.capacity() + yaw_votes_.capacity()) * sizeof(uint32_t);
+}
+
+bool countVotes(const std::vector<TrunkPair>& pq, const std::vector<TrunkPair>& pc,
+                const MatcherParams& params, VoteCounts* out) {
+  VoteCounts& counts = *out;
+  const VoteGrid grid = voteGrid(params);
+  counts.n_yaw = grid.n_yaw, counts.yaw_bin = grid.yaw_bin, counts.xy_bin = grid.xy_bin;
+  const size_t n_votes = 2 * countCompatible(pq, pc, params);
+  counts.reset(std::min(n_votes, VoteCounts::kMaxVotes));
+  if (n_votes > VoteCounts::kMaxVotes) return false;
+  forEachVote(
+      pq, pc, params, grid,
+      [&](int64_t iyaw, int64_t ix, int64_t iy, double, double, const Eigen::Vector2d&) {
+        counts.add(compactBin(iyaw, ix, iy));
+      },
+      [&] { counts.skip(); });
+  return true;
 }
 
 std::vector<ScoredSeed> scoreSeeds(const VoteAccumulator& acc) {
@@ -274,6 +342,164 @@ std::vector<ScoredSeed> scoreSeeds(const VoteAccumulator& acc) {
   return scored;
 }
 
+namespace {
+
+/// The bins of one vote with the n smallest bins (as by iyaw, ix, iy), ascending. Those of
+/// the lowest yaw bins: cut where the votes up to a yaw bin, less all votes of the bins of more
+/// (multi_votes), reach n; only the votes below the cut are looked at.
+std::vector<uint64_t> smallestSingleVoteBins(const VoteCounts& counts, size_t multi_votes,
+                                             size_t n) {
+  if (n == 0) return {};
+  const std::vector<uint32_t>& per_yaw = counts.yawVotes();
+  uint64_t cut = per_yaw.size();  // yaw bins below it
+  for (size_t iyaw = 0, votes = 0; iyaw < per_yaw.size(); ++iyaw) {
+    votes += per_yaw[iyaw];
+    if (votes >= n + multi_votes) {
+      cut = iyaw + 1;
+      break;
+    }
+  }
+  std::vector<uint64_t> out;
+  for (uint64_t bin : counts.votes())
+    if (bin >> 32 < cut && counts.count(bin) == 1) out.push_back(bin);
+  n = std::min(n, out.size());
+  std::nth_element(out.begin(), out.begin() + n, out.end());
+  out.resize(n);
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+/// The seeds of scoreSeeds: the kSeedBins bins of most votes, ties by bin (as by iyaw, ix,
+/// iy), fullest first.
+std::vector<VoteBin> seedBins(const VoteCounts& counts) {
+  constexpr uint64_t kCount = VoteCounts::kCountMask;
+  std::vector<uint64_t> multi = counts.multiVoteBins();  // bin << kCountBits | count
+  const size_t n_multi = std::min(kSeedBins, multi.size());
+  std::partial_sort(multi.begin(), multi.begin() + n_multi, multi.end(),
+                    [](uint64_t x, uint64_t y) {
+                      return (x & kCount) != (y & kCount) ? (x & kCount) > (y & kCount) : x < y;
+                    });
+  size_t multi_votes = 0;
+  for (uint64_t s : multi) multi_votes += s & kCount;
+  multi.resize(n_multi);
+  const std::vector<uint64_t> single =
+      smallestSingleVoteBins(counts, multi_votes, kSeedBins - n_multi);
+  std::vector<VoteBin> seeds(n_multi + single.size());
+  for (size_t i = 0; i < seeds.size(); ++i) {
+    const bool up = i < n_multi;
+    unpackCompactBin(up ? multi[i] >> VoteCounts::kCountBits : single[i - n_multi], &seeds[i]);
+    seeds[i].count = static_cast<double>(up ? multi[i] & kCount : 1);
+  }
+  return seeds;
+}
+
+/// The sums of a few bins (the seeds' neighbourhoods): an open-addressing table small enough
+/// for L1, behind a bitmap (64 bits per bin) that turns most other bins away with one test.
+class BinSums {
+ public:
+  /// For the distinct bins `bins`, their sums zero.
+  explicit BinSums(const std::vector<uint64_t>& bins) {
+    size_t cap = 16;
+    while (cap < 2 * bins.size()) cap *= 2;
+    bins_.assign(cap, 0);
+    index_.resize(cap);
+    mask_ = cap - 1;
+    filter_.assign(cap / 2, 0);
+    sums_.resize(bins.size());
+    for (size_t i = 0; i < bins.size(); ++i) {
+      const uint64_t h = hash(bins[i]);
+      size_t k = h & mask_;
+      while (bins_[k] != 0) k = (k + 1) & mask_;
+      bins_[k] = bins[i];
+      index_[k] = static_cast<uint32_t>(i);
+      filter_[(h >> 6) & (filter_.size() - 1)] |= uint64_t{1} << (h & 63);
+    }
+  }
+  /// bin's sums, nullptr when it is not one of them.
+  VoteBin* find(uint64_t bin) {
+    const uint64_t h = hash(bin);
+    if (!(filter_[(h >> 6) & (filter_.size() - 1)] >> (h & 63) & 1)) return nullptr;
+    for (size_t k = h & mask_; bins_[k] != 0; k = (k + 1) & mask_)
+      if (bins_[k] == bin) return &sums_[index_[k]];
+    return nullptr;
+  }
+
+ private:
+  static uint64_t hash(uint64_t bin) { return (bin * 0x9E3779B97F4A7C15ull) >> 32; }
+  std::vector<uint64_t> bins_;  ///< 0: free
+  std::vector<uint32_t> index_;
+  std::vector<VoteBin> sums_;
+  std::vector<uint64_t> filter_;
+  size_t mask_;
+};
+
+/// The 27 bins around seed s (yaw wraps around), in scoreSeeds' order.
+template <class F>
+void forNeighbours(const VoteBin& s, int64_t n_yaw, const F& f) {
+  for (int64_t dyaw = -1; dyaw <= 1; ++dyaw) {
+    const int64_t iyaw = (s.iyaw + dyaw + n_yaw) % n_yaw;
+    for (int64_t dx = -1; dx <= 1; ++dx)
+      for (int64_t dy = -1; dy <= 1; ++dy) f(compactBin(iyaw, s.ix + dx, s.iy + dy));
+  }
+}
+
+/// The votes of the bins in *sums, summed in vote order (as accumulateVotes sums them): the
+/// pairs' votes cast again, only where the bin counted for the vote is one of them.
+void sumVotes(const VoteCounts& counts, const std::vector<TrunkPair>& pq,
+              const std::vector<TrunkPair>& pc, const MatcherParams& params, BinSums* sums) {
+  const std::vector<uint64_t>& votes = counts.votes();
+  size_t v = 0;
+  auto add = [&](VoteBin* b, double cy, double sy, const Eigen::Vector2d& mq,
+                 const Eigen::Vector2d& mc) {
+    b->count += 1.0, b->cos_sum += cy, b->sin_sum += sy, b->t_sum += proposalT(cy, sy, mq, mc);
+  };
+  forCompatible(pq, pc, params, [&](const TrunkPair& a, const TrunkPair& b) {
+    VoteBin* first = sums->find(votes[v]);
+    VoteBin* second = sums->find(votes[v + 1]);
+    v += 2;
+    if (!first && !second) return;
+    double cy, sy;
+    pairTurn(a, b, &cy, &sy);
+    if (first) add(first, cy, sy, a.mid, b.mid);
+    if (second) add(second, -cy, -sy, a.mid, b.mid);
+  });
+}
+
+}  // namespace
+
+std::vector<ScoredSeed> scoreSeeds(const VoteCounts& counts, const std::vector<TrunkPair>& pq,
+                                   const std::vector<TrunkPair>& pc, const MatcherParams& params,
+                                   std::vector<VoteBin>* seeds) {
+  *seeds = seedBins(counts);
+  const int64_t n_yaw = counts.n_yaw;
+  std::vector<uint64_t> voted;  // the bins with votes around the seeds
+  for (const VoteBin& s : *seeds)
+    forNeighbours(s, n_yaw, [&](uint64_t bin) {
+      if (counts.count(bin) > 0) voted.push_back(bin);
+    });
+  std::sort(voted.begin(), voted.end());
+  voted.erase(std::unique(voted.begin(), voted.end()), voted.end());
+  BinSums sums(voted);
+  sumVotes(counts, pq, pc, params, &sums);
+  std::vector<ScoredSeed> scored;
+  for (const VoteBin& s : *seeds) {
+    ScoredSeed sc{&s, VoteBin{}};
+    forNeighbours(s, n_yaw, [&](uint64_t bin) {
+      const VoteBin* b = sums.find(bin);
+      if (!b) return;
+      sc.sum.count += b->count;
+      sc.sum.cos_sum += b->cos_sum;
+      sc.sum.sin_sum += b->sin_sum;
+      sc.sum.t_sum += b->t_sum;
+    });
+    scored.push_back(sc);
+  }
+  std::stable_sort(scored.begin(), scored.end(), [](const ScoredSeed& x, const ScoredSeed& y) {
+    return x.sum.count > y.sum.count;
+  });
+  return scored;
+}
+
 std::vector<VotePeak> selectPeaks(const std::vector<ScoredSeed>& scored, int64_t n_yaw,
                                   int max_peaks) {
   std::vector<VotePeak> peaks;
@@ -303,6 +529,18 @@ std::vector<VotePeak> selectPeaks(const std::vector<ScoredSeed>& scored, int64_t
 
 }  // namespace pair_vote_stages
 
+namespace {
+
+/// votePoses on the full accumulator, for pairs that cast too many votes to count.
+std::vector<VotePeak> accumulatedPeaks(const std::vector<pair_vote_stages::TrunkPair>& pq,
+                                       const std::vector<pair_vote_stages::TrunkPair>& pc,
+                                       const MatcherParams& params, int max_peaks) {
+  const pair_vote_stages::VoteAccumulator acc = pair_vote_stages::accumulateVotes(pq, pc, params);
+  return pair_vote_stages::selectPeaks(pair_vote_stages::scoreSeeds(acc), acc.n_yaw, max_peaks);
+}
+
+}  // namespace
+
 std::vector<VotePeak> votePoses(const Descriptor& q, const Descriptor& c,
                                 const MatcherParams& params, int max_peaks) {
   using pair_vote_stages::TrunkPair;
@@ -310,15 +548,16 @@ std::vector<VotePeak> votePoses(const Descriptor& q, const Descriptor& c,
   const std::vector<TrunkPair> pq = pair_vote_stages::trunkPairs(q, params.vote_max_pair_m);
   const std::vector<TrunkPair> pc = pair_vote_stages::trunkPairs(c, params.vote_max_pair_m);
   if (pq.empty() || pc.empty()) return {};
-  // One accumulator per thread, its memory kept between calls (see accumulateVotes).
-  thread_local pair_vote_stages::VoteAccumulator acc;
-  pair_vote_stages::accumulateVotes(pq, pc, params, &acc);
-  if (acc.bins.empty()) return {};
-  std::vector<VotePeak> peaks =
-      pair_vote_stages::selectPeaks(pair_vote_stages::scoreSeeds(acc), acc.n_yaw, max_peaks);
-  // Submap pairs fill ~10^4-10^5 bins; an outsized pair's table is not held on to.
-  constexpr size_t kKeptBins = size_t{1} << 20;
-  if (acc.bins.capacity() > kKeptBins) acc = pair_vote_stages::VoteAccumulator{};
+  // One table per thread, its memory kept between calls (see accumulateVotes).
+  thread_local pair_vote_stages::VoteCounts counts;
+  if (!pair_vote_stages::countVotes(pq, pc, params, &counts))
+    return accumulatedPeaks(pq, pc, params, max_peaks);
+  std::vector<pair_vote_stages::VoteBin> seeds;
+  std::vector<VotePeak> peaks = pair_vote_stages::selectPeaks(
+      pair_vote_stages::scoreSeeds(counts, pq, pc, params, &seeds), counts.n_yaw, max_peaks);
+  // Submap pairs cast ~10^3-10^5 votes; an outsized pair's table is not held on to.
+  constexpr size_t kKeptBytes = size_t{8} << 20;
+  if (counts.bytes() > kKeptBytes) counts = pair_vote_stages::VoteCounts{};
   return peaks;
 }
 
