@@ -130,6 +130,15 @@ TEST(PairVoteStages, TrunkPairsKeepLengthsInRangeSortedByLengthThenIndex) {
   EXPECT_DOUBLE_EQ(pairs[2].cos_a, -1.0 / std::sqrt(5.0));
   EXPECT_DOUBLE_EQ(pairs[2].sin_a, 2.0 / std::sqrt(5.0));
   EXPECT_EQ(pairs[2].mid, Eigen::Vector2d(0.5, 1.0));
+  // A pair of exactly max_len is in, one a hair longer out, an infinite trunk pairs with none.
+  const Descriptor edge = trunksOnly({{0, 0, 0, 0.1},
+                                      {6, 0, 0, 0.1},
+                                      {0, 6 + 1e-12, 0, 0.1},
+                                      {std::numeric_limits<double>::infinity(), 0, 0, 0.1}});
+  const auto at_max = pair_vote_stages::trunkPairs(edge, 6.0);
+  ASSERT_EQ(at_max.size(), 1u);
+  EXPECT_EQ(std::make_pair(at_max[0].i, at_max[0].j), std::make_pair(0, 1));
+  EXPECT_EQ(at_max[0].len, 6.0);
 }
 
 TEST(PairVoteStages, OnePairVotesForThePoseAndItsHalfTurn) {

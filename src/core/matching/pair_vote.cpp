@@ -172,10 +172,15 @@ namespace pair_vote_stages {
 std::vector<TrunkPair> trunkPairs(const Descriptor& d, double max_len) {
   std::vector<TrunkPair> out;
   const int n = static_cast<int>(d.trunks.size());
+  // Most pairs of a submap are far longer than max_len: they are dropped on the squared length
+  // (with a margin far above its rounding), before the root and the divisions.
+  const double beyond = max_len * (1.0 + 1e-9);
+  const double beyond_sq = beyond * beyond;
   for (int i = 0; i < n; ++i) {
     for (int j = i + 1; j < n; ++j) {
       const Eigen::Vector2d a(d.trunks[i].x, d.trunks[i].y), b(d.trunks[j].x, d.trunks[j].y);
       const Eigen::Vector2d e = b - a;
+      if (e.squaredNorm() > beyond_sq) continue;  // len > max_len; NaN goes on
       const double len = e.norm();
       if (!(len >= kMinPairM && len <= max_len)) continue;  // also drops non-finite trunks
       out.push_back({len, e.x() / len, e.y() / len, 0.5 * (a + b), i, j});
