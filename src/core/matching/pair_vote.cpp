@@ -273,6 +273,7 @@ void VoteCounts::reset(size_t n) {
   shift_ = 60;
   while (cap < 2 * n) cap *= 2, --shift_;  // at most half full
   slots_.assign(cap, 0);
+  filter_.assign(cap / 4, 0);
   mask_ = cap - 1;
   votes_.clear();
   votes_.reserve(n);
@@ -288,7 +289,7 @@ std::vector<uint64_t> VoteCounts::multiVoteBins() const {
 }
 
 size_t VoteCounts::bytes() const {
-  return (slots_.capacity() + votes_.capacity()) * sizeof(uint64_t) +
+  return (slots_.capacity() + filter_.capacity() + votes_.capacity()) * sizeof(uint64_t) +
          (multi_.capacity() + yaw_votes_.capacity()) * sizeof(uint32_t);
 }
 

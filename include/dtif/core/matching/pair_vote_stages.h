@@ -98,6 +98,8 @@ class VoteCounts {
   /// One vote into bin (countVotes' packing: nonzero, yaw bin in the bits from 32). Inline: a
   /// call per vote through the library's PLT cost as much as the probe.
   void add(uint64_t bin) {
+    const size_t f = filterBit(bin);
+    filter_[f >> 6] |= uint64_t{1} << (f & 63);
     size_t k = home(bin);
     while (slots_[k] != 0 && slots_[k] >> kCountBits != bin) k = (k + 1) & mask_;
     uint64_t& s = slots_[k];
@@ -110,6 +112,8 @@ class VoteCounts {
   void skip() { votes_.push_back(kSkipped); }
   /// Votes in bin.
   uint32_t count(uint64_t bin) const {
+    const size_t f = filterBit(bin);
+    if (!(filter_[f >> 6] >> (f & 63) & 1)) return 0;
     for (size_t k = home(bin);; k = (k + 1) & mask_) {
       const uint64_t s = slots_[k];
       if (s == 0) return 0;
@@ -129,7 +133,14 @@ class VoteCounts {
   size_t home(uint64_t bin) const {
     return static_cast<size_t>((bin * 0x9E3779B97F4A7C15ull) >> shift_);
   }
+  /// A bin's bit in filter_ (16 per slot).
+  size_t filterBit(uint64_t bin) const {
+    return static_cast<size_t>((bin * 0x9E3779B97F4A7C15ull) >> (shift_ - 4));
+  }
   std::vector<uint64_t> slots_;  ///< 0 (free) or bin << kCountBits | count
+  /// A bit set per bin with votes: most bins asked for (the seeds' neighbours) have none, and
+  /// one well-predicted bit test says so where a probe of the table mispredicts.
+  std::vector<uint64_t> filter_;
   std::vector<uint64_t> votes_;
   std::vector<uint32_t> multi_;  ///< slots of the bins of two votes or more
   std::vector<uint32_t> yaw_votes_;
