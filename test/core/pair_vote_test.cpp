@@ -106,6 +106,40 @@ TEST(VotePoses, DeterministicAndEmptyWithoutPairs) {
   for (const VotePeak& p : clean) EXPECT_TRUE(std::isfinite(p.yaw) && p.t.allFinite());
 }
 
+/// votePoses from the stages, on the full accumulator (no state kept between calls).
+std::vector<VotePeak> accumulatedPeaks(const Descriptor& q, const Descriptor& c,
+                                       const MatcherParams& params) {
+  using namespace pair_vote_stages;
+  const VoteAccumulator acc = accumulateVotes(trunkPairs(q, params.vote_max_pair_m),
+                                              trunkPairs(c, params.vote_max_pair_m), params);
+  return selectPeaks(scoreSeeds(acc), acc.n_yaw, 4);
+}
+
+void expectSamePeaks(const std::vector<VotePeak>& got, const std::vector<VotePeak>& want) {
+  ASSERT_EQ(got.size(), want.size());
+  for (size_t k = 0; k < got.size(); ++k) {
+    EXPECT_EQ(got[k].yaw, want[k].yaw);
+    EXPECT_EQ(got[k].t, want[k].t);
+    EXPECT_EQ(got[k].votes, want[k].votes);
+  }
+}
+
+TEST(VotePoses, QueryPairsAreNotKeptForOtherTrunksAtTheSameAddress) {
+  // votePoses keeps the query's trunk pairs between calls: a descriptor that another one
+  // replaced in place, or one moved trunk, or another vote_max_pair_m, must not reuse them.
+  const MatcherParams params;
+  const auto cases = sparseOverlaps(2, 31);
+  Descriptor q = cases[0].q;
+  expectSamePeaks(votePoses(q, cases[0].c, params, 4), accumulatedPeaks(q, cases[0].c, params));
+  q = cases[1].q;
+  expectSamePeaks(votePoses(q, cases[1].c, params, 4), accumulatedPeaks(q, cases[1].c, params));
+  q.trunks[3].x += 1.0;
+  expectSamePeaks(votePoses(q, cases[1].c, params, 4), accumulatedPeaks(q, cases[1].c, params));
+  MatcherParams shorter = params;
+  shorter.vote_max_pair_m = 4.0;
+  expectSamePeaks(votePoses(q, cases[1].c, shorter, 4), accumulatedPeaks(q, cases[1].c, shorter));
+}
+
 // --- Stages (pair_vote_stages.h) ---
 
 Descriptor trunksOnly(const Trunks& t) {

@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
+#include <limits>
 #include <tuple>
 
 #include "dtif/core/matching/pair_vote_stages.h"
@@ -537,6 +539,25 @@ std::vector<VotePeak> selectPeaks(const std::vector<ScoredSeed>& scored, int64_t
 
 namespace {
 
+/// Whether two doubles have the same bits.
+bool sameBits(double a, double b) { return std::memcmp(&a, &b, sizeof a) == 0; }
+
+/// trunkPairs(q, max_len), kept per thread: a loop query votes its descriptor against a dozen
+/// candidates in a row. Keyed by max_len and the trunks' coordinates, bit for bit, never by
+/// address (another descriptor may come to live there).
+const std::vector<pair_vote_stages::TrunkPair>& queryPairs(const Descriptor& q, double max_len) {
+  thread_local std::vector<double> key{std::numeric_limits<double>::quiet_NaN()};
+  thread_local std::vector<pair_vote_stages::TrunkPair> pairs;
+  bool same = key.size() == 1 + 2 * q.trunks.size() && sameBits(key[0], max_len);
+  for (size_t i = 0; same && i < q.trunks.size(); ++i)
+    same = sameBits(key[1 + 2 * i], q.trunks[i].x) && sameBits(key[2 + 2 * i], q.trunks[i].y);
+  if (same) return pairs;
+  key.assign(1, max_len);
+  for (const TrunkLandmark& t : q.trunks) key.push_back(t.x), key.push_back(t.y);
+  pairs = pair_vote_stages::trunkPairs(q, max_len);
+  return pairs;
+}
+
 /// votePoses on the full accumulator, for pairs that cast too many votes to count.
 std::vector<VotePeak> accumulatedPeaks(const std::vector<pair_vote_stages::TrunkPair>& pq,
                                        const std::vector<pair_vote_stages::TrunkPair>& pc,
@@ -551,7 +572,7 @@ std::vector<VotePeak> votePoses(const Descriptor& q, const Descriptor& c,
                                 const MatcherParams& params, int max_peaks) {
   using pair_vote_stages::TrunkPair;
   if (q.trunks.size() < 2 || c.trunks.size() < 2 || max_peaks <= 0) return {};
-  const std::vector<TrunkPair> pq = pair_vote_stages::trunkPairs(q, params.vote_max_pair_m);
+  const std::vector<TrunkPair>& pq = queryPairs(q, params.vote_max_pair_m);
   const std::vector<TrunkPair> pc = pair_vote_stages::trunkPairs(c, params.vote_max_pair_m);
   if (pq.empty() || pc.empty()) return {};
   // One table per thread, its memory kept between calls (see accumulateVotes).
