@@ -5,6 +5,7 @@
 
 #include <cstring>
 #include <limits>
+#include <map>
 #include <memory>
 #include <random>
 #include <tuple>
@@ -284,6 +285,66 @@ void expectCountedSeedsAsAccumulated(const Descriptor& q, const Descriptor& c,
                 sameBits(gs.t_sum.x(), ws.t_sum.x()) && sameBits(gs.t_sum.y(), ws.t_sum.y()))
         << k;
   }
+}
+
+/// accumulateVotes written out plainly: every pair against every pair, each vote's yaw bin
+/// from atan2 and a division, the bins in a map; sums in the same order.
+std::map<std::tuple<int64_t, int64_t, int64_t>, pair_vote_stages::VoteBin> plainVotes(
+    const std::vector<pair_vote_stages::TrunkPair>& pq,
+    const std::vector<pair_vote_stages::TrunkPair>& pc, const MatcherParams& params) {
+  const int64_t n_yaw = std::llround(360.0 / params.vote_yaw_bin_deg);
+  const double yaw_bin = 2.0 * M_PI / static_cast<double>(n_yaw), xy = params.vote_xy_bin_m;
+  std::map<std::tuple<int64_t, int64_t, int64_t>, pair_vote_stages::VoteBin> bins;
+  for (const auto& a : pq) {
+    for (const auto& b : pc) {
+      const double tol = std::max(params.edge_abs_tol_m, params.edge_rel_tol * a.len);
+      if (b.len < a.len - tol || b.len > a.len + tol) continue;
+      const double cy = b.cos_a * a.cos_a + b.sin_a * a.sin_a;
+      const double sy = b.sin_a * a.cos_a - b.cos_a * a.sin_a;
+      for (const double sign : {1.0, -1.0}) {
+        const double c = sign * cy, s = sign * sy;
+        double yaw = std::atan2(s, c);
+        if (yaw < 0.0) yaw += 2.0 * M_PI;
+        const int64_t iyaw = std::min<int64_t>(static_cast<int64_t>(yaw / yaw_bin), n_yaw - 1);
+        const Eigen::Vector2d t(b.mid.x() - (c * a.mid.x() - s * a.mid.y()),
+                                b.mid.y() - (s * a.mid.x() + c * a.mid.y()));
+        if (!(std::abs(t.x()) < 3e4 * xy && std::abs(t.y()) < 3e4 * xy)) continue;
+        const auto key = std::make_tuple(iyaw, static_cast<int64_t>(std::floor(t.x() / xy)),
+                                         static_cast<int64_t>(std::floor(t.y() / xy)));
+        pair_vote_stages::VoteBin& v = bins[key];
+        v.count += 1.0, v.cos_sum += c, v.sin_sum += s, v.t_sum += t;
+      }
+    }
+  }
+  return bins;
+}
+
+/// accumulateVotes against plainVotes: the same bins, counts and sums, bit for bit.
+void expectPlainVotes(const Descriptor& q, const Descriptor& c, const MatcherParams& params) {
+  using namespace pair_vote_stages;
+  const auto pq = trunkPairs(q, params.vote_max_pair_m), pc = trunkPairs(c, params.vote_max_pair_m);
+  const VoteAccumulator acc = accumulateVotes(pq, pc, params);
+  const auto want = plainVotes(pq, pc, params);
+  ASSERT_EQ(acc.bins.size(), want.size());
+  for (const VoteBin& b : acc.bins) {
+    const auto it = want.find(std::make_tuple(b.iyaw, b.ix, b.iy));
+    ASSERT_NE(it, want.end());
+    const VoteBin& w = it->second;
+    EXPECT_EQ(b.count, w.count);
+    EXPECT_TRUE(sameBits(b.cos_sum, w.cos_sum) && sameBits(b.sin_sum, w.sin_sum) &&
+                sameBits(b.t_sum.x(), w.t_sum.x()) && sameBits(b.t_sum.y(), w.t_sum.y()));
+  }
+}
+
+TEST(PairVoteStages, VotesAreBinnedAsByAtan2) {
+  // Tens of thousands of votes, some within 2e-6 rad of a yaw bin edge: a yaw off by that much
+  // with no margin at the edges fails here (measured).
+  const MatcherParams params;
+  for (const SparseOverlap& s : sparseOverlaps(6, 41)) expectPlainVotes(s.q, s.c, params);
+  MatcherParams coarse = params;
+  coarse.vote_xy_bin_m = 1.3, coarse.vote_yaw_bin_deg = 7.0;
+  const auto one = sparseOverlaps(1, 42);
+  expectPlainVotes(one[0].q, one[0].c, coarse);
 }
 
 TEST(PairVoteStages, CountedSeedsAreTheAccumulatorsBitForBit) {

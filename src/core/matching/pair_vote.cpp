@@ -30,21 +30,12 @@ inline int64_t floorIndex(double v) {
   return t - static_cast<int64_t>(v < static_cast<double>(t));
 }
 
-/// atan2(y, x) to within kApproxYawErr (Hastings' polynomial for atan on [0, 1], by octant;
-/// measured 1.15e-5 rad at most over 2e7 directions), without the libm call: it only picks
-/// the yaw bin of a vote, and votes within kYawHair of a bin edge take atan2's. NaN for a
-/// zero vector (then atan2 decides too).
+/// A vote's yaw is taken as the difference of its pairs' directions (one atan2 per pair, not
+/// per vote), within ~1e-15 rad of atan2(sy, cy) of the vote's turn and far within
+/// kApproxYawErr of it: it only picks the yaw bin, and votes within kYawHair of a bin edge take
+/// atan2's.
 constexpr double kApproxYawErr = 2e-5;
 constexpr double kYawHair = 5.0 * kApproxYawErr;  // [rad]
-inline double approxAtan2(double y, double x) {
-  const double ax = std::fabs(x), ay = std::fabs(y);
-  const double z = std::min(ax, ay) / std::max(ax, ay), z2 = z * z;
-  double a =
-      z * (0.9998660 + z2 * (-0.3302995 + z2 * (0.1801410 + z2 * (-0.0851330 + z2 * 0.0208351))));
-  if (ay > ax) a = M_PI_2 - a;
-  if (x < 0.0) a = M_PI - a;
-  return y < 0.0 ? -a : a;
-}
 
 /// The vote accumulator's yaw bins: n_yaw of yaw_bin [rad] from 0, a yaw in [-pi, pi] or
 /// [0, 2 pi) wrapped into them.
@@ -160,7 +151,9 @@ void forEachVote(const std::vector<pair_vote_stages::TrunkPair>& pq,
   forCompatible(pq, pc, params, [&](const auto& a, const auto& b) {
     double cy, sy;
     pairTurn(a, b, &cy, &sy);
-    const double yaw = approxAtan2(sy, cy);
+    double yaw = b.angle - a.angle;
+    if (yaw > M_PI) yaw -= kTwoPi;
+    if (yaw < -M_PI) yaw += kTwoPi;
     vote(bins.of(yaw, [&] { return std::atan2(sy, cy); }), cy, sy, a.mid, b.mid);
     const double turned = yaw < 0.0 ? yaw + M_PI : yaw - M_PI;
     vote(bins.of(turned, [&] { return std::atan2(-sy, -cy); }), -cy, -sy, a.mid, b.mid);
@@ -185,7 +178,7 @@ std::vector<TrunkPair> trunkPairs(const Descriptor& d, double max_len) {
       if (e.squaredNorm() > beyond_sq) continue;  // len > max_len; NaN goes on
       const double len = e.norm();
       if (!(len >= kMinPairM && len <= max_len)) continue;  // also drops non-finite trunks
-      out.push_back({len, e.x() / len, e.y() / len, 0.5 * (a + b), i, j});
+      out.push_back({len, e.x() / len, e.y() / len, std::atan2(e.y(), e.x()), 0.5 * (a + b), i, j});
     }
   }
   std::sort(out.begin(), out.end(), [](const TrunkPair& x, const TrunkPair& y) {

@@ -19,6 +19,7 @@ namespace pair_vote_stages {
 struct TrunkPair {
   double len;           ///< [m]
   double cos_a, sin_a;  ///< direction of i -> j
+  double angle;         ///< that direction [rad] (atan2)
   Eigen::Vector2d mid;  ///< midpoint [m]
   int i, j;
 };
