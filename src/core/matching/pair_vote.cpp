@@ -40,10 +40,12 @@ constexpr double kYawHair = 5.0 * kApproxYawErr;  // [rad]
 /// The vote accumulator's yaw bins: n_yaw of yaw_bin [rad] from 0, a yaw in [-pi, pi] or
 /// [0, 2 pi) wrapped into them.
 struct YawBins {
-  YawBins(int64_t n, double bin) : n_yaw(n), yaw_bin(bin), hair(kYawHair / bin) {}
+  YawBins(int64_t n, double bin)
+      : n_yaw(n), yaw_bin(bin), per_rad(1.0 / bin), hair(kYawHair / bin) {}
   int64_t n_yaw;
   double yaw_bin;
-  double hair;  ///< kYawHair in bins
+  double per_rad;  ///< 1 / yaw_bin, for `near` (its rounding is far inside the hair)
+  double hair;     ///< kYawHair in bins
   int64_t exact(double yaw) const {
     if (yaw < 0.0) yaw += kTwoPi;
     return std::min<int64_t>(static_cast<int64_t>(yaw / yaw_bin), n_yaw - 1);
@@ -53,7 +55,7 @@ struct YawBins {
   /// either way.
   template <class Yaw>
   int64_t of(double near, const Yaw& yaw) const {
-    const double pos = (near < 0.0 ? near + kTwoPi : near) / yaw_bin;
+    const double pos = (near < 0.0 ? near + kTwoPi : near) * per_rad;
     const double frac = pos - static_cast<double>(floorIndex(pos));
     const bool clear =
         frac > hair && frac < 1.0 - hair && pos > 0.0 && pos < static_cast<double>(n_yaw) - hair;
@@ -141,11 +143,16 @@ void forEachVote(const std::vector<pair_vote_stages::TrunkPair>& pq,
   const double xy_bin = grid.xy_bin;
   // Translations beyond the packing range are no poses of overlapping submaps.
   const double max_t = 3.0e4 * xy_bin;
+  // Dividing by a power of two (0.5 m bins) is multiplying by its exact inverse, bit for bit.
+  int exponent = 0;
+  const bool pow2 = std::frexp(xy_bin, &exponent) == 0.5;
+  const double per_m = 1.0 / xy_bin;
+  auto cell = [&](double v) { return floorIndex(pow2 ? v * per_m : v / xy_bin); };
   auto vote = [&](int64_t iyaw, double cy, double sy, const Eigen::Vector2d& mq,
                   const Eigen::Vector2d& mc) {
     const Eigen::Vector2d t = proposalT(cy, sy, mq, mc);
     if (!(std::abs(t.x()) < max_t && std::abs(t.y()) < max_t)) return skip();
-    f(iyaw, floorIndex(t.x() / xy_bin), floorIndex(t.y() / xy_bin), cy, sy, t);
+    f(iyaw, cell(t.x()), cell(t.y()), cy, sy, t);
   };
   const YawBins bins(grid.n_yaw, grid.yaw_bin);
   forCompatible(pq, pc, params, [&](const auto& a, const auto& b) {
