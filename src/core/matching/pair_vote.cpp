@@ -273,7 +273,9 @@ void accumulateVotes(const std::vector<TrunkPair>& pq, const std::vector<TrunkPa
 void VoteCounts::reset(size_t n) {
   size_t cap = 16;
   shift_ = 60;
-  while (cap < 2 * n) cap *= 2, --shift_;  // at most half full
+  // At most a quarter full: a probe past the home slot is a mispredicted branch (half full:
+  // votePoses 8 % slower; an eighth: no faster).
+  while (cap < 4 * n) cap *= 2, --shift_;
   slots_.assign(cap, 0);
   filter_.assign(cap / 4, 0);
   mask_ = cap - 1;
