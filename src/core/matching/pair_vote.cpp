@@ -55,11 +55,21 @@ struct YawBins {
   /// either way.
   template <class Yaw>
   int64_t of(double near, const Yaw& yaw) const {
+    int64_t bin;
+    return clearOf(near, &bin) ? bin : exact(yaw());
+  }
+  /// Whether `near` lies clear of the bin edges and of the wrap; then its bin is *bin.
+  bool clearOf(double near, int64_t* bin) const {
     const double pos = (near < 0.0 ? near + kTwoPi : near) * per_rad;
     const double frac = pos - static_cast<double>(floorIndex(pos));
-    const bool clear =
-        frac > hair && frac < 1.0 - hair && pos > 0.0 && pos < static_cast<double>(n_yaw) - hair;
-    return clear ? static_cast<int64_t>(pos) : exact(yaw());
+    *bin = static_cast<int64_t>(pos);
+    return frac > hair && frac < 1.0 - hair && pos > 0.0 && pos < static_cast<double>(n_yaw) - hair;
+  }
+  /// The bin of yaw + pi for a yaw in bin `bin` clear of the edges, when n_yaw is even (its
+  /// edges turned by pi are edges again), else -1.
+  int64_t halfTurn(int64_t bin) const {
+    if (n_yaw % 2 != 0) return -1;
+    return bin < n_yaw / 2 ? bin + n_yaw / 2 : bin - n_yaw / 2;
   }
 };
 
@@ -161,9 +171,15 @@ void forEachVote(const std::vector<pair_vote_stages::TrunkPair>& pq,
     double yaw = b.angle - a.angle;
     if (yaw > M_PI) yaw -= kTwoPi;
     if (yaw < -M_PI) yaw += kTwoPi;
-    vote(bins.of(yaw, [&] { return std::atan2(sy, cy); }), cy, sy, a.mid, b.mid);
+    int64_t iyaw, turn = -1;
+    if (bins.clearOf(yaw, &iyaw))
+      turn = bins.halfTurn(iyaw);
+    else
+      iyaw = bins.exact(std::atan2(sy, cy));
+    vote(iyaw, cy, sy, a.mid, b.mid);
     const double turned = yaw < 0.0 ? yaw + M_PI : yaw - M_PI;
-    vote(bins.of(turned, [&] { return std::atan2(-sy, -cy); }), -cy, -sy, a.mid, b.mid);
+    if (turn < 0) turn = bins.of(turned, [&] { return std::atan2(-sy, -cy); });
+    vote(turn, -cy, -sy, a.mid, b.mid);
   });
 }
 
