@@ -319,7 +319,7 @@ bool countVotes(const std::vector<TrunkPair>& pq, const std::vector<TrunkPair>& 
   const VoteGrid grid = voteGrid(params);
   counts.n_yaw = grid.n_yaw, counts.yaw_bin = grid.yaw_bin, counts.xy_bin = grid.xy_bin;
   const size_t n_votes = 2 * countCompatible(pq, pc, params);
-  counts.reset(std::min(n_votes, VoteCounts::kMaxVotes));
+  counts.reset(n_votes > VoteCounts::kMaxVotes ? 0 : n_votes);  // no table for refused votes
   if (n_votes > VoteCounts::kMaxVotes) return false;
   forEachVote(
       pq, pc, params, grid,
