@@ -330,6 +330,38 @@ bool countVotes(const std::vector<TrunkPair>& pq, const std::vector<TrunkPair>& 
   return true;
 }
 
+namespace {
+
+/// The sums over seed s's 3 x 3 x 3 neighbourhood (yaw wraps around), in one fixed order;
+/// find(iyaw, ix, iy) gives a bin's sums, nullptr when it has no vote.
+template <class Find>
+ScoredSeed neighbourhoodSum(const VoteBin& s, int64_t n_yaw, const Find& find) {
+  ScoredSeed sc{&s, VoteBin{}};
+  for (int64_t dyaw = -1; dyaw <= 1; ++dyaw) {
+    const int64_t iyaw = (s.iyaw + dyaw + n_yaw) % n_yaw;
+    for (int64_t dx = -1; dx <= 1; ++dx) {
+      for (int64_t dy = -1; dy <= 1; ++dy) {
+        const VoteBin* b = find(iyaw, s.ix + dx, s.iy + dy);
+        if (!b) continue;
+        sc.sum.count += b->count;
+        sc.sum.cos_sum += b->cos_sum;
+        sc.sum.sin_sum += b->sin_sum;
+        sc.sum.t_sum += b->t_sum;
+      }
+    }
+  }
+  return sc;
+}
+
+/// Strongest neighbourhood first (stable: ties keep the seeds' order).
+void sortScored(std::vector<ScoredSeed>* scored) {
+  std::stable_sort(scored->begin(), scored->end(), [](const ScoredSeed& x, const ScoredSeed& y) {
+    return x.sum.count > y.sum.count;
+  });
+}
+
+}  // namespace
+
 std::vector<ScoredSeed> scoreSeeds(const VoteAccumulator& acc) {
   std::vector<const VoteBin*> seeds;
   seeds.reserve(acc.bins.size());
@@ -343,28 +375,12 @@ std::vector<ScoredSeed> scoreSeeds(const VoteAccumulator& acc) {
   std::partial_sort(seeds.begin(), seeds.begin() + n_seeds, seeds.end(), fuller);
   seeds.resize(n_seeds);
 
-  const int64_t n_yaw = acc.n_yaw;
   std::vector<ScoredSeed> scored;
-  for (const VoteBin* s : seeds) {
-    ScoredSeed sc{s, VoteBin{}};
-    for (int64_t dyaw = -1; dyaw <= 1; ++dyaw) {
-      const int64_t iyaw = (s->iyaw + dyaw + n_yaw) % n_yaw;
-      for (int64_t dx = -1; dx <= 1; ++dx) {
-        for (int64_t dy = -1; dy <= 1; ++dy) {
-          const VoteBin* b = acc.find(iyaw, s->ix + dx, s->iy + dy);
-          if (!b) continue;
-          sc.sum.count += b->count;
-          sc.sum.cos_sum += b->cos_sum;
-          sc.sum.sin_sum += b->sin_sum;
-          sc.sum.t_sum += b->t_sum;
-        }
-      }
-    }
-    scored.push_back(sc);
-  }
-  std::stable_sort(scored.begin(), scored.end(), [](const ScoredSeed& x, const ScoredSeed& y) {
-    return x.sum.count > y.sum.count;
-  });
+  for (const VoteBin* s : seeds)
+    scored.push_back(neighbourhoodSum(*s, acc.n_yaw, [&](int64_t iyaw, int64_t ix, int64_t iy) {
+      return acc.find(iyaw, ix, iy);
+    }));
+  sortScored(&scored);
   return scored;
 }
 
@@ -459,14 +475,23 @@ class BinSums {
   size_t mask_;
 };
 
-/// The 27 bins around seed s (yaw wraps around), in scoreSeeds' order.
-template <class F>
-void forNeighbours(const VoteBin& s, int64_t n_yaw, const F& f) {
-  for (int64_t dyaw = -1; dyaw <= 1; ++dyaw) {
-    const int64_t iyaw = (s.iyaw + dyaw + n_yaw) % n_yaw;
-    for (int64_t dx = -1; dx <= 1; ++dx)
-      for (int64_t dy = -1; dy <= 1; ++dy) f(compactBin(iyaw, s.ix + dx, s.iy + dy));
+/// The bins with votes around the seeds, each once.
+std::vector<uint64_t> votedAround(const VoteCounts& counts, const std::vector<VoteBin>& seeds) {
+  std::vector<uint64_t> voted;
+  for (const VoteBin& s : seeds) {
+    for (int64_t dyaw = -1; dyaw <= 1; ++dyaw) {
+      const int64_t iyaw = (s.iyaw + dyaw + counts.n_yaw) % counts.n_yaw;
+      for (int64_t dx = -1; dx <= 1; ++dx) {
+        for (int64_t dy = -1; dy <= 1; ++dy) {
+          const uint64_t bin = compactBin(iyaw, s.ix + dx, s.iy + dy);
+          if (counts.count(bin) > 0) voted.push_back(bin);
+        }
+      }
+    }
   }
+  std::sort(voted.begin(), voted.end());
+  voted.erase(std::unique(voted.begin(), voted.end()), voted.end());
+  return voted;
 }
 
 /// The votes of the bins in *sums, summed in vote order (as accumulateVotes sums them): the
@@ -497,32 +522,14 @@ std::vector<ScoredSeed> scoreSeeds(const VoteCounts& counts, const std::vector<T
                                    const std::vector<TrunkPair>& pc, const MatcherParams& params,
                                    std::vector<VoteBin>* seeds) {
   *seeds = seedBins(counts);
-  const int64_t n_yaw = counts.n_yaw;
-  std::vector<uint64_t> voted;  // the bins with votes around the seeds
-  for (const VoteBin& s : *seeds)
-    forNeighbours(s, n_yaw, [&](uint64_t bin) {
-      if (counts.count(bin) > 0) voted.push_back(bin);
-    });
-  std::sort(voted.begin(), voted.end());
-  voted.erase(std::unique(voted.begin(), voted.end()), voted.end());
-  BinSums sums(voted);
+  BinSums sums(votedAround(counts, *seeds));
   sumVotes(counts, pq, pc, params, &sums);
   std::vector<ScoredSeed> scored;
-  for (const VoteBin& s : *seeds) {
-    ScoredSeed sc{&s, VoteBin{}};
-    forNeighbours(s, n_yaw, [&](uint64_t bin) {
-      const VoteBin* b = sums.find(bin);
-      if (!b) return;
-      sc.sum.count += b->count;
-      sc.sum.cos_sum += b->cos_sum;
-      sc.sum.sin_sum += b->sin_sum;
-      sc.sum.t_sum += b->t_sum;
-    });
-    scored.push_back(sc);
-  }
-  std::stable_sort(scored.begin(), scored.end(), [](const ScoredSeed& x, const ScoredSeed& y) {
-    return x.sum.count > y.sum.count;
-  });
+  for (const VoteBin& s : *seeds)
+    scored.push_back(neighbourhoodSum(s, counts.n_yaw, [&](int64_t iyaw, int64_t ix, int64_t iy) {
+      return sums.find(compactBin(iyaw, ix, iy));
+    }));
+  sortScored(&scored);
   return scored;
 }
 
