@@ -301,6 +301,20 @@ void VoteCounts::reset(size_t n) {
   yaw_votes_.assign(static_cast<size_t>(n_yaw), 0);
 }
 
+void VoteCounts::count() {
+  for (const uint64_t bin : votes_) {
+    if (bin == kSkipped) continue;
+    const size_t f = filterBit(bin);
+    filter_[f >> 6] |= uint64_t{1} << (f & 63);
+    size_t k = home(bin);
+    while (slots_[k] != 0 && slots_[k] >> kCountBits != bin) k = (k + 1) & mask_;
+    uint64_t& s = slots_[k];
+    s = (s == 0 ? bin << kCountBits : s) + 1;
+    if ((s & kCountMask) == 2) multi_.push_back(static_cast<uint32_t>(k));
+    ++yaw_votes_[bin >> 32];
+  }
+}
+
 std::vector<uint64_t> VoteCounts::multiVoteBins() const {
   std::vector<uint64_t> out;
   out.reserve(multi_.size());
@@ -327,6 +341,7 @@ bool countVotes(const std::vector<TrunkPair>& pq, const std::vector<TrunkPair>& 
         counts.add(compactBin(iyaw, ix, iy));
       },
       [&] { counts.skip(); });
+  counts.count();
   return true;
 }
 
@@ -403,7 +418,7 @@ std::vector<uint64_t> smallestSingleVoteBins(const VoteCounts& counts, size_t mu
   }
   std::vector<uint64_t> out;
   for (uint64_t bin : counts.votes())
-    if (bin >> 32 < cut && counts.count(bin) == 1) out.push_back(bin);
+    if (bin >> 32 < cut && counts.votesIn(bin) == 1) out.push_back(bin);
   n = std::min(n, out.size());
   std::nth_element(out.begin(), out.begin() + n, out.end());
   out.resize(n);
@@ -484,7 +499,7 @@ std::vector<uint64_t> votedAround(const VoteCounts& counts, const std::vector<Vo
       for (int64_t dx = -1; dx <= 1; ++dx) {
         for (int64_t dy = -1; dy <= 1; ++dy) {
           const uint64_t bin = compactBin(iyaw, s.ix + dx, s.iy + dy);
-          if (counts.count(bin) > 0) voted.push_back(bin);
+          if (counts.votesIn(bin) > 0) voted.push_back(bin);
         }
       }
     }

@@ -96,23 +96,16 @@ class VoteCounts {
 
   /// Empties the table and sizes it for up to n <= kMaxVotes votes (no growth while voting).
   void reset(size_t n);
-  /// One vote into bin (countVotes' packing: nonzero, yaw bin in the bits from 32). Inline: a
-  /// call per vote through the library's PLT cost as much as the probe.
-  void add(uint64_t bin) {
-    const size_t f = filterBit(bin);
-    filter_[f >> 6] |= uint64_t{1} << (f & 63);
-    size_t k = home(bin);
-    while (slots_[k] != 0 && slots_[k] >> kCountBits != bin) k = (k + 1) & mask_;
-    uint64_t& s = slots_[k];
-    s = (s == 0 ? bin << kCountBits : s) + 1;
-    if ((s & kCountMask) == 2) multi_.push_back(static_cast<uint32_t>(k));
-    ++yaw_votes_[bin >> 32];
-    votes_.push_back(bin);
-  }
+  /// One vote into bin (countVotes' packing: nonzero, yaw bin in the bits from 32), counted
+  /// by count().
+  void add(uint64_t bin) { votes_.push_back(bin); }
   /// A vote out of the packing range: in the vote order, in no bin.
   void skip() { votes_.push_back(kSkipped); }
+  /// Counts the votes added since reset() into the table, once. Apart from casting them: the
+  /// casting loop then waits on no table (votePoses 4 % faster; a prefetch ahead gained nothing).
+  void count();
   /// Votes in bin.
-  uint32_t count(uint64_t bin) const {
+  uint32_t votesIn(uint64_t bin) const {
     const size_t f = filterBit(bin);
     if (!(filter_[f >> 6] >> (f & 63) & 1)) return 0;
     for (size_t k = home(bin);; k = (k + 1) & mask_) {
