@@ -6,7 +6,6 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
-#include <tuple>
 
 #include "dtif/core/matching/pair_vote_stages.h"
 
