@@ -3,9 +3,12 @@
 
 #include <gtest/gtest.h>
 
+#include <cstring>
 #include <limits>
+#include <map>
 #include <memory>
 #include <random>
+#include <tuple>
 
 #include "core/match_test_utils.h"
 #include "dtif/core/database/loop_detector.h"
@@ -104,6 +107,40 @@ TEST(VotePoses, DeterministicAndEmptyWithoutPairs) {
   for (const VotePeak& p : clean) EXPECT_TRUE(std::isfinite(p.yaw) && p.t.allFinite());
 }
 
+/// votePoses from the stages, on the full accumulator (no state kept between calls).
+std::vector<VotePeak> accumulatedPeaks(const Descriptor& q, const Descriptor& c,
+                                       const MatcherParams& params) {
+  using namespace pair_vote_stages;
+  const VoteAccumulator acc = accumulateVotes(trunkPairs(q, params.vote_max_pair_m),
+                                              trunkPairs(c, params.vote_max_pair_m), params);
+  return selectPeaks(scoreSeeds(acc), acc.n_yaw, 4);
+}
+
+void expectSamePeaks(const std::vector<VotePeak>& got, const std::vector<VotePeak>& want) {
+  ASSERT_EQ(got.size(), want.size());
+  for (size_t k = 0; k < got.size(); ++k) {
+    EXPECT_EQ(got[k].yaw, want[k].yaw);
+    EXPECT_EQ(got[k].t, want[k].t);
+    EXPECT_EQ(got[k].votes, want[k].votes);
+  }
+}
+
+TEST(VotePoses, QueryPairsAreNotKeptForOtherTrunksAtTheSameAddress) {
+  // votePoses keeps the query's trunk pairs between calls: a descriptor that another one
+  // replaced in place, or one moved trunk, or another vote_max_pair_m, must not reuse them.
+  const MatcherParams params;
+  const auto cases = sparseOverlaps(2, 31);
+  Descriptor q = cases[0].q;
+  expectSamePeaks(votePoses(q, cases[0].c, params, 4), accumulatedPeaks(q, cases[0].c, params));
+  q = cases[1].q;
+  expectSamePeaks(votePoses(q, cases[1].c, params, 4), accumulatedPeaks(q, cases[1].c, params));
+  q.trunks[3].x += 1.0;
+  expectSamePeaks(votePoses(q, cases[1].c, params, 4), accumulatedPeaks(q, cases[1].c, params));
+  MatcherParams shorter = params;
+  shorter.vote_max_pair_m = 4.0;
+  expectSamePeaks(votePoses(q, cases[1].c, shorter, 4), accumulatedPeaks(q, cases[1].c, shorter));
+}
+
 // --- Stages (pair_vote_stages.h) ---
 
 Descriptor trunksOnly(const Trunks& t) {
@@ -128,6 +165,15 @@ TEST(PairVoteStages, TrunkPairsKeepLengthsInRangeSortedByLengthThenIndex) {
   EXPECT_DOUBLE_EQ(pairs[2].cos_a, -1.0 / std::sqrt(5.0));
   EXPECT_DOUBLE_EQ(pairs[2].sin_a, 2.0 / std::sqrt(5.0));
   EXPECT_EQ(pairs[2].mid, Eigen::Vector2d(0.5, 1.0));
+  // A pair of exactly max_len is in, one a hair longer out, an infinite trunk pairs with none.
+  const Descriptor edge = trunksOnly({{0, 0, 0, 0.1},
+                                      {6, 0, 0, 0.1},
+                                      {0, 6 + 1e-12, 0, 0.1},
+                                      {std::numeric_limits<double>::infinity(), 0, 0, 0.1}});
+  const auto at_max = pair_vote_stages::trunkPairs(edge, 6.0);
+  ASSERT_EQ(at_max.size(), 1u);
+  EXPECT_EQ(std::make_pair(at_max[0].i, at_max[0].j), std::make_pair(0, 1));
+  EXPECT_EQ(at_max[0].len, 6.0);
 }
 
 TEST(PairVoteStages, OnePairVotesForThePoseAndItsHalfTurn) {
@@ -211,6 +257,153 @@ TEST(PairVoteStages, SelectPeaksSuppressesNeighboursAcrossTheYawWrap) {
   EXPECT_EQ(peaks[1].votes, 6.0);
   EXPECT_NEAR(peaks[1].yaw, -0.02, 1e-12);
   EXPECT_EQ(pair_vote_stages::selectPeaks(scored, 180, 1).size(), 1u);
+}
+
+/// Bit-for-bit equality of two doubles (== would take -0.0 for 0.0).
+bool sameBits(double a, double b) { return std::memcmp(&a, &b, sizeof a) == 0; }
+
+/// votePoses' path (countVotes, then scoreSeeds on the counts) against the full accumulator
+/// on the same pairs: the same seeds in the same order, with bit-identical sums.
+void expectCountedSeedsAsAccumulated(const Descriptor& q, const Descriptor& c,
+                                     const MatcherParams& params) {
+  using namespace pair_vote_stages;
+  const auto pq = trunkPairs(q, params.vote_max_pair_m), pc = trunkPairs(c, params.vote_max_pair_m);
+  const VoteAccumulator acc = accumulateVotes(pq, pc, params);
+  const std::vector<ScoredSeed> want = scoreSeeds(acc);
+  VoteCounts counts;
+  ASSERT_TRUE(countVotes(pq, pc, params, &counts));
+  std::vector<VoteBin> seeds;
+  const std::vector<ScoredSeed> got = scoreSeeds(counts, pq, pc, params, &seeds);
+  ASSERT_EQ(got.size(), want.size());
+  for (size_t k = 0; k < got.size(); ++k) {
+    const VoteBin &g = *got[k].seed, &w = *want[k].seed;
+    EXPECT_EQ(std::make_tuple(g.iyaw, g.ix, g.iy), std::make_tuple(w.iyaw, w.ix, w.iy)) << k;
+    EXPECT_EQ(g.count, w.count) << k;
+    const VoteBin &gs = got[k].sum, &ws = want[k].sum;
+    EXPECT_EQ(gs.count, ws.count) << k;
+    EXPECT_TRUE(sameBits(gs.cos_sum, ws.cos_sum) && sameBits(gs.sin_sum, ws.sin_sum) &&
+                sameBits(gs.t_sum.x(), ws.t_sum.x()) && sameBits(gs.t_sum.y(), ws.t_sum.y()))
+        << k;
+  }
+}
+
+/// accumulateVotes written out plainly: every pair against every pair, each vote's yaw bin
+/// from atan2 and a division, the bins in a map; sums in the same order.
+std::map<std::tuple<int64_t, int64_t, int64_t>, pair_vote_stages::VoteBin> plainVotes(
+    const std::vector<pair_vote_stages::TrunkPair>& pq,
+    const std::vector<pair_vote_stages::TrunkPair>& pc, const MatcherParams& params) {
+  const int64_t n_yaw = std::llround(360.0 / params.vote_yaw_bin_deg);
+  const double yaw_bin = 2.0 * M_PI / static_cast<double>(n_yaw), xy = params.vote_xy_bin_m;
+  std::map<std::tuple<int64_t, int64_t, int64_t>, pair_vote_stages::VoteBin> bins;
+  for (const auto& a : pq) {
+    for (const auto& b : pc) {
+      const double tol = std::max(params.edge_abs_tol_m, params.edge_rel_tol * a.len);
+      if (b.len < a.len - tol || b.len > a.len + tol) continue;
+      const double cy = b.cos_a * a.cos_a + b.sin_a * a.sin_a;
+      const double sy = b.sin_a * a.cos_a - b.cos_a * a.sin_a;
+      for (const double sign : {1.0, -1.0}) {
+        const double c = sign * cy, s = sign * sy;
+        double yaw = std::atan2(s, c);
+        if (yaw < 0.0) yaw += 2.0 * M_PI;
+        const int64_t iyaw = std::min<int64_t>(static_cast<int64_t>(yaw / yaw_bin), n_yaw - 1);
+        const Eigen::Vector2d t(b.mid.x() - (c * a.mid.x() - s * a.mid.y()),
+                                b.mid.y() - (s * a.mid.x() + c * a.mid.y()));
+        if (!(std::abs(t.x()) < 3e4 * xy && std::abs(t.y()) < 3e4 * xy)) continue;
+        const auto key = std::make_tuple(iyaw, static_cast<int64_t>(std::floor(t.x() / xy)),
+                                         static_cast<int64_t>(std::floor(t.y() / xy)));
+        pair_vote_stages::VoteBin& v = bins[key];
+        v.count += 1.0, v.cos_sum += c, v.sin_sum += s, v.t_sum += t;
+      }
+    }
+  }
+  return bins;
+}
+
+/// accumulateVotes against plainVotes: the same bins, counts and sums, bit for bit.
+void expectPlainVotes(const Descriptor& q, const Descriptor& c, const MatcherParams& params) {
+  using namespace pair_vote_stages;
+  const auto pq = trunkPairs(q, params.vote_max_pair_m), pc = trunkPairs(c, params.vote_max_pair_m);
+  const VoteAccumulator acc = accumulateVotes(pq, pc, params);
+  const auto want = plainVotes(pq, pc, params);
+  ASSERT_EQ(acc.bins.size(), want.size());
+  for (const VoteBin& b : acc.bins) {
+    const auto it = want.find(std::make_tuple(b.iyaw, b.ix, b.iy));
+    ASSERT_NE(it, want.end());
+    const VoteBin& w = it->second;
+    EXPECT_EQ(b.count, w.count);
+    EXPECT_TRUE(sameBits(b.cos_sum, w.cos_sum) && sameBits(b.sin_sum, w.sin_sum) &&
+                sameBits(b.t_sum.x(), w.t_sum.x()) && sameBits(b.t_sum.y(), w.t_sum.y()));
+  }
+}
+
+TEST(PairVoteStages, VotesAreBinnedAsByAtan2) {
+  // Tens of thousands of votes, some within 2e-6 rad of a yaw bin edge: a yaw off by that much
+  // with no margin at the edges fails here (measured).
+  const MatcherParams params;
+  for (const SparseOverlap& s : sparseOverlaps(6, 41)) expectPlainVotes(s.q, s.c, params);
+  MatcherParams coarse = params;
+  coarse.vote_xy_bin_m = 1.3, coarse.vote_yaw_bin_deg = 7.0;
+  const auto one = sparseOverlaps(1, 42);
+  expectPlainVotes(one[0].q, one[0].c, coarse);
+}
+
+TEST(PairVoteStages, CountedSeedsAreTheAccumulatorsBitForBit) {
+  const MatcherParams params;
+  // Overlaps and disjoint places of a dense stand: most bins hold one vote, so most seeds are
+  // ties at one vote, ranked by position.
+  for (const SparseOverlap& s : sparseOverlaps(8, 21)) {
+    expectCountedSeedsAsAccumulated(s.q, s.c, params);
+    expectCountedSeedsAsAccumulated(s.q, sparseOverlaps(1, 22)[0].c, params);
+  }
+  // The true pose in the lowest yaw bins: its many votes there hold few seeds, so the bins of
+  // one vote taken reach into higher yaw bins.
+  std::mt19937 stand_rng(24);
+  const Trunks stand = test::randomStand(stand_rng, 60, 60, 600);
+  const test::ObservationNoise clean;
+  const Descriptor low_q =
+      describe(observe(stand_rng, stand, {30, 30}, poseXyYaw(30, 30, 0, 0.01), clean), 0);
+  const Descriptor low_c =
+      describe(observe(stand_rng, stand, {31, 30}, poseXyYaw(31, 30, 0, 0.0), clean), 1);
+  expectCountedSeedsAsAccumulated(low_q, low_c, params);
+  // A plantation: hundreds of bins of several votes, ties at the lowest count taken.
+  std::mt19937 rng(23);
+  const Trunks grid = test::plantation(rng, 40, 40, 3.0, 0.05);
+  test::ObservationNoise nz;
+  const Descriptor pq = describe(observe(rng, grid, {20, 20}, poseXyYaw(20, 20, 0, 0.3), nz), 0);
+  const Descriptor pc = describe(observe(rng, grid, {22, 19}, poseXyYaw(22, 19, 0, 2.1), nz), 1);
+  expectCountedSeedsAsAccumulated(pq, pc, params);
+  // Coarser and finer bins (not a power of two: the translation bins divide), fewer than 64
+  // bins in all.
+  MatcherParams coarse = params, fine = params;
+  coarse.vote_xy_bin_m = 1.3, coarse.vote_yaw_bin_deg = 7.0;
+  fine.vote_xy_bin_m = 0.1, fine.vote_yaw_bin_deg = 0.5;
+  expectCountedSeedsAsAccumulated(pq, pc, coarse);
+  expectCountedSeedsAsAccumulated(pq, pc, fine);
+  const Descriptor few = trunksOnly({{0, 0, 0, .1}, {2, 0, 0, .1}, {0, 3, 0, .1}, {4, 4, 0, .1}});
+  expectCountedSeedsAsAccumulated(few, few, params);
+}
+
+TEST(PairVoteStages, CountVotesRefusesMoreVotesThanACountHolds) {
+  // A 1 m grid: thousands of pairs of a few lengths, over a million votes; votePoses takes
+  // the full accumulator then, with its peaks.
+  Trunks grid;
+  for (int x = 0; x < 10; ++x)
+    for (int y = 0; y < 10; ++y) grid.push_back({double(x), double(y), 0, .1});
+  const Descriptor d = trunksOnly(grid);
+  const MatcherParams params;
+  const auto pairs = pair_vote_stages::trunkPairs(d, params.vote_max_pair_m);
+  pair_vote_stages::VoteCounts counts;
+  EXPECT_FALSE(pair_vote_stages::countVotes(pairs, pairs, params, &counts));
+  const pair_vote_stages::VoteAccumulator acc =
+      pair_vote_stages::accumulateVotes(pairs, pairs, params);
+  const auto want = pair_vote_stages::selectPeaks(pair_vote_stages::scoreSeeds(acc), acc.n_yaw, 4);
+  const auto got = votePoses(d, d, params, 4);
+  ASSERT_EQ(got.size(), want.size());
+  for (size_t k = 0; k < got.size(); ++k) {
+    EXPECT_EQ(got[k].yaw, want[k].yaw);
+    EXPECT_EQ(got[k].t, want[k].t);
+    EXPECT_EQ(got[k].votes, want[k].votes);
+  }
 }
 
 /// The fallback is what finds these pairs: without it the triangles give no hypothesis for most

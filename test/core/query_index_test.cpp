@@ -243,7 +243,8 @@ TEST(QueryIndex, VotesFallInTheBinsOfTheirOwnAtan2) {
   std::mt19937 rng(41);
   std::uniform_real_distribution<double> angle(-M_PI, M_PI), xy(-30.0, 30.0);
   auto pair = [&](double a, int i) {
-    return pair_vote_stages::TrunkPair{3.0, std::cos(a), std::sin(a), {xy(rng), xy(rng)}, i, i + 1};
+    const double c = std::cos(a), s = std::sin(a);
+    return pair_vote_stages::TrunkPair{3.0, c, s, std::atan2(s, c), {xy(rng), xy(rng)}, i, i + 1};
   };
   std::vector<pair_vote_stages::TrunkPair> pq, pc;
   for (int i = 0; i < 100; ++i) pq.push_back(pair(angle(rng), i));
