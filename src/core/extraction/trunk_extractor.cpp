@@ -413,27 +413,30 @@ float horizontalMax(__m128 v) {
 }
 #endif
 
-// toLocalPoints of a cloud whose finite points all lie inside b, and (marks not null) each
-// finite point added to the footprint's marks, in one pass over the cloud, the largest array
-// extraction reads. *finite counts the finite points. false when a finite point lies outside b
-// (then nothing is usable). Raw pointers and locals: through the members, the compiler reloads
-// them (and the thread's workspace address) at every point.
-bool firstPass(const Cloud& cloud, const PointBounds& b, LocalPoints* pts, HeightCellMarks* marks,
-               size_t* finite) {
-  const size_t size = cloud.size();
-  pts->x.resize(size), pts->y.resize(size), pts->z.resize(size);
-  float *X = pts->x.data(), *Y = pts->y.data(), *Z = pts->z.data();
+// What firstPass's loop finds: the local origin (a floor of the first usable point), the local
+// points' extent and how many points it kept (n) and found finite (nf).
+struct FirstPassFound {
+  float ox = 0.0f, oy = 0.0f, oz = 0.0f;
+  float minx = 0.0f, maxx = 0.0f, miny = 0.0f, maxy = 0.0f;
+  size_t n = 0, nf = 0;
+};
+
+#ifdef __SSE2__
+// firstPass's loop over the cloud: the local points into X, Y, Z, each finite point marked
+// (marking), the rest into *found. false when a finite point lies outside b. Raw pointers and
+// locals: through members, the compiler reloads them at every point.
+bool firstPassLoop(const Cloud& cloud, const PointBounds& b, float* X, float* Y, float* Z,
+                   bool marking, HeightCellMarks::Pass* marks, FirstPassFound* found) {
   const pcl::PointXYZ* P = cloud.points.data();
+  const size_t size = cloud.size();
+  HeightCellMarks::Pass marker = *marks;
   float ox = 0.0f, oy = 0.0f, oz = 0.0f;
   bool have_origin = false;
   size_t n = 0, nf = 0;
-  const bool marking = marks != nullptr;
-  HeightCellMarks::Pass marker = marking ? marks->pass() : HeightCellMarks::Pass();
-  // The ground grid's extent, in the order binGroundGrid would take it (lanes x and y).
   constexpr float kInf = std::numeric_limits<float>::infinity();
-#ifdef __SSE2__
   const __m128d cxy = _mm_set_pd(b.centre.y(), b.centre.x()), cz = _mm_set1_pd(b.centre.z());
   const __m128d hs = _mm_set1_pd(b.half_side_m);
+  // The extent in lanes x and y, in the order binGroundGrid would take it.
   __m128 origin = _mm_setzero_ps(), lo = _mm_set1_ps(kInf), hi = _mm_set1_ps(-kInf);
   // One point; false when it is finite and outside b.
   const auto one = [&](size_t i) {
@@ -486,14 +489,26 @@ bool firstPass(const Cloud& cloud, const PointBounds& b, LocalPoints* pts, Heigh
   for (; i < size; ++i) {
     if (!one(i)) return false;
   }
-  float minx = std::min(_mm_cvtss_f32(lo), horizontalMin(lox));
-  float miny = std::min(_mm_cvtss_f32(_mm_shuffle_ps(lo, lo, 1)), horizontalMin(loy));
-  float maxx = std::max(_mm_cvtss_f32(hi), horizontalMax(hix));
-  float maxy = std::max(_mm_cvtss_f32(_mm_shuffle_ps(hi, hi, 1)), horizontalMax(hiy));
+  *marks = marker;
+  found->ox = ox, found->oy = oy, found->oz = oz, found->n = n, found->nf = nf;
+  found->minx = std::min(_mm_cvtss_f32(lo), horizontalMin(lox));
+  found->miny = std::min(_mm_cvtss_f32(_mm_shuffle_ps(lo, lo, 1)), horizontalMin(loy));
+  found->maxx = std::max(_mm_cvtss_f32(hi), horizontalMax(hix));
+  found->maxy = std::max(_mm_cvtss_f32(_mm_shuffle_ps(hi, hi, 1)), horizontalMax(hiy));
+  return true;
+}
 #else
+// firstPass's loop over the cloud, one point at a time (see the SSE2 form above).
+bool firstPassLoop(const Cloud& cloud, const PointBounds& b, float* X, float* Y, float* Z,
+                   bool marking, HeightCellMarks::Pass* marks, FirstPassFound* found) {
+  const pcl::PointXYZ* P = cloud.points.data();
+  HeightCellMarks::Pass marker = *marks;
   const double cx = b.centre.x(), cy = b.centre.y(), cz = b.centre.z(), hs = b.half_side_m;
-  float minx = kInf, maxx = -kInf, miny = kInf, maxy = -kInf;
-  for (size_t i = 0; i < size; ++i) {
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  float minx = kInf, maxx = -kInf, miny = kInf, maxy = -kInf, ox = 0.0f, oy = 0.0f, oz = 0.0f;
+  bool have_origin = false;
+  size_t n = 0, nf = 0;
+  for (size_t i = 0; i < cloud.size(); ++i) {
     const float x = P[i].x, y = P[i].y, z = P[i].z;
     if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) continue;
     ++nf;
@@ -508,14 +523,33 @@ bool firstPass(const Cloud& cloud, const PointBounds& b, LocalPoints* pts, Heigh
     miny = std::min(miny, ly), maxy = std::max(maxy, ly);
     ++n;
   }
+  *marks = marker;
+  found->ox = ox, found->oy = oy, found->oz = oz, found->n = n, found->nf = nf;
+  found->minx = minx, found->maxx = maxx, found->miny = miny, found->maxy = maxy;
+  return true;
+}
 #endif
+
+// toLocalPoints of a cloud whose finite points all lie inside b, and (marks not null) each
+// finite point added to the footprint's marks, in one pass over the cloud, the largest array
+// extraction reads. *finite counts the finite points. false when a finite point lies outside b
+// (then nothing is usable).
+bool firstPass(const Cloud& cloud, const PointBounds& b, LocalPoints* pts, HeightCellMarks* marks,
+               size_t* finite) {
+  const size_t size = cloud.size();
+  pts->x.resize(size), pts->y.resize(size), pts->z.resize(size);
+  const bool marking = marks != nullptr;
+  HeightCellMarks::Pass marker = marking ? marks->pass() : HeightCellMarks::Pass();
+  FirstPassFound f;
+  if (!firstPassLoop(cloud, b, pts->x.data(), pts->y.data(), pts->z.data(), marking, &marker, &f))
+    return false;
   if (marking) marks->finish(marker);
-  if (n == 0) minx = maxx = miny = maxy = 0.0f;
-  pts->ox = ox, pts->oy = oy, pts->oz = oz;
-  pts->minx = minx, pts->maxx = maxx, pts->miny = miny, pts->maxy = maxy;
-  pts->has_extent = n > 0;
-  pts->x.resize(n), pts->y.resize(n), pts->z.resize(n);
-  *finite = nf;
+  if (f.n == 0) f.minx = f.maxx = f.miny = f.maxy = 0.0f;
+  pts->ox = f.ox, pts->oy = f.oy, pts->oz = f.oz;
+  pts->minx = f.minx, pts->maxx = f.maxx, pts->miny = f.miny, pts->maxy = f.maxy;
+  pts->has_extent = f.n > 0;
+  pts->x.resize(f.n), pts->y.resize(f.n), pts->z.resize(f.n);
+  *finite = f.nf;
   return true;
 }
 
