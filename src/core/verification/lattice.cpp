@@ -241,11 +241,6 @@ std::vector<std::pair<double, Pose>> rankLatticePoses(const Descriptor& q, const
 
 }  // namespace
 
-Fit fitPose(const Descriptor& q, const Descriptor& c, const Pose& T0, double radius,
-            double score_radius) {
-  return fitPose(q, c, RefineTargets(c, radius), T0, score_radius);
-}
-
 Fit fitPose(const Descriptor& q, const Descriptor& c, const RefineTargets& targets, const Pose& T0,
             double score_radius) {
   Fit f;

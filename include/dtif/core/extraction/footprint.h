@@ -78,18 +78,11 @@ class HeightCellMarks {
       // floor(x / 2^k) = floor(floor(x) / 2^k) = floor(x) >> k: the 2 m tile and, for cells of
       // 2^k m (k >= 0, the default 1 m), the cell from one floor of each coordinate.
       const int64_t fx = floorOf(x), fy = floorOf(y);
-      const int64_t tx = (fx >> 1) - tx0_, ty = (fy >> 1) - ty0_;
-      const bool tile = (static_cast<uint64_t>(tx) < static_cast<uint64_t>(tw_)) &
-                        (static_cast<uint64_t>(ty) < static_cast<uint64_t>(th_));
-      const float h =
-          z - ground_[select(tile, static_cast<size_t>(ty * tw_ + tx), 0)];  // NaN: none
+      bool tile;
+      const float h = z - tileGround((fx >> 1) - tx0_, (fy >> 1) - ty0_, &tile);  // NaN: none
       const bool band = tile & (h >= kMin) & (h <= kMax);
-      const int64_t cx = (shift_ >= 0 ? fx >> shift_ : floorOf(cellDiv(x))) - cx0_;
-      const int64_t cy = (shift_ >= 0 ? fy >> shift_ : floorOf(cellDiv(y))) - cy0_;
-      const bool box = (static_cast<uint64_t>(cx) < static_cast<uint64_t>(cw_)) &
-                       (static_cast<uint64_t>(cy) < static_cast<uint64_t>(ch_));
-      outside_ |= band & !box;  // only by rounding at the box's edge
-      marks_[select(band & box, static_cast<size_t>(cx * ch_ + cy), sink_)] = 1;
+      mark(band, (shift_ >= 0 ? fx >> shift_ : floorOf(cellDiv(x))) - cx0_,
+           (shift_ >= 0 ? fy >> shift_ : floorOf(cellDiv(y))) - cy0_);
     }
 
 #ifdef __SSE2__
@@ -117,27 +110,32 @@ class HeightCellMarks {
                       _mm_sub_epi32(_mm_sra_epi32(fy, shift), _mm_set1_epi32(int32_t(cy0_))));
       alignas(16) float g[4];
       bool tile[4];
-      for (int j = 0; j < 4; ++j) {
-        tile[j] = (static_cast<uint64_t>(int64_t{tx[j]}) < static_cast<uint64_t>(tw_)) &
-                  (static_cast<uint64_t>(int64_t{ty[j]}) < static_cast<uint64_t>(th_));
-        g[j] = ground_[select(tile[j], static_cast<size_t>(int64_t{ty[j]} * tw_ + tx[j]), 0)];
-      }
+      for (int j = 0; j < 4; ++j) g[j] = tileGround(tx[j], ty[j], &tile[j]);
       // h >= kMin and h <= kMax as float comparisons with the bounds' nearest floats inside.
       const __m128 h = _mm_sub_ps(z, _mm_load_ps(g));
       const int in_band = _mm_movemask_ps(
           _mm_and_ps(_mm_cmpge_ps(h, _mm_set1_ps(kMinF)), _mm_cmple_ps(h, _mm_set1_ps(kMaxF))));
-      for (int j = 0; j < 4; ++j) {
-        const bool band = tile[j] & ((in_band >> j) & 1);
-        const bool box = (static_cast<uint64_t>(int64_t{cx[j]}) < static_cast<uint64_t>(cw_)) &
-                         (static_cast<uint64_t>(int64_t{cy[j]}) < static_cast<uint64_t>(ch_));
-        outside_ |= band & !box;
-        marks_[select(band & box, static_cast<size_t>(int64_t{cx[j]} * ch_ + cy[j]), sink_)] = 1;
-      }
+      for (int j = 0; j < 4; ++j) mark(tile[j] & ((in_band >> j) & 1), cx[j], cy[j]);
     }
 #endif
 
    private:
     friend class HeightCellMarks;
+    // The ground of tile (tx, ty) (tile grid indices); *tile false when it lies outside the grid
+    // (then tile 0's ground, which band tests discard).
+    float tileGround(int64_t tx, int64_t ty, bool* tile) const {
+      *tile = (static_cast<uint64_t>(tx) < static_cast<uint64_t>(tw_)) &
+              (static_cast<uint64_t>(ty) < static_cast<uint64_t>(th_));
+      return ground_[select(*tile, static_cast<size_t>(ty * tw_ + tx), 0)];
+    }
+    // Marks cell (cx, cy) (cell grid indices) when the point is in the band, else the sink; a
+    // band point outside the box (only by rounding at the box's edge) sets outside_.
+    void mark(bool band, int64_t cx, int64_t cy) {
+      const bool box = (static_cast<uint64_t>(cx) < static_cast<uint64_t>(cw_)) &
+                       (static_cast<uint64_t>(cy) < static_cast<uint64_t>(ch_));
+      outside_ |= band & !box;
+      marks_[select(band & box, static_cast<size_t>(cx * ch_ + cy), sink_)] = 1;
+    }
 #ifdef __SSE2__
     // floorOf of four floats (|v| < 2^31): truncation, one less where that rose above v.
     static __m128i floor4(__m128 v) {

@@ -12,8 +12,9 @@
 
 namespace dtif {
 
-/// Fit of a pose to the whole trunk sets: guided refinement from `T0` (pairs within `radius`),
-/// then the Tukey-weighted count of the mutual pairs, sum of (1 - (d / score_radius)^2)^2.
+/// Fit of a pose to the whole trunk sets: guided refinement from `T0` (pairs within the
+/// targets' radius), then the Tukey-weighted count of the mutual pairs, sum of
+/// (1 - (d / score_radius)^2)^2.
 /// Trunk centres are fitted to a few cm, so a pose shifted or turned onto another lattice site
 /// of a jittered plantation scores clearly lower than the true one even though it pairs as
 /// many trunks.
@@ -23,9 +24,7 @@ struct Fit {
   double median_xy = 0.0;                  ///< median horizontal residual of the pairs [m]
   std::vector<std::pair<int, int>> pairs;  ///< the refined mutual pairs under T
 };
-Fit fitPose(const Descriptor& q, const Descriptor& c, const Pose& T0, double radius,
-            double score_radius);
-/// The same with c's refinement targets made once (their radius is the refinement's).
+/// `targets`: c's, made once for the several poses fitted (their radius is the refinement's).
 Fit fitPose(const Descriptor& q, const Descriptor& c, const RefineTargets& targets, const Pose& T0,
             double score_radius);
 
