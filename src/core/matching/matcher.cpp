@@ -412,9 +412,13 @@ struct TriangleColumns {
 /// [from, to) as edgeMask would give it for a pair of faces (q_face and c_j a face), else 7
 /// when fully consistent and 0 otherwise: from b's intervals, without branches. The partial
 /// mask is 7 exactly when every value is in its interval (each edge needs its length and both
-/// end radii), so the non-face case is "partial mask == 7".
-void boundsMasks(const TriangleColumns& c, const ConsistencyBounds& b, bool q_face, size_t from,
-                 size_t to, std::vector<uint8_t>* mask) {
+/// end radii), so the non-face case is "partial mask == 7". Comparisons only, so the AVX2
+/// clone (32 pairs a step where the CPU has AVX2) gives the same masks.
+__attribute__((target_clones("avx2", "default"))) void boundsMasks(const TriangleColumns& c,
+                                                                   const ConsistencyBounds& b,
+                                                                   bool q_face, size_t from,
+                                                                   size_t to,
+                                                                   std::vector<uint8_t>* mask) {
   const size_t n = to - from;
   mask->resize(n);
   uint8_t* m = mask->data();
@@ -471,9 +475,28 @@ class SupportCounts {
   /// Every vertex pair gets its increment of the mask (kIncrements) at once, without a branch
   /// per mask or edge: which edges agree follows no pattern.
   void add(const Triangle& q, const Triangle& c, int m) {
-    const std::array<uint32_t, 3>& inc = kIncrements[m];
-    for (int j = 0; j < 3; ++j) bump(static_cast<size_t>(q.v[j]) * nc_ + c.v[j], inc[j]);
+    if (saturating_) {
+      addAt<true>(rowsOf(q), c, m);
+    } else {
+      addAt<false>(rowsOf(q), c, m);
+    }
   }
+  /// The table rows of q's vertices (q.v[j] * nc), for addAt: once per query triangle, not
+  /// per pair of its window.
+  struct Rows {
+    std::array<size_t, 3> r;
+  };
+  Rows rowsOf(const Triangle& q) const {
+    return {{static_cast<size_t>(q.v[0]) * nc_, static_cast<size_t>(q.v[1]) * nc_,
+             static_cast<size_t>(q.v[2]) * nc_}};
+  }
+  /// add() of the query triangle of `rows`, for a table that saturates (kSaturating) or not.
+  template <bool kSaturating>
+  void addAt(const Rows& rows, const Triangle& c, int m) {
+    const std::array<uint32_t, 3>& inc = kIncrements[m];
+    for (int j = 0; j < 3; ++j) bump<kSaturating>(rows.r[j] + c.v[j], inc[j]);
+  }
+  bool saturating() const { return saturating_; }
   /// The counts into sup (touched: the non-zero entries by index), without branches.
   void out() {
     sup_.strong.resize(n_);
@@ -507,8 +530,9 @@ class SupportCounts {
     return t;
   }();
   /// Both counts of entry k raised by inc, each saturating at 65535 (as one count at a time).
+  template <bool kSaturating>
   void bump(size_t k, uint32_t inc) {
-    if (!saturating_) {
+    if (!kSaturating) {
       packed_[k] += inc;
       return;
     }
@@ -636,8 +660,14 @@ VertexSupport accumulateSupport(const std::vector<MatchTriangle>& tq,
     // ~125,000 pairs per candidate fall in the windows and under a tenth of them support.
     boundsMasks(scratch.cols, bounds[i], mq.delaunay, from, to, &scratch.mask);
     const MatchTriangle* window = tc.data() + from;  // a lambda cannot capture `from` (C++17)
-    forEachNonzero(scratch.mask.data(), to - from,
-                   [&](size_t k, uint8_t m) { counts.add(mq.t, window[k].t, m); });
+    const SupportCounts::Rows rows = counts.rowsOf(mq.t);
+    if (counts.saturating()) {
+      forEachNonzero(scratch.mask.data(), to - from,
+                     [&](size_t k, uint8_t m) { counts.addAt<true>(rows, window[k].t, m); });
+    } else {
+      forEachNonzero(scratch.mask.data(), to - from,
+                     [&](size_t k, uint8_t m) { counts.addAt<false>(rows, window[k].t, m); });
+    }
   }
   counts.out();
   return sup;
