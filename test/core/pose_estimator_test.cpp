@@ -354,8 +354,9 @@ std::pair<double, double> referenceSweep(const std::vector<pose_stages::Tim>& ti
 }
 
 TEST(PoseStages, YawSweepEqualsTheFullSortWithWrappedAngles) {
-  // Hundreds of TIMs (the sweep's radix sort and its shortcut around wrapAngle), with outliers
-  // and with duplicated TIMs (arc ends at equal angles), against the sweep done plainly.
+  // Hundreds of TIMs (the sweep's radix sort, its arc ends wrapped by one turn and its shortcut
+  // around wrapAngle), with outliers and with duplicated TIMs (arc ends at equal angles), against
+  // the sweep done plainly, its arc ends by wrapAngle.
   std::mt19937 rng(19);
   size_t cases = 0;
   for (const double outliers : {0.0, 0.3, 0.7}) {
