@@ -1,7 +1,9 @@
 #include "dtif/core/voxel_grid.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <limits>
 
 #include "dtif/core/cells.h"
 
@@ -64,6 +66,109 @@ void VoxelCentroidGrid::grow() {
   for (const Cell& c : old) {
     if (c.n) find(c.key) = c;
   }
+}
+
+namespace {
+
+/// cellIndex(v) without libm's floor call (not inlined on baseline x86-64; three per return):
+/// below 10^12 in magnitude the truncation, one lower where it rounded up, is the floor and
+/// needs no saturation.
+int64_t voxelIndex(double v) {
+  if (!(std::fabs(v) < 1e12)) return cellIndex(v);  // NaN too
+  const int64_t i = static_cast<int64_t>(v);
+  return i - (v < static_cast<double>(i));
+}
+
+constexpr int64_t kAxisOffset = int64_t{1} << 20;  // VoxelCentroidGrid::add's
+constexpr int64_t kAxisEnd = int64_t{1} << 21;
+constexpr int kDigitBits = 11;
+
+int bitsOf(uint64_t v) {
+  int b = 0;
+  while (b < 64 && (v >> b) != 0) ++b;
+  return b;
+}
+
+}  // namespace
+
+VoxelCentroidSorter::VoxelCentroidSorter(double voxel_m) : inv_(1.0 / voxel_m) {}
+
+int VoxelCentroidSorter::packedKeys(const Cloud& cloud) {
+  const size_t n = cloud.size();
+  key_.resize(n);
+  idx_.resize(n);
+  std::array<int64_t, 3> lo, hi;
+  lo.fill(kAxisEnd), hi.fill(-1);
+  size_t m = 0;
+  for (size_t i = 0; i < n; ++i) {
+    const pcl::PointXYZ& p = cloud.points[i];
+    const std::array<int64_t, 3> a = {voxelIndex(p.x * inv_) + kAxisOffset,
+                                      voxelIndex(p.y * inv_) + kAxisOffset,
+                                      voxelIndex(p.z * inv_) + kAxisOffset};
+    bool in = true;
+    for (int d = 0; d < 3; ++d) in &= a[d] >= 0 && a[d] < kAxisEnd;
+    if (!in) continue;  // as the grid: beyond 2^20 voxels from the origin
+    for (int d = 0; d < 3; ++d) lo[d] = std::min(lo[d], a[d]), hi[d] = std::max(hi[d], a[d]);
+    key_[m] = static_cast<uint64_t>(a[0]) << 42 | static_cast<uint64_t>(a[1]) << 21 |
+              static_cast<uint64_t>(a[2]);
+    idx_[m++] = static_cast<uint32_t>(i);
+  }
+  key_.resize(m), idx_.resize(m);
+  if (m == 0) return 0;
+  // Each axis from its lowest index, in the bits its extent needs: the order of the grid's keys
+  // (x, then y, then z) in fewer radix passes.
+  std::array<int, 3> bits;
+  for (int d = 0; d < 3; ++d) bits[d] = bitsOf(static_cast<uint64_t>(hi[d] - lo[d]));
+  constexpr uint64_t kAxisMask = (uint64_t{1} << 21) - 1;
+  for (uint64_t& k : key_) {
+    const uint64_t x = (k >> 42) - lo[0], y = (k >> 21 & kAxisMask) - lo[1],
+                   z = (k & kAxisMask) - lo[2];
+    k = x << (bits[1] + bits[2]) | y << bits[2] | z;
+  }
+  return bits[0] + bits[1] + bits[2];
+}
+
+void VoxelCentroidSorter::radixSort(int bits) {
+  const size_t m = key_.size();
+  constexpr size_t kBuckets = size_t{1} << kDigitBits;
+  key_tmp_.resize(m), idx_tmp_.resize(m);
+  std::vector<size_t> start(kBuckets + 1);
+  for (int shift = 0; shift < bits; shift += kDigitBits) {
+    std::fill(start.begin(), start.end(), 0);
+    for (const uint64_t k : key_) ++start[(k >> shift & (kBuckets - 1)) + 1];
+    for (size_t b = 1; b <= kBuckets; ++b) start[b] += start[b - 1];
+    for (size_t i = 0; i < m; ++i) {
+      const size_t to = start[key_[i] >> shift & (kBuckets - 1)]++;
+      key_tmp_[to] = key_[i], idx_tmp_[to] = idx_[i];
+    }
+    key_.swap(key_tmp_), idx_.swap(idx_tmp_);
+  }
+}
+
+void VoxelCentroidSorter::filter(Cloud* cloud) {
+  std::vector<Eigen::Vector3f>& centroids = centroids_;
+  centroids.clear();
+  if (cloud->size() >= std::numeric_limits<uint32_t>::max()) {  // beyond the indices: the grid
+    VoxelCentroidGrid grid(1.0 / inv_);
+    for (const auto& p : *cloud) grid.add(p.getVector3fMap());
+    centroids = grid.centroids();
+  } else {
+    radixSort(packedKeys(*cloud));
+    const size_t m = key_.size();
+    for (size_t i = 0; i < m;) {
+      // As the grid sums a voxel: from zero, its points in the order they came.
+      Eigen::Vector3f sum(0.0f, 0.0f, 0.0f);
+      uint32_t count = 0;
+      size_t j = i;
+      for (; j < m && key_[j] == key_[i]; ++j, ++count)
+        sum += cloud->points[idx_[j]].getVector3fMap();
+      centroids.push_back(sum / static_cast<float>(count));
+      i = j;
+    }
+  }
+  cloud->clear();
+  cloud->reserve(centroids.size());
+  for (const Eigen::Vector3f& q : centroids) cloud->push_back(pcl::PointXYZ(q.x(), q.y(), q.z()));
 }
 
 }  // namespace dtif

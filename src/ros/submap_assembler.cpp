@@ -21,15 +21,7 @@ std::string SubmapAssemblerParams::validate() const {
   return os.str();
 }
 
-void voxelFilterSubmap(VoxelCentroidGrid* grid, Cloud* cloud_S) {
-  grid->clear();
-  for (const auto& p : *cloud_S) grid->add(p.getVector3fMap());
-  cloud_S->clear();
-  cloud_S->reserve(grid->voxels());
-  for (const Eigen::Vector3f& q : grid->centroids()) {
-    cloud_S->push_back(pcl::PointXYZ(q.x(), q.y(), q.z()));
-  }
-}
+void voxelFilterSubmap(VoxelCentroidSorter* voxels, Cloud* cloud_S) { voxels->filter(cloud_S); }
 
 Pose gravityAlignedPose(const Pose& T_O_B) {
   const Eigen::Matrix3d R = T_O_B.rotation();

@@ -234,8 +234,8 @@ TEST(SubmapAssembler, VoxelFilterAveragesEachVoxelOfS) {
   ASSERT_TRUE(done);
   EXPECT_EQ(done->cloud->size(), 6u);
   // Filtering afterwards (as TrunkExtractionNodelet does, on its worker) gives the same points.
-  VoxelCentroidGrid grid(0.05);
-  voxelFilterSubmap(&grid, done->cloud.get());
+  VoxelCentroidSorter voxels(0.05);
+  voxelFilterSubmap(&voxels, done->cloud.get());
   ASSERT_EQ(done->cloud->size(), filtered.size());
   for (size_t i = 0; i < filtered.size(); ++i) {
     EXPECT_EQ((*done->cloud)[i].getVector3fMap(), filtered[i].getVector3fMap()) << i;

@@ -8,6 +8,8 @@
 #include <cstdint>
 #include <vector>
 
+#include "dtif/core/cloud.h"
+
 namespace dtif {
 
 /// Voxels of `voxel_m` on the grid floor(p / voxel_m); each occupied voxel yields the mean of
@@ -43,6 +45,32 @@ class VoxelCentroidGrid {
   std::vector<Cell> cells_;
   size_t used_ = 0;
   size_t raw_ = 0;
+};
+
+/// The same filter for a whole cloud at once: the centroids a VoxelCentroidGrid of voxel_m gives
+/// for the cloud's points added in order (the same float values, in the same key order), from a
+/// stable radix sort of the points' voxel keys and each voxel's sum taken in point order. A
+/// submap's millions of returns are filtered several times faster than through the grid's hash
+/// table (a cache miss per return) and its final sort. Keeps its buffers between calls; not
+/// thread-safe.
+class VoxelCentroidSorter {
+ public:
+  /// voxel_m > 0 [m].
+  explicit VoxelCentroidSorter(double voxel_m);
+  /// *cloud replaced by its voxels' centroids (a cloud of height 1).
+  void filter(Cloud* cloud);
+
+ private:
+  /// Voxel keys of the points in range (key_, their indices in idx_), packed to the bits their
+  /// extent needs; the number of those bits.
+  int packedKeys(const Cloud& cloud);
+  /// key_ and idx_ sorted by key, stably, in passes of kDigitBits.
+  void radixSort(int bits);
+
+  double inv_;
+  std::vector<uint64_t> key_, key_tmp_;
+  std::vector<uint32_t> idx_, idx_tmp_;
+  std::vector<Eigen::Vector3f> centroids_;
 };
 
 }  // namespace dtif

@@ -117,15 +117,16 @@ class SubmapAssembler {
   double last_cloud_stamp_ = -1.0;
   std::optional<double> t0_;  ///< start of window 0 of the current stream
   std::optional<Window> open_;
-  VoxelCentroidGrid voxels_;  ///< reused by close()
+  VoxelCentroidSorter voxels_;  ///< reused by close()
 };
 
 /// The assembler's voxel filter (voxel_m > 0): replaces the points of a submap in S by the
-/// centroids of the grid's voxels of S, in voxel key order. `grid` (made with voxel_m) is scratch,
-/// reused across submaps to keep its table. Exposed so that a caller can assemble with voxel_m 0
+/// centroids of its voxels of S, in voxel key order (VoxelCentroidSorter: the points the
+/// simulator's VoxelCentroidGrid gives). `voxels` (made with voxel_m) is scratch, reused across
+/// submaps to keep its buffers. Exposed so that a caller can assemble with voxel_m 0
 /// and filter elsewhere (TrunkExtractionNodelet filters on its worker thread, not in the
 /// callback); the result is the same.
-void voxelFilterSubmap(VoxelCentroidGrid* grid, Cloud* cloud_S);
+void voxelFilterSubmap(VoxelCentroidSorter* voxels, Cloud* cloud_S);
 
 /// Gravity-aligned submap pose from a body pose: position kept, roll and pitch removed, yaw of
 /// the body's x axis kept.
