@@ -116,34 +116,78 @@ int VoxelCentroidSorter::packedKeys(const Cloud& cloud) {
   key_.resize(m), idx_.resize(m);
   if (m == 0) return 0;
   // Each axis from its lowest index, in the bits its extent needs: the order of the grid's keys
-  // (x, then y, then z) in fewer radix passes.
+  // (x, then y, then z) in fewer radix passes, and in 32-bit keys for a submap's extent.
   std::array<int, 3> bits;
   for (int d = 0; d < 3; ++d) bits[d] = bitsOf(static_cast<uint64_t>(hi[d] - lo[d]));
+  const int total = bits[0] + bits[1] + bits[2];
   constexpr uint64_t kAxisMask = (uint64_t{1} << 21) - 1;
-  for (uint64_t& k : key_) {
+  const auto pack = [&](uint64_t k) {
     const uint64_t x = (k >> 42) - lo[0], y = (k >> 21 & kAxisMask) - lo[1],
                    z = (k & kAxisMask) - lo[2];
-    k = x << (bits[1] + bits[2]) | y << bits[2] | z;
+    return x << (bits[1] + bits[2]) | y << bits[2] | z;
+  };
+  if (total <= 32) {
+    key32_.resize(m);
+    for (size_t i = 0; i < m; ++i) key32_[i] = static_cast<uint32_t>(pack(key_[i]));
+  } else {
+    for (uint64_t& k : key_) k = pack(k);
   }
-  return bits[0] + bits[1] + bits[2];
+  return total;
 }
 
-void VoxelCentroidSorter::radixSort(int bits) {
-  const size_t m = key_.size();
+namespace {
+
+/// key and idx sorted by key, stably: LSD radix passes of kDigitBits over the key's low `bits`,
+/// their histograms counted in one read of the keys.
+template <class Key>
+void radixSort(int bits, std::vector<Key>* key, std::vector<uint32_t>* idx,
+               std::vector<Key>* key_tmp, std::vector<uint32_t>* idx_tmp) {
   constexpr size_t kBuckets = size_t{1} << kDigitBits;
-  key_tmp_.resize(m), idx_tmp_.resize(m);
-  std::vector<size_t> start(kBuckets + 1);
-  for (int shift = 0; shift < bits; shift += kDigitBits) {
-    std::fill(start.begin(), start.end(), 0);
-    for (const uint64_t k : key_) ++start[(k >> shift & (kBuckets - 1)) + 1];
-    for (size_t b = 1; b <= kBuckets; ++b) start[b] += start[b - 1];
-    for (size_t i = 0; i < m; ++i) {
-      const size_t to = start[key_[i] >> shift & (kBuckets - 1)]++;
-      key_tmp_[to] = key_[i], idx_tmp_[to] = idx_[i];
+  const size_t m = key->size();
+  const int passes = (bits + kDigitBits - 1) / kDigitBits;
+  std::vector<uint32_t> start(static_cast<size_t>(passes) * kBuckets, 0);
+  for (const Key k : *key) {
+    for (int p = 0; p < passes; ++p)
+      ++start[p * kBuckets + (k >> (p * kDigitBits) & (kBuckets - 1))];
+  }
+  key_tmp->resize(m), idx_tmp->resize(m);
+  for (int p = 0; p < passes; ++p) {
+    uint32_t* at = start.data() + p * kBuckets;
+    uint32_t sum = 0;  // exclusive prefix sums: each bucket's first place
+    for (size_t b = 0; b < kBuckets; ++b) {
+      const uint32_t c = at[b];
+      at[b] = sum, sum += c;
     }
-    key_.swap(key_tmp_), idx_.swap(idx_tmp_);
+    const Key* k = key->data();
+    const uint32_t* i = idx->data();
+    Key* kt = key_tmp->data();
+    uint32_t* it = idx_tmp->data();
+    const int shift = p * kDigitBits;
+    for (size_t e = 0; e < m; ++e) {
+      const uint32_t to = at[k[e] >> shift & (kBuckets - 1)]++;
+      kt[to] = k[e], it[to] = i[e];
+    }
+    key->swap(*key_tmp), idx->swap(*idx_tmp);
   }
 }
+
+/// The centroid of each run of equal keys, its points summed in order from zero as the grid
+/// sums a voxel.
+template <class Key>
+void runCentroids(const std::vector<Key>& key, const std::vector<uint32_t>& idx, const Cloud& cloud,
+                  std::vector<Eigen::Vector3f>* centroids) {
+  const size_t m = key.size();
+  for (size_t i = 0; i < m;) {
+    Eigen::Vector3f sum(0.0f, 0.0f, 0.0f);
+    uint32_t count = 0;
+    size_t j = i;
+    for (; j < m && key[j] == key[i]; ++j, ++count) sum += cloud.points[idx[j]].getVector3fMap();
+    centroids->push_back(sum / static_cast<float>(count));
+    i = j;
+  }
+}
+
+}  // namespace
 
 void VoxelCentroidSorter::filter(Cloud* cloud) {
   std::vector<Eigen::Vector3f>& centroids = centroids_;
@@ -153,17 +197,13 @@ void VoxelCentroidSorter::filter(Cloud* cloud) {
     for (const auto& p : *cloud) grid.add(p.getVector3fMap());
     centroids = grid.centroids();
   } else {
-    radixSort(packedKeys(*cloud));
-    const size_t m = key_.size();
-    for (size_t i = 0; i < m;) {
-      // As the grid sums a voxel: from zero, its points in the order they came.
-      Eigen::Vector3f sum(0.0f, 0.0f, 0.0f);
-      uint32_t count = 0;
-      size_t j = i;
-      for (; j < m && key_[j] == key_[i]; ++j, ++count)
-        sum += cloud->points[idx_[j]].getVector3fMap();
-      centroids.push_back(sum / static_cast<float>(count));
-      i = j;
+    const int bits = packedKeys(*cloud);
+    if (bits <= 32 && !idx_.empty()) {
+      radixSort(bits, &key32_, &idx_, &key32_tmp_, &idx_tmp_);
+      runCentroids(key32_, idx_, *cloud, &centroids);
+    } else {
+      radixSort(bits, &key_, &idx_, &key_tmp_, &idx_tmp_);
+      runCentroids(key_, idx_, *cloud, &centroids);
     }
   }
   cloud->clear();

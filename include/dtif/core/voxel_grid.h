@@ -61,14 +61,13 @@ class VoxelCentroidSorter {
   void filter(Cloud* cloud);
 
  private:
-  /// Voxel keys of the points in range (key_, their indices in idx_), packed to the bits their
-  /// extent needs; the number of those bits.
+  /// Voxel keys of the points in range (their indices in idx_), packed to the bits their extent
+  /// needs, in key32_ when they fit 32 bits, else in key_; the number of those bits.
   int packedKeys(const Cloud& cloud);
-  /// key_ and idx_ sorted by key, stably, in passes of kDigitBits.
-  void radixSort(int bits);
 
   double inv_;
   std::vector<uint64_t> key_, key_tmp_;
+  std::vector<uint32_t> key32_, key32_tmp_;
   std::vector<uint32_t> idx_, idx_tmp_;
   std::vector<Eigen::Vector3f> centroids_;
 };
