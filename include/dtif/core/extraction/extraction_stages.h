@@ -102,7 +102,8 @@ struct GroundPlane {
 /// Tukey weights: residuals above the plane use c_up, below c_down [m] (points far above are
 /// clutter, points slightly below are ground noise). Slopes are mildly ridge-regularised so a
 /// collinear support (a narrow path) stays defined. `iterations` reweightings after the first
-/// solve; a degenerate system leaves the last good plane (initially 0).
+/// solve; a degenerate system leaves the last good plane (initially 0). Every coordinate finite
+/// (a point of weight 0 still enters the sums, as +0 terms).
 GroundPlane fitGroundPlane(const double* x, const double* y, const double* z, const double* w0,
                            size_t n, double x0, double y0, double c_up, double c_down,
                            int iterations);
