@@ -8,8 +8,13 @@
 #include <cmath>
 #include <limits>
 
+#include "dtif/core/extraction/avx2.h"
 #include "dtif/core/extraction/extraction_stages.h"
 #include "dtif/core/robust.h"
+
+#if DTIF_AVX2_PATHS
+#include <immintrin.h>
+#endif
 
 namespace dtif {
 namespace {
@@ -382,42 +387,21 @@ GroundMapCells cellGeometry(const GroundMapCells& mc) {
   return g;
 }
 
-// heightsAndSlab, and with kMapCells each point added to *map_cells.
-template <bool kMapCells>
-void heightsSlabPass(const LocalPoints& pts, const GroundGrid& grid, const TrunkExtractorParams& p,
-                     std::vector<float>* out, std::vector<uint32_t>* slab,
-                     GroundMapCells* map_cells) {
-  std::vector<float>& h = *out;
-  const size_t n = pts.size();
-  const std::vector<Centred> cells = centredPlanes(grid);
-  h.resize(n);
-  const PointCell cell_of(grid);
-  const float *X = pts.x.data(), *Y = pts.y.data(), *Z = pts.z.data();
-  float* H = h.data();
-  // Branch-free, as slabColumns selects: about a quarter of the points are in the slab, in no
-  // predictable pattern.
-  slab->resize(n);
-  uint32_t* S = slab->data();
+// What heightsSlabPass carries from point to point: the slab's count and the map cells' run of
+// points in one cell (consecutive returns mostly are), whose lowest point and count stay in
+// registers instead of a read-modify-write of the cell per point.
+struct SlabRun {
   size_t ns = 0;
-  const double lo = p.slab_min_h_m, hi = p.slab_max_h_m;
-  // The map cells' lowest point and count per run of points in one cell (consecutive returns
-  // mostly are): in registers, not a read-modify-write of the cell per point. A copy of the
-  // cells' geometry in locals: through the pointer, each store to a cell would make the
-  // compiler reload it and the point arrays.
-  const GroundMapCells geometry = kMapCells ? cellGeometry(*map_cells) : GroundMapCells();
   size_t run = GroundMapCells::npos;
   float run_low = std::numeric_limits<float>::infinity();
   uint32_t run_hits = 0;
-  for (size_t i = 0; i < n; ++i) {
-    prefetchAhead(X, i, n), prefetchAhead(Y, i, n), prefetchAhead(Z, i, n);
-    const float x = X[i], y = Y[i], z = Z[i];
-    const Centred& cc = cells[cell_of(x, y)];
-    const float hv = static_cast<float>(z - cc.pl.at(x - cc.x0, y - cc.y0));
-    H[i] = hv;
+
+  // Point i of height class `in_slab`, and with kMapCells its map cell k and local z.
+  template <bool kMapCells>
+  void add(uint32_t* S, size_t i, bool in_slab, size_t k, float z, GroundMapCells* map_cells) {
     S[ns] = static_cast<uint32_t>(i);
-    ns += static_cast<size_t>((hv >= lo) & (hv < hi));
+    ns += static_cast<size_t>(in_slab);
     if (kMapCells) {
-      const size_t k = geometry.cellOf(x, y);
       if (k != run) {
         map_cells->addRun(run, run_low, run_hits);
         run = k, run_low = z, run_hits = 0;
@@ -426,8 +410,198 @@ void heightsSlabPass(const LocalPoints& pts, const GroundGrid& grid, const Trunk
       ++run_hits;
     }
   }
-  if (kMapCells) map_cells->addRun(run, run_low, run_hits);
-  slab->resize(ns);
+};
+
+#if DTIF_AVX2_PATHS
+// Divisor d of four lanes: x * (1 / d) or x / d, as d computes it.
+struct DivisorLanes {
+  DTIF_TARGET_AVX2 explicit DivisorLanes(const Divisor& d)
+      : mul(d.multiplies()), f(_mm256_set1_pd(d.factor())) {}
+  DTIF_TARGET_AVX2 __m256d operator()(__m256d x) const {
+    return mul ? _mm256_mul_pd(x, f) : _mm256_div_pd(x, f);
+  }
+  bool mul;
+  __m256d f;
+};
+
+// PointCell of four points, and their cells' centres as GroundGrid::cellCentre computes them
+// (c % nx is the column: the column is clamped to [0, nx - 1]).
+struct GroundCellLanes {
+  DTIF_TARGET_AVX2 explicit GroundCellLanes(const GroundGrid& g)
+      : x0(_mm256_set1_pd(g.minx)),
+        y0(_mm256_set1_pd(g.miny)),
+        by_g(Divisor(g.cell_m)),
+        cell(_mm256_set1_pd(g.cell_m)),
+        nx1(_mm_set1_epi32(g.nx - 1)),
+        ny1(_mm_set1_epi32(g.ny - 1)),
+        nx(_mm_set1_epi32(g.nx)) {}
+  DTIF_TARGET_AVX2 __m128i operator()(__m256d x, __m256d y, __m256d* cx, __m256d* cy) const {
+    const __m128i gx = _mm_min_epi32(_mm256_cvttpd_epi32(by_g(_mm256_sub_pd(x, x0))), nx1);
+    const __m128i gy = _mm_min_epi32(_mm256_cvttpd_epi32(by_g(_mm256_sub_pd(y, y0))), ny1);
+    const __m256d half = _mm256_set1_pd(0.5);
+    *cx = _mm256_add_pd(x0, _mm256_mul_pd(_mm256_add_pd(_mm256_cvtepi32_pd(gx), half), cell));
+    *cy = _mm256_add_pd(y0, _mm256_mul_pd(_mm256_add_pd(_mm256_cvtepi32_pd(gy), half), cell));
+    return _mm_add_epi32(_mm_mullo_epi32(gy, nx), gx);
+  }
+  __m256d x0, y0;
+  DivisorLanes by_g;
+  __m256d cell;
+  __m128i nx1, ny1, nx;
+};
+
+// GroundMapCells::cellOf of four points, -1 for npos. In double: the floors and the corner are
+// whole numbers far below 2^53, so their differences and the index are exact.
+struct MapCellLanes {
+  DTIF_TARGET_AVX2 explicit MapCellLanes(const GroundMapCells& m)
+      : ox(_mm256_set1_pd(m.ox)),
+        oy(_mm256_set1_pd(m.oy)),
+        by_cell(m.byCell()),
+        x0(_mm256_set1_pd(static_cast<double>(m.x0))),
+        y0(_mm256_set1_pd(static_cast<double>(m.y0))),
+        w(_mm256_set1_pd(static_cast<double>(m.width))),
+        h(_mm256_set1_pd(static_cast<double>(m.height))) {}
+  DTIF_TARGET_AVX2 __m128i operator()(__m256d x, __m256d y) const {
+    const __m256d ix = _mm256_sub_pd(_mm256_floor_pd(by_cell(_mm256_add_pd(x, ox))), x0);
+    const __m256d iy = _mm256_sub_pd(_mm256_floor_pd(by_cell(_mm256_add_pd(y, oy))), y0);
+    const __m256d zero = _mm256_setzero_pd();
+    const __m256d in = _mm256_and_pd(
+        _mm256_and_pd(_mm256_cmp_pd(ix, zero, _CMP_GE_OQ), _mm256_cmp_pd(ix, w, _CMP_LT_OQ)),
+        _mm256_and_pd(_mm256_cmp_pd(iy, zero, _CMP_GE_OQ), _mm256_cmp_pd(iy, h, _CMP_LT_OQ)));
+    const __m256d k = _mm256_add_pd(_mm256_mul_pd(iy, w), ix);
+    return _mm256_cvttpd_epi32(_mm256_blendv_pd(_mm256_set1_pd(-1.0), k, in));
+  }
+  __m256d ox, oy;
+  DivisorLanes by_cell;
+  __m256d x0, y0, w, h;
+};
+
+static_assert(sizeof(GroundPlane) == 3 * sizeof(double), "planes are gathered as doubles");
+
+// heightsSlabPass four points at a time: the cells, centres, planes and heights in lanes, the
+// same IEEE operations per point as heightsSlabScalar (no fused multiply-add); the slab and the
+// runs lane by lane.
+struct HeightsAvx2 {
+  DTIF_TARGET_AVX2 HeightsAvx2(const GroundGrid& g, const GroundMapCells& geometry, double lo,
+                               double hi)
+      : cell_of(g),
+        map_of(geometry),
+        plane(&g.plane.data()->a),
+        lo(_mm256_set1_pd(lo)),
+        hi(_mm256_set1_pd(hi)) {}
+  // Points i.. (count of them, <= 4) of X, Y, Z from x, y, z (four readable each).
+  template <bool kMapCells>
+  DTIF_TARGET_AVX2 void block(const float* x, const float* y, const float* z, size_t i, int count,
+                              float* H, uint32_t* S, SlabRun* run, GroundMapCells* mc) const {
+    const __m128 zf = _mm_loadu_ps(z);
+    const __m256d vx = _mm256_cvtps_pd(_mm_loadu_ps(x)), vy = _mm256_cvtps_pd(_mm_loadu_ps(y));
+    __m256d cx, cy;
+    const __m128i c = cell_of(vx, vy, &cx, &cy);
+    const __m128i c3 = _mm_add_epi32(c, _mm_add_epi32(c, c));
+    const __m256d a = gather(plane, c3), b = gather(plane + 1, c3), s = gather(plane + 2, c3);
+    // pl.at(x - x0, y - y0) = (a + b (x - x0)) + s (y - y0); h rounded to float, as stored.
+    const __m256d at = _mm256_add_pd(_mm256_add_pd(a, _mm256_mul_pd(b, _mm256_sub_pd(vx, cx))),
+                                     _mm256_mul_pd(s, _mm256_sub_pd(vy, cy)));
+    alignas(16) float hv[4], zv[4];
+    const __m128 h = _mm256_cvtpd_ps(_mm256_sub_pd(_mm256_cvtps_pd(zf), at));
+    _mm_store_ps(hv, h), _mm_store_ps(zv, zf);
+    const __m256d hd = _mm256_cvtps_pd(h);
+    const int slab = _mm256_movemask_pd(
+        _mm256_and_pd(_mm256_cmp_pd(hd, lo, _CMP_GE_OQ), _mm256_cmp_pd(hd, hi, _CMP_LT_OQ)));
+    alignas(16) int32_t k[4] = {0, 0, 0, 0};
+    if (kMapCells) _mm_store_si128(reinterpret_cast<__m128i*>(k), map_of(vx, vy));
+    for (int j = 0; j < count; ++j) {
+      H[i + j] = hv[j];
+      const size_t kj = k[j] < 0 ? GroundMapCells::npos : static_cast<size_t>(k[j]);
+      run->add<kMapCells>(S, i + j, (slab >> j) & 1, kj, zv[j], mc);
+    }
+  }
+  // v[index] of four lanes. The masked form: GCC 12 warns of the unmasked one's undefined source.
+  DTIF_TARGET_AVX2 static __m256d gather(const double* v, __m128i index) {
+    const __m256d all = _mm256_castsi256_pd(_mm256_set1_epi64x(-1));
+    return _mm256_mask_i32gather_pd(_mm256_setzero_pd(), v, index, all, 8);
+  }
+  GroundCellLanes cell_of;
+  MapCellLanes map_of;
+  const double* plane;  // a, b, c of each cell
+  __m256d lo, hi;
+};
+
+// heightsSlabPass's points, all of them: the last few through a padded copy (the last point
+// repeated, so every lane has a cell). Returns the count of points done.
+template <bool kMapCells>
+DTIF_TARGET_AVX2 size_t heightsSlabAvx2(const LocalPoints& pts, const GroundGrid& grid, double lo,
+                                        double hi, float* H, uint32_t* S, SlabRun* r,
+                                        GroundMapCells* map_cells) {
+  const size_t n = pts.size();
+  const float *X = pts.x.data(), *Y = pts.y.data(), *Z = pts.z.data();
+  const GroundMapCells geometry = kMapCells ? cellGeometry(*map_cells) : GroundMapCells();
+  const HeightsAvx2 lanes(grid, geometry, lo, hi);
+  SlabRun run = *r;
+  size_t i = 0;
+  for (; i + 4 <= n; i += 4) {
+    prefetchAhead(X, i, n), prefetchAhead(Y, i, n), prefetchAhead(Z, i, n);
+    lanes.block<kMapCells>(X + i, Y + i, Z + i, i, 4, H, S, &run, map_cells);
+  }
+  if (i < n) {
+    float x[4], y[4], z[4];
+    for (size_t j = 0; j < 4; ++j) {
+      const size_t k = std::min(i + j, n - 1);
+      x[j] = X[k], y[j] = Y[k], z[j] = Z[k];
+    }
+    lanes.block<kMapCells>(x, y, z, i, static_cast<int>(n - i), H, S, &run, map_cells);
+  }
+  *r = run;
+  return n;
+}
+#endif
+
+// heightsSlabPass over the points from..n-1, one at a time.
+template <bool kMapCells>
+void heightsSlabScalar(const LocalPoints& pts, const GroundGrid& grid,
+                       const std::vector<Centred>& cells, double lo, double hi, size_t from,
+                       float* H, uint32_t* S, SlabRun* r, GroundMapCells* map_cells) {
+  const size_t n = pts.size();
+  const PointCell cell_of(grid);
+  const float *X = pts.x.data(), *Y = pts.y.data(), *Z = pts.z.data();
+  // A copy of the cells' geometry in locals: through the pointer, each store to a cell would
+  // make the compiler reload it and the point arrays.
+  const GroundMapCells geometry = kMapCells ? cellGeometry(*map_cells) : GroundMapCells();
+  SlabRun run = *r;
+  for (size_t i = from; i < n; ++i) {
+    prefetchAhead(X, i, n), prefetchAhead(Y, i, n), prefetchAhead(Z, i, n);
+    const float x = X[i], y = Y[i], z = Z[i];
+    const Centred& cc = cells[cell_of(x, y)];
+    const float hv = static_cast<float>(z - cc.pl.at(x - cc.x0, y - cc.y0));
+    H[i] = hv;
+    // Branch-free, as slabColumns selects: about a quarter of the points are in the slab, in no
+    // predictable pattern.
+    const size_t k = kMapCells ? geometry.cellOf(x, y) : 0;
+    run.add<kMapCells>(S, i, (hv >= lo) & (hv < hi), k, z, map_cells);
+  }
+  *r = run;
+}
+
+// heightsAndSlab, and with kMapCells each point added to *map_cells.
+template <bool kMapCells>
+void heightsSlabPass(const LocalPoints& pts, const GroundGrid& grid, const TrunkExtractorParams& p,
+                     std::vector<float>* out, std::vector<uint32_t>* slab,
+                     GroundMapCells* map_cells) {
+  const size_t n = pts.size();
+  out->resize(n);
+  slab->resize(n);
+  SlabRun run;
+  size_t from = 0;
+#if DTIF_AVX2_PATHS
+  if (useAvx2()) {
+    from = heightsSlabAvx2<kMapCells>(pts, grid, p.slab_min_h_m, p.slab_max_h_m, out->data(),
+                                      slab->data(), &run, map_cells);
+  }
+#endif
+  const std::vector<Centred> cells = from < n ? centredPlanes(grid) : std::vector<Centred>();
+  heightsSlabScalar<kMapCells>(pts, grid, cells, p.slab_min_h_m, p.slab_max_h_m, from, out->data(),
+                               slab->data(), &run, map_cells);
+  if (kMapCells) map_cells->addRun(run.run, run.run_low, run.run_hits);
+  slab->resize(run.ns);
 }
 
 }  // namespace

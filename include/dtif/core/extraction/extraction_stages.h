@@ -45,6 +45,9 @@ class Divisor {
     inv_ = pow2_ ? 1.0 / d : 0.0;
   }
   double operator()(double x) const { return pow2_ ? x * inv_ : x / d_; }
+  /// Whether operator() multiplies (by factor()) rather than divides (by factor()).
+  bool multiplies() const { return pow2_; }
+  double factor() const { return pow2_ ? inv_ : d_; }
 
  private:
   double d_, inv_;
@@ -225,6 +228,8 @@ struct GroundMapCells {
     hits[k] += count;
   }
   static constexpr size_t npos = ~size_t{0};
+  /// x / cell_m as cellOf computes it.
+  const Divisor& byCell() const { return by_cell_; }
   /// The cell size, origin and extent of `other`, not its cells (cellOf works on those alone).
   void copyGeometry(const GroundMapCells& other) {
     cell_m = other.cell_m, ox = other.ox, oy = other.oy, oz = other.oz;
