@@ -95,5 +95,25 @@ TEST(Avx2Paths, HeightsAndSlabGiveTheBaselineBits) {
   }
 }
 
+// binGroundGrid with and without AVX2: the same counts and the same points in the same order.
+TEST(Avx2Paths, GroundGridBinsGiveTheBaselineBits) {
+  if (!useAvx2()) GTEST_SKIP() << "no AVX2 on this CPU";
+  TrunkExtractorParams p;
+  for (double cell : {1.0, 0.7}) {
+    p.ground_cell_m = cell;
+    for (size_t n : {1, 7, 8, 9, 16, 23, 1000, 20003}) {
+      SCOPED_TRACE(testing::Message() << "cell " << cell << " n " << n);
+      const LocalPoints pts = adversarialPoints(n, static_cast<uint32_t>(n + 7), 0.0);
+      GroundGrid grid[2];
+      bothForms([&](bool avx2) { binGroundGrid(pts, p, &grid[avx2]); });
+      EXPECT_EQ(grid[0].start, grid[1].start);
+      ASSERT_EQ(grid[0].sorted.size(), grid[1].sorted.size());
+      EXPECT_EQ(std::memcmp(grid[0].sorted.data(), grid[1].sorted.data(),
+                            grid[0].sorted.size() * sizeof(GroundGrid::SortedPoint)),
+                0);
+    }
+  }
+}
+
 }  // namespace
 }  // namespace dtif

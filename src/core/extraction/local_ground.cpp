@@ -140,6 +140,116 @@ class PointCell {
   int nx_, ny_;
 };
 
+#if DTIF_AVX2_PATHS
+// Divisor d of four lanes: x * (1 / d) or x / d, as d computes it.
+struct DivisorLanes {
+  DTIF_TARGET_AVX2 explicit DivisorLanes(const Divisor& d)
+      : mul(d.multiplies()), f(_mm256_set1_pd(d.factor())) {}
+  DTIF_TARGET_AVX2 __m256d operator()(__m256d x) const {
+    return mul ? _mm256_mul_pd(x, f) : _mm256_div_pd(x, f);
+  }
+  bool mul;
+  __m256d f;
+};
+
+// PointCell of four points, and their cells' centres as GroundGrid::cellCentre computes them
+// (c % nx is the column: the column is clamped to [0, nx - 1]).
+struct GroundCellLanes {
+  DTIF_TARGET_AVX2 explicit GroundCellLanes(const GroundGrid& g)
+      : x0(_mm256_set1_pd(g.minx)),
+        y0(_mm256_set1_pd(g.miny)),
+        by_g(Divisor(g.cell_m)),
+        cell(_mm256_set1_pd(g.cell_m)),
+        nx1(_mm_set1_epi32(g.nx - 1)),
+        ny1(_mm_set1_epi32(g.ny - 1)),
+        nx(_mm_set1_epi32(g.nx)) {}
+  DTIF_TARGET_AVX2 __m128i operator()(__m256d x, __m256d y, __m256d* cx, __m256d* cy) const {
+    const __m128i gx = column(x, x0, nx1), gy = column(y, y0, ny1);
+    const __m256d half = _mm256_set1_pd(0.5);
+    *cx = _mm256_add_pd(x0, _mm256_mul_pd(_mm256_add_pd(_mm256_cvtepi32_pd(gx), half), cell));
+    *cy = _mm256_add_pd(y0, _mm256_mul_pd(_mm256_add_pd(_mm256_cvtepi32_pd(gy), half), cell));
+    return _mm_add_epi32(_mm_mullo_epi32(gy, nx), gx);
+  }
+  // The cells of the eight points (x, y)[0..7].
+  DTIF_TARGET_AVX2 __m256i eight(const float* x, const float* y) const {
+    return _mm256_setr_m128i(four(_mm_loadu_ps(x), _mm_loadu_ps(y)),
+                             four(_mm_loadu_ps(x + 4), _mm_loadu_ps(y + 4)));
+  }
+  // The cells of four points.
+  DTIF_TARGET_AVX2 __m128i four(__m128 x, __m128 y) const {
+    const __m128i gx = column(_mm256_cvtps_pd(x), x0, nx1);
+    return _mm_add_epi32(_mm_mullo_epi32(column(_mm256_cvtps_pd(y), y0, ny1), nx), gx);
+  }
+  // PointCell's column (or row) of coordinates v from corner v0, at most last.
+  DTIF_TARGET_AVX2 __m128i column(__m256d v, __m256d v0, __m128i last) const {
+    return _mm_min_epi32(_mm256_cvttpd_epi32(by_g(_mm256_sub_pd(v, v0))), last);
+  }
+  __m256d x0, y0;
+  DivisorLanes by_g;
+  __m256d cell;
+  __m128i nx1, ny1, nx;
+};
+
+// binGroundGrid's counts per cell (into count) of the points 0.. eight at a time: a run of points
+// in one cell (neighbours on a scan line mostly are) is counted in a register, not by an
+// increment of the cell per point, whose chain through memory bounded the pass. Returns the
+// count of points done (the rest: fewer than eight).
+DTIF_TARGET_AVX2 size_t binCountAvx2(const LocalPoints& pts, const GroundGrid& grid,
+                                     uint32_t* count) {
+  const size_t n = pts.size();
+  const float *X = pts.x.data(), *Y = pts.y.data();
+  const GroundCellLanes cells(grid);
+  uint32_t run = 0, hits = 0;
+  size_t i = 0;
+  for (; i + 8 <= n; i += 8) {
+    prefetchAhead(X, i, n), prefetchAhead(Y, i, n);
+    const __m256i c = cells.eight(X + i, Y + i);
+    const __m256i same = _mm256_cmpeq_epi32(c, _mm256_set1_epi32(static_cast<int32_t>(run)));
+    if (_mm256_movemask_epi8(same) == -1) {
+      hits += 8;
+      continue;
+    }
+    alignas(32) uint32_t k[8];
+    _mm256_store_si256(reinterpret_cast<__m256i*>(k), c);
+    for (int j = 0; j < 8; ++j) {
+      if (k[j] != run) count[run] += hits, run = k[j], hits = 0;
+      ++hits;
+    }
+  }
+  count[run] += hits;
+  return i;
+}
+
+// binGroundGrid's placing of the points 0.. by their cells' next places (fill), eight at a
+// time: within a run of one cell the place is a register (see binCountAvx2). Returns the count
+// of points done.
+DTIF_TARGET_AVX2 size_t binFillAvx2(const LocalPoints& pts, const GroundGrid& grid, uint32_t* fill,
+                                    GroundGrid::SortedPoint* out) {
+  const size_t n = pts.size();
+  const float *X = pts.x.data(), *Y = pts.y.data(), *Z = pts.z.data();
+  const GroundCellLanes cells(grid);
+  uint32_t run = 0, at = fill[0];
+  size_t i = 0;
+  for (; i + 8 <= n; i += 8) {
+    prefetchAhead(X, i, n), prefetchAhead(Y, i, n), prefetchAhead(Z, i, n);
+    const __m256i c = cells.eight(X + i, Y + i);
+    const __m256i same = _mm256_cmpeq_epi32(c, _mm256_set1_epi32(static_cast<int32_t>(run)));
+    if (_mm256_movemask_epi8(same) == -1) {
+      for (size_t j = i; j < i + 8; ++j) out[at++] = {X[j], Y[j], Z[j]};
+      continue;
+    }
+    alignas(32) uint32_t k[8];
+    _mm256_store_si256(reinterpret_cast<__m256i*>(k), c);
+    for (size_t j = 0; j < 8; ++j) {
+      if (k[j] != run) fill[run] = at, run = k[j], at = fill[run];
+      out[at++] = {X[i + j], Y[i + j], Z[i + j]};
+    }
+  }
+  fill[run] = at;
+  return i;
+}
+#endif
+
 }  // namespace
 
 LocalPoints toLocalPoints(const Cloud& cloud) {
@@ -238,7 +348,12 @@ void binGroundGrid(const LocalPoints& pts, const TrunkExtractorParams& p, Ground
   const PointCell cell_of(grid);
   // Raw pointers: through the members the compiler reloads them at every point.
   uint32_t* count = grid.start.data() + 1;
-  for (size_t i = 0; i < n; ++i) {
+  size_t done = 0;
+#if DTIF_AVX2_PATHS
+  const bool avx2 = useAvx2();
+  if (avx2) done = binCountAvx2(pts, grid, count);
+#endif
+  for (size_t i = done; i < n; ++i) {
     prefetchAhead(X, i, n), prefetchAhead(Y, i, n);
     ++count[cell_of(X[i], Y[i])];
   }
@@ -247,7 +362,10 @@ void binGroundGrid(const LocalPoints& pts, const TrunkExtractorParams& p, Ground
   grid.sorted.resize(n);
   GroundGrid::SortedPoint* out_pts = grid.sorted.data();
   const float* Z = pts.z.data();
-  for (size_t i = 0; i < n; ++i) {
+#if DTIF_AVX2_PATHS
+  if (avx2) done = binFillAvx2(pts, grid, fill.data(), out_pts);
+#endif
+  for (size_t i = done; i < n; ++i) {
     prefetchAhead(X, i, n), prefetchAhead(Y, i, n), prefetchAhead(Z, i, n);
     out_pts[fill[cell_of(X[i], Y[i])]++] = {X[i], Y[i], Z[i]};
   }
@@ -413,42 +531,6 @@ struct SlabRun {
 };
 
 #if DTIF_AVX2_PATHS
-// Divisor d of four lanes: x * (1 / d) or x / d, as d computes it.
-struct DivisorLanes {
-  DTIF_TARGET_AVX2 explicit DivisorLanes(const Divisor& d)
-      : mul(d.multiplies()), f(_mm256_set1_pd(d.factor())) {}
-  DTIF_TARGET_AVX2 __m256d operator()(__m256d x) const {
-    return mul ? _mm256_mul_pd(x, f) : _mm256_div_pd(x, f);
-  }
-  bool mul;
-  __m256d f;
-};
-
-// PointCell of four points, and their cells' centres as GroundGrid::cellCentre computes them
-// (c % nx is the column: the column is clamped to [0, nx - 1]).
-struct GroundCellLanes {
-  DTIF_TARGET_AVX2 explicit GroundCellLanes(const GroundGrid& g)
-      : x0(_mm256_set1_pd(g.minx)),
-        y0(_mm256_set1_pd(g.miny)),
-        by_g(Divisor(g.cell_m)),
-        cell(_mm256_set1_pd(g.cell_m)),
-        nx1(_mm_set1_epi32(g.nx - 1)),
-        ny1(_mm_set1_epi32(g.ny - 1)),
-        nx(_mm_set1_epi32(g.nx)) {}
-  DTIF_TARGET_AVX2 __m128i operator()(__m256d x, __m256d y, __m256d* cx, __m256d* cy) const {
-    const __m128i gx = _mm_min_epi32(_mm256_cvttpd_epi32(by_g(_mm256_sub_pd(x, x0))), nx1);
-    const __m128i gy = _mm_min_epi32(_mm256_cvttpd_epi32(by_g(_mm256_sub_pd(y, y0))), ny1);
-    const __m256d half = _mm256_set1_pd(0.5);
-    *cx = _mm256_add_pd(x0, _mm256_mul_pd(_mm256_add_pd(_mm256_cvtepi32_pd(gx), half), cell));
-    *cy = _mm256_add_pd(y0, _mm256_mul_pd(_mm256_add_pd(_mm256_cvtepi32_pd(gy), half), cell));
-    return _mm_add_epi32(_mm_mullo_epi32(gy, nx), gx);
-  }
-  __m256d x0, y0;
-  DivisorLanes by_g;
-  __m256d cell;
-  __m128i nx1, ny1, nx;
-};
-
 // GroundMapCells::cellOf of four points, -1 for npos. In double: the floors and the corner are
 // whole numbers far below 2^53, so their differences and the index are exact.
 struct MapCellLanes {
