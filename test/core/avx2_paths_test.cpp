@@ -115,5 +115,154 @@ TEST(Avx2Paths, GroundGridBinsGiveTheBaselineBits) {
   }
 }
 
+// A small plot in S: sloped ground, stems, and shrubs, every fifth point on a whole metre (the
+// footprint's tiles and cells, the floors' edges), offset to (off_x, off_y); non-finite points
+// at the given places; size points in all.
+Cloud plotCloud(size_t size, double off_x, double off_y, const std::vector<size_t>& bad) {
+  std::mt19937 rng(static_cast<uint32_t>(size));
+  std::uniform_real_distribution<double> u(-8.0, 8.0), uh(0.0, 5.0), ua(0.0, 6.2832);
+  std::uniform_int_distribution<int> kind(0, 9);
+  const double stems[][3] = {
+      {-3.0, 2.0, 0.2}, {2.5, -1.5, 0.3}, {4.0, 4.0, 0.15}, {-5.0, -5.0, 0.25}};
+  Cloud cloud;
+  for (size_t i = 0; i < size; ++i) {
+    double x = u(rng), y = u(rng), h = 0.01 * u(rng);
+    const int k = kind(rng);
+    if (k < 4) {  // bark
+      const double a = ua(rng);
+      x = stems[k][0] + stems[k][2] * std::cos(a), y = stems[k][1] + stems[k][2] * std::sin(a);
+      h = uh(rng);
+    } else if (k == 4) {
+      x = std::round(x), y = std::round(y), h = std::round(uh(rng) * 4.0) / 4.0;
+    } else if (k == 5) {
+      h = uh(rng) * 0.5;  // shrubs
+    }
+    const double z = 0.2 * x - 0.1 * y + h;
+    cloud.push_back(pcl::PointXYZ(static_cast<float>(x + off_x), static_cast<float>(y + off_y),
+                                  static_cast<float>(z)));
+  }
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float inf = std::numeric_limits<float>::infinity();
+  for (size_t j = 0; j < bad.size(); ++j) {
+    if (bad[j] >= cloud.size()) continue;
+    pcl::PointXYZ& q = cloud[bad[j]];
+    (j % 3 == 0 ? q.x : j % 3 == 1 ? q.y : q.z) = j % 2 ? nan : -inf;
+  }
+  return cloud;
+}
+
+// Trunks and ground map cells found (the comparison covered something).
+size_t expectSameExtraction(const Cloud& cloud, const TrunkExtractorParams& p) {
+  TrunkExtractionResult r[2];
+  bothForms([&](bool avx2) { r[avx2] = extractTrunks(cloud, p, nullptr); });
+  EXPECT_EQ(r[0].trunks.size(), r[1].trunks.size());
+  if (r[0].trunks.size() != r[1].trunks.size()) return 0;
+  for (size_t t = 0; t < r[0].trunks.size(); ++t) {
+    const TrunkLandmark &a = r[0].trunks[t], &b = r[1].trunks[t];
+    const double va[] = {a.x, a.y, a.z, a.r}, vb[] = {b.x, b.y, b.z, b.r};
+    EXPECT_EQ(std::memcmp(va, vb, sizeof(va)), 0) << "trunk " << t;
+    EXPECT_EQ(a.base_seen, b.base_seen) << "trunk " << t;
+  }
+  EXPECT_EQ(r[0].footprint.cell_m, r[1].footprint.cell_m);
+  EXPECT_EQ(r[0].footprint.x0, r[1].footprint.x0);
+  EXPECT_EQ(r[0].footprint.y0, r[1].footprint.y0);
+  EXPECT_EQ(r[0].footprint.width, r[1].footprint.width);
+  EXPECT_EQ(r[0].footprint.bits, r[1].footprint.bits);
+  EXPECT_EQ(encodeGroundMap(r[0].ground_map), encodeGroundMap(r[1].ground_map));
+  EXPECT_EQ(r[0].stats.finite_points, r[1].stats.finite_points);
+  EXPECT_EQ(r[0].stats.candidate_columns, r[1].stats.candidate_columns);
+  EXPECT_EQ(r[0].stats.candidates, r[1].stats.candidates);
+  return r[1].trunks.size() + r[1].ground_map.count();
+}
+
+// firstPass (local points, extent, footprint marks) with and without AVX2, on clouds with
+// non-finite and absurd points in and out of eight-point blocks: the same bits.
+// Returns the cells marked (the comparison covered something).
+size_t expectSameFirstPass(const Cloud& cloud, double cell_m, double range_m) {
+  const PointBounds b = pointBounds(cloud, range_m);
+  std::vector<float> sx, sy, sz;
+  for (size_t i = 0; i < cloud.size(); i += 7) {
+    const pcl::PointXYZ& q = cloud[i];
+    if (std::isfinite(q.x) && std::isfinite(q.y) && std::isfinite(q.z))
+      sx.push_back(q.x), sy.push_back(q.y), sz.push_back(q.z);
+  }
+  const Eigen::Vector2d half = Eigen::Vector2d::Constant(b.half_side_m);
+  LocalPoints pts[2];
+  HeightCellMarks marks[2];
+  bool ok[2], marked[2];
+  size_t finite[2];
+  bothForms([&](bool avx2) {
+    marked[avx2] =
+        marks[avx2].init(sx, sy, sz, cell_m, b.centre.head<2>() - half, b.centre.head<2>() + half);
+    ok[avx2] =
+        firstPass(cloud, b, &pts[avx2], marked[avx2] ? &marks[avx2] : nullptr, &finite[avx2]);
+  });
+  EXPECT_EQ(ok[0], ok[1]);
+  EXPECT_TRUE(ok[0]);
+  if (!ok[0] || !ok[1]) return 0;
+  EXPECT_EQ(finite[0], finite[1]);
+  EXPECT_TRUE(sameBits(pts[0].x, pts[1].x));
+  EXPECT_TRUE(sameBits(pts[0].y, pts[1].y));
+  EXPECT_TRUE(sameBits(pts[0].z, pts[1].z));
+  EXPECT_EQ(pts[0].ox, pts[1].ox);
+  EXPECT_EQ(pts[0].oy, pts[1].oy);
+  EXPECT_EQ(pts[0].oz, pts[1].oz);
+  // The extent's values (the lanes' minima may pick another sign of a zero, as SSE2's do).
+  EXPECT_EQ(pts[0].minx, pts[1].minx);
+  EXPECT_EQ(pts[0].maxx, pts[1].maxx);
+  EXPECT_EQ(pts[0].miny, pts[1].miny);
+  EXPECT_EQ(pts[0].maxy, pts[1].maxy);
+  EXPECT_EQ(marked[0], marked[1]);
+  if (!marked[0] || !marked[1]) return 0;
+  EXPECT_EQ(marks[0].complete(), marks[1].complete());
+  EXPECT_EQ(marks[0].cells(), marks[1].cells());
+  return marks[1].cells().size();
+}
+
+TEST(Avx2Paths, FirstPassGivesTheBaselineBits) {
+  if (!useAvx2()) GTEST_SKIP() << "no AVX2 on this CPU";
+  const std::vector<size_t> none, some = {0, 5, 8, 13, 100, 101, 102, 103, 777, 4095};
+  size_t marked = 0;
+  for (size_t size : {1, 7, 8, 9, 15, 16, 17, 4000, 30001}) {
+    for (double cell : {1.0, 2.0, 0.75}) {
+      for (const auto* bad : {&none, &some}) {
+        SCOPED_TRACE(testing::Message()
+                     << "size " << size << " cell " << cell << " bad " << bad->size());
+        Cloud cloud = plotCloud(size, -7.0, 3.0, *bad);
+        marked += expectSameFirstPass(cloud, cell, 200.0);
+        // An absurd point (|z| > 1e8 m) inside the bounds: no local point (and no marks: the
+        // box is too far out for them).
+        cloud[size / 2].z = 2e8f;
+        expectSameFirstPass(cloud, cell, 3e8);
+      }
+    }
+  }
+  EXPECT_GT(marked, 1000u);
+}
+
+// The whole extraction with and without AVX2 (the first pass eight points at a time and the
+// footprint's marks, the ground grid, the heights): the same trunks, footprint and ground map,
+// bit for bit, with non-finite points anywhere and sizes that are no multiple of eight.
+TEST(Avx2Paths, ExtractionGivesTheBaselineBits) {
+  if (!useAvx2()) GTEST_SKIP() << "no AVX2 on this CPU";
+  TrunkExtractorParams p;
+  p.ground_map_below_seen = 1.01;  // a ground map whenever there are trunks
+  const std::vector<size_t> none, some = {0, 5, 8, 13, 100, 101, 102, 103, 777, 4095};
+  size_t found = 0;
+  for (size_t size : {3, 9, 17, 4000, 30001, 60008}) {
+    for (const auto& off :
+         {std::make_pair(0.0, 0.0), std::make_pair(-7.0, 3.0), std::make_pair(1234.0, -5678.0)}) {
+      for (const auto* bad : {&none, &some}) {
+        SCOPED_TRACE(testing::Message()
+                     << "size " << size << " off " << off.first << " bad " << bad->size());
+        found += expectSameExtraction(plotCloud(size, off.first, off.second, *bad), p);
+      }
+    }
+  }
+  p.footprint_cell_m = 0.75;  // footprint cells not of 2^k m: add8 lane by lane
+  found += expectSameExtraction(plotCloud(30001, -7.0, 3.0, none), p);
+  EXPECT_GT(found, 1000u);
+}
+
 }  // namespace
 }  // namespace dtif
