@@ -241,8 +241,9 @@ TEST(Avx2Paths, FirstPassGivesTheBaselineBits) {
 }
 
 // The whole extraction with and without AVX2 (the first pass eight points at a time and the
-// footprint's marks, the ground grid, the heights): the same trunks, footprint and ground map,
-// bit for bit, with non-finite points anywhere and sizes that are no multiple of eight.
+// footprint's marks, the ground grid, the heights, the stem bases' rings): the same trunks,
+// footprint and ground map, bit for bit, with non-finite points anywhere and sizes that are no
+// multiple of eight.
 TEST(Avx2Paths, ExtractionGivesTheBaselineBits) {
   if (!useAvx2()) GTEST_SKIP() << "no AVX2 on this CPU";
   TrunkExtractorParams p;

@@ -208,6 +208,7 @@ struct RingTests {
   double cx, cy, r_stem2, r_in2, r_out2, max_dh;
   GroundPlane pl;
   double x0, y0;
+  bool avx2;  // useAvx2()
 };
 
 // Point k written at every point as a ring point and as a ground point, kept by the counts.
@@ -271,6 +272,86 @@ uint32_t gatherPairs(const GroundGrid::SortedPoint* sorted, size_t ns, uint32_t 
   return k;
 }
 
+#if DTIF_AVX2_PATHS
+// Four sorted points (lanes of x, y, z, as doubles) from their 48 bytes.
+DTIF_TARGET_AVX2 void quadLanes(const GroundGrid::SortedPoint* q, __m256d* x, __m256d* y,
+                                __m256d* z) {
+  const float* f = &q->x;
+  const __m128 m0 = _mm_loadu_ps(f), m1 = _mm_loadu_ps(f + 4), m2 = _mm_loadu_ps(f + 8);
+  // m0 = x0 y0 z0 x1, m1 = y1 z1 x2 y2, m2 = z2 x3 y3 z3.
+  const __m128 u = _mm_shuffle_ps(m1, m2, _MM_SHUFFLE(1, 1, 2, 2));  // x2 x2 x3 x3
+  const __m128 v = _mm_shuffle_ps(m0, m1, _MM_SHUFFLE(0, 0, 1, 1));  // y0 y0 y1 y1
+  const __m128 w = _mm_shuffle_ps(m1, m2, _MM_SHUFFLE(2, 2, 3, 3));  // y2 y2 y3 y3
+  const __m128 a = _mm_shuffle_ps(m0, m1, _MM_SHUFFLE(1, 1, 2, 2));  // z0 z0 z1 z1
+  *x = _mm256_cvtps_pd(_mm_shuffle_ps(m0, u, _MM_SHUFFLE(2, 0, 3, 0)));
+  *y = _mm256_cvtps_pd(_mm_shuffle_ps(v, w, _MM_SHUFFLE(2, 0, 2, 0)));
+  *z = _mm256_cvtps_pd(_mm_shuffle_ps(a, m2, _MM_SHUFFLE(3, 0, 2, 0)));
+}
+
+// For each mask of four lanes, its set lanes in order (then zeros) and their count.
+struct MaskLanes {
+  alignas(16) int32_t lane[16][4];
+  int count[16];
+};
+constexpr MaskLanes maskLanes() {
+  MaskLanes t{};
+  for (int m = 0; m < 16; ++m) {
+    for (int j = 0; j < 4; ++j) {
+      if ((m >> j) & 1) t.lane[m][t.count[m]++] = j;
+    }
+  }
+  return t;
+}
+constexpr MaskLanes kLanes = maskLanes();
+
+// gatherPairs four points at a time (AVX2; the caller checks useAvx2()): the same IEEE
+// operations per point, the stem's lowest point a minimum per lane as there. Returns the first
+// point not taken.
+DTIF_TARGET_AVX2 uint32_t gatherQuads(const GroundGrid::SortedPoint* sorted, size_t ns, uint32_t k0,
+                                      uint32_t k1, const RingTests& t, RingOut* out) {
+  const __m256d vcx = _mm256_set1_pd(t.cx), vcy = _mm256_set1_pd(t.cy);
+  const __m256d vx0 = _mm256_set1_pd(t.x0), vy0 = _mm256_set1_pd(t.y0);
+  const __m256d va = _mm256_set1_pd(t.pl.a), vb = _mm256_set1_pd(t.pl.b);
+  const __m256d vc = _mm256_set1_pd(t.pl.c), vstem = _mm256_set1_pd(t.r_stem2);
+  const __m256d vin = _mm256_set1_pd(t.r_in2), vout = _mm256_set1_pd(t.r_out2);
+  const __m256d vdh = _mm256_set1_pd(t.max_dh);
+  const __m256d inf = _mm256_set1_pd(std::numeric_limits<double>::infinity());
+  const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
+  __m256d low = inf;
+  uint32_t k = k0;
+  for (; k + 4 <= k1; k += 4) {
+    prefetchAhead(sorted, k, ns);  // the row's next cells
+    __m256d x, y, z;
+    quadLanes(sorted + k, &x, &y, &z);
+    const __m256d dx = _mm256_sub_pd(x, vcx), dy = _mm256_sub_pd(y, vcy);
+    const __m256d d2 = _mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy));
+    low = _mm256_min_pd(_mm256_blendv_pd(inf, z, _mm256_cmp_pd(d2, vstem, _CMP_LT_OQ)), low);
+    const int in_ring = _mm256_movemask_pd(
+        _mm256_and_pd(_mm256_cmp_pd(d2, vin, _CMP_GE_OQ), _mm256_cmp_pd(d2, vout, _CMP_LE_OQ)));
+    // pl.at(x - x0, y - y0) = (a + b (x - x0)) + c (y - y0); h rounded to float, as stored.
+    const __m256d at = _mm256_add_pd(_mm256_add_pd(va, _mm256_mul_pd(vb, _mm256_sub_pd(x, vx0))),
+                                     _mm256_mul_pd(vc, _mm256_sub_pd(y, vy0)));
+    const __m128 h = _mm_and_ps(_mm256_cvtpd_ps(_mm256_sub_pd(z, at)), abs_mask);
+    const int high = _mm256_movemask_pd(_mm256_cmp_pd(_mm256_cvtps_pd(h), vdh, _CMP_GT_OQ));
+    // put() of the four, packed: the lanes kept in order at the counts (room for four: the
+    // arrays have room for every point of the cell).
+    const __m128i kk = _mm_set1_epi32(static_cast<int32_t>(k));
+    const int ground = in_ring & ~high;
+    _mm_storeu_si128(
+        reinterpret_cast<__m128i*>(out->ring + out->over),
+        _mm_add_epi32(kk, _mm_load_si128(reinterpret_cast<const __m128i*>(kLanes.lane[in_ring]))));
+    _mm_storeu_si128(
+        reinterpret_cast<__m128i*>(out->ground_at + out->ground),
+        _mm_add_epi32(kk, _mm_load_si128(reinterpret_cast<const __m128i*>(kLanes.lane[ground]))));
+    out->over += kLanes.count[in_ring], out->ground += kLanes.count[ground];
+  }
+  const __m128d low2 = _mm_min_pd(_mm256_castpd256_pd128(low), _mm256_extractf128_pd(low, 1));
+  const double lane_low = std::min(_mm_cvtsd_f64(low2), _mm_cvtsd_f64(_mm_unpackhi_pd(low2, low2)));
+  out->stem_low = std::min(out->stem_low, lane_low);
+  return k;
+}
+#endif
+
 // The points of ground cell c in the ring: every one is written and the counts advance by its
 // tests (branch-free: whether a point is in the ring or on the ground follows no pattern).
 void gatherCell(const GroundGrid& grid, size_t c, RingTests t, BaseRing* b) {
@@ -283,7 +364,11 @@ void gatherCell(const GroundGrid& grid, size_t c, RingTests t, BaseRing* b) {
   RingOut out{b->on_ground.data(), b->ring.data(), b->ground, b->over, b->stem_low};
   const GroundGrid::SortedPoint* sorted = grid.sorted.data();
   constexpr double kInf = std::numeric_limits<double>::infinity();
-  for (uint32_t k = gatherPairs(sorted, grid.sorted.size(), k0, k1, t, &out); k < k1; ++k) {
+  uint32_t from = k0;
+#if DTIF_AVX2_PATHS
+  if (t.avx2) from = gatherQuads(sorted, grid.sorted.size(), k0, k1, t, &out);
+#endif
+  for (uint32_t k = gatherPairs(sorted, grid.sorted.size(), from, k1, t, &out); k < k1; ++k) {
     const GroundGrid::SortedPoint& q = sorted[k];
     const double dx = q.x - t.cx, dy = q.y - t.cy;
     const double d2 = dx * dx + dy * dy;
@@ -304,7 +389,8 @@ void gatherBaseRing(const GroundGrid& grid, double cx, double cy, double r,
   // Lowest point on the stem itself: a base counts as seen only if the stem is visible
   // down to the ground (not hidden by shrubs or below the sensor's field of view).
   const double r_stem2 = (r + p.stem_shell_m) * (r + p.stem_shell_m);
-  const RingTests t{cx, cy, r_stem2, r_in * r_in, r_out * r_out, p.base_max_dh_m, {}, 0.0, 0.0};
+  RingTests t{cx, cy, r_stem2, r_in * r_in, r_out * r_out, p.base_max_dh_m, {}, 0.0, 0.0, false};
+  t.avx2 = useAvx2();
   int gx0, gy0, gx1, gy1;
   grid.cellOf(cx - r_out, cy - r_out, &gx0, &gy0);
   grid.cellOf(cx + r_out, cy + r_out, &gx1, &gy1);
