@@ -52,7 +52,8 @@ LocalPoints adversarialPoints(size_t n, uint32_t seed, double ox) {
     const double z = ground + (k == 5 ? uh(rng) : 0.02 * near(rng));
     pts.x.push_back(static_cast<float>(px));
     pts.y.push_back(static_cast<float>(py));
-    pts.z.push_back(static_cast<float>(z));
+    // Zeros of both signs: the lowest points' joins must keep the sign the one chain keeps.
+    pts.z.push_back(i % 13 == 0 ? (i % 2 ? 0.0f : -0.0f) : static_cast<float>(z));
   }
   return pts;
 }
@@ -111,6 +112,50 @@ TEST(Avx2Paths, GroundGridBinsGiveTheBaselineBits) {
       EXPECT_EQ(std::memcmp(grid[0].sorted.data(), grid[1].sorted.data(),
                             grid[0].sorted.size() * sizeof(GroundGrid::SortedPoint)),
                 0);
+    }
+  }
+}
+
+// n points on a 0.125 m lattice over [0, 3)^2 at heights whose differences are exactly 0.25 m
+// and 1.5 m (the open test's bounds in GroundCellsGiveTheBaselineBits).
+LocalPoints steppedPoints(size_t n) {
+  const float heights[] = {1.0f, 1.25f, 2.5f, 1.5f, 3.0f, 1.0625f};
+  LocalPoints pts;
+  for (size_t i = 0; i < n; ++i) {
+    pts.x.push_back(0.125f * static_cast<float>(i % 24));
+    pts.y.push_back(0.125f * static_cast<float>((i / 24) % 24));
+    pts.z.push_back(heights[(i * 7) % 6]);
+  }
+  return pts;
+}
+
+void expectSameGroundCells(const LocalPoints& pts, const GroundGrid& grid,
+                           const TrunkExtractorParams& p) {
+  GroundCells cells[2];
+  bothForms([&](bool avx2) { cells[avx2] = openGroundCells(pts, grid, p); });
+  EXPECT_TRUE(sameBits(cells[0].low, cells[1].low));
+  EXPECT_TRUE(sameBits(cells[0].min, cells[1].min));
+  EXPECT_EQ(cells[0].count, cells[1].count);
+  EXPECT_EQ(cells[0].any, cells[1].any);
+}
+
+// openGroundCells with and without AVX2 (at most 32 sub-columns: 16, 25 and 9; beyond, 100, both
+// the baseline): the same cells, bit for bit.
+TEST(Avx2Paths, GroundCellsGiveTheBaselineBits) {
+  if (!useAvx2()) GTEST_SKIP() << "no AVX2 on this CPU";
+  TrunkExtractorParams p;
+  const double cells[][2] = {{1.0, 0.25}, {1.0, 0.2}, {0.7, 0.25}, {1.0, 0.1}};
+  for (const auto& c : cells) {
+    p.ground_cell_m = c[0], p.ground_sub_cell_m = c[1];
+    for (size_t n : {1, 3, 4, 5, 9, 1000, 20003}) {
+      SCOPED_TRACE(testing::Message() << "cell " << c[0] << " sub " << c[1] << " n " << n);
+      const LocalPoints pts = adversarialPoints(n, static_cast<uint32_t>(n + 11), 0.0);
+      const GroundGrid grid = binGroundGrid(pts, p);
+      expectSameGroundCells(pts, grid, p);
+      TrunkExtractorParams q = p;
+      q.ground_open_gap_m = 0.25, q.ground_open_top_m = 1.5;  // floats: dz may equal them
+      const LocalPoints steps = steppedPoints(n);
+      expectSameGroundCells(steps, binGroundGrid(steps, q), q);
     }
   }
 }

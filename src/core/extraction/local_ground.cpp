@@ -28,7 +28,124 @@ struct SubColumns {
   std::vector<char> sopen;  // nothing in the open gap above the lowest point
   std::vector<int> sidx;    // sub-column of each point of the cell
   std::vector<float> zs;    // ground points of the cell [m]
+  bool avx2 = false;        // useAvx2()
 };
+
+#if DTIF_AVX2_PATHS
+// Divisor d of four lanes: x * (1 / d) or x / d, as d computes it.
+struct DivisorLanes {
+  DTIF_TARGET_AVX2 explicit DivisorLanes(const Divisor& d)
+      : mul(d.multiplies()), f(_mm256_set1_pd(d.factor())) {}
+  DTIF_TARGET_AVX2 __m256d operator()(__m256d x) const {
+    return mul ? _mm256_mul_pd(x, f) : _mm256_div_pd(x, f);
+  }
+  bool mul;
+  __m256d f;
+};
+
+static_assert(sizeof(GroundGrid::SortedPoint) == 3 * sizeof(float), "sorted points are xyz");
+
+// openSubColumns' sub-columns of the points b..e-1 (into sidx), and their lowest points in four
+// interleaved sets (point k in set (k - b) % 4: one set made a chain through memory from point to
+// point), four points at a time.
+DTIF_TARGET_AVX2 void subColumnsAvx2(const GroundGrid& grid, uint32_t b, uint32_t e, double x0,
+                                     double y0, const SubColumns& s, int* sidx, float (*low)[32]) {
+  const GroundGrid::SortedPoint* P = grid.sorted.data();
+  const DivisorLanes by_sub(s.by_sub);
+  const __m256d vx0 = _mm256_set1_pd(x0), vy0 = _mm256_set1_pd(y0);
+  const __m128i last = _mm_set1_epi32(s.ns - 1), zero = _mm_setzero_si128();
+  const __m128i ns = _mm_set1_epi32(s.ns);
+  uint32_t k = b;
+  for (; k + 4 <= e; k += 4) {
+    prefetchAhead(P, k, grid.sorted.size());  // the first read since binGroundGrid wrote them
+    __m128 x, y, z;
+    deinterleave4(&P[k].x, &x, &y, &z);
+    // std::clamp(static_cast<int>(by_sub(q.x - x0)), 0, ns - 1), and for y.
+    const __m128i sx = _mm_max_epi32(
+        _mm_min_epi32(_mm256_cvttpd_epi32(by_sub(_mm256_sub_pd(_mm256_cvtps_pd(x), vx0))), last),
+        zero);
+    const __m128i sy = _mm_max_epi32(
+        _mm_min_epi32(_mm256_cvttpd_epi32(by_sub(_mm256_sub_pd(_mm256_cvtps_pd(y), vy0))), last),
+        zero);
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(sidx + (k - b)),
+                     _mm_add_epi32(_mm_mullo_epi32(sy, ns), sx));
+    alignas(16) float zv[4];
+    _mm_store_ps(zv, z);
+    for (int j = 0; j < 4; ++j) low[j][sidx[k - b + j]] = std::min(low[j][sidx[k - b + j]], zv[j]);
+  }
+  for (; k < e; ++k) {
+    const GroundGrid::SortedPoint& q = P[k];
+    const int sx = std::clamp(static_cast<int>(s.by_sub(q.x - x0)), 0, s.ns - 1);
+    const int sy = std::clamp(static_cast<int>(s.by_sub(q.y - y0)), 0, s.ns - 1);
+    const int sc = sy * s.ns + sx;
+    sidx[k - b] = sc;
+    float& m = low[(k - b) & 3][sc];
+    m = std::min(m, q.z);
+  }
+}
+
+// openSubColumns' open tests of the points b..e-1 as bits of the sub-columns closed, four points
+// at a time.
+DTIF_TARGET_AVX2 uint32_t closedAvx2(const GroundGrid& grid, uint32_t b, uint32_t e,
+                                     const int* sidx, const float* smin,
+                                     const TrunkExtractorParams& p) {
+  const GroundGrid::SortedPoint* P = grid.sorted.data();
+  const double gap = p.ground_open_gap_m, top = p.ground_open_top_m;
+  const __m256d vgap = _mm256_set1_pd(gap), vtop = _mm256_set1_pd(top);
+  const __m128 all = _mm_castsi128_ps(_mm_set1_epi32(-1));
+  const __m256i even = _mm256_setr_epi32(0, 2, 4, 6, 0, 2, 4, 6);
+  __m128i closed4 = _mm_setzero_si128();
+  uint32_t k = b;
+  for (; k + 4 <= e; k += 4) {
+    __m128 x, y, z;
+    deinterleave4(&P[k].x, &x, &y, &z);
+    const __m128i sc = _mm_loadu_si128(reinterpret_cast<const __m128i*>(sidx + (k - b)));
+    const __m128 low = _mm_mask_i32gather_ps(_mm_setzero_ps(), smin, sc, all, 4);
+    const __m256d dz = _mm256_cvtps_pd(_mm_sub_ps(z, low));  // the float dz, compared in double
+    const __m256d in =
+        _mm256_and_pd(_mm256_cmp_pd(dz, vgap, _CMP_GT_OQ), _mm256_cmp_pd(dz, vtop, _CMP_LE_OQ));
+    const __m128i in4 = _mm256_castsi256_si128(
+        _mm256_permutevar8x32_epi32(_mm256_castpd_si256(in), even));  // 64 -> 32-bit lanes
+    closed4 = _mm_or_si128(closed4, _mm_and_si128(in4, _mm_sllv_epi32(_mm_set1_epi32(1), sc)));
+  }
+  closed4 = _mm_or_si128(closed4, _mm_shuffle_epi32(closed4, _MM_SHUFFLE(1, 0, 3, 2)));
+  closed4 = _mm_or_si128(closed4, _mm_shuffle_epi32(closed4, _MM_SHUFFLE(2, 3, 0, 1)));
+  uint32_t closed = static_cast<uint32_t>(_mm_cvtsi128_si32(closed4));
+  for (; k < e; ++k) {
+    const int sc = sidx[k - b];
+    const float dz = P[k].z - smin[sc];
+    closed |= static_cast<uint32_t>((dz > gap) & (dz <= top)) << sc;
+  }
+  return closed;
+}
+
+// openSubColumns with AVX2, for at most 32 sub-columns (the caller checks useAvx2()). The four
+// sets' joined minimum has the one chain's bits unless it is a zero (the chain keeps the first
+// zero's sign): then the one chain.
+DTIF_TARGET_AVX2 void openSubColumnsAvx2(const GroundGrid& grid, uint32_t b, uint32_t e, double x0,
+                                         double y0, const TrunkExtractorParams& p, SubColumns* s) {
+  const size_t nsub = s->smin.size();
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  float low[4][32];
+  for (auto& set : low) std::fill(set, set + nsub, kInf);
+  s->sidx.resize(e - b);
+  int* sidx = s->sidx.data();
+  subColumnsAvx2(grid, b, e, x0, y0, *s, sidx, low);
+  float* smin = s->smin.data();
+  bool zero = false;
+  for (size_t sc = 0; sc < nsub; ++sc) {
+    smin[sc] = std::min(std::min(low[0][sc], low[1][sc]), std::min(low[2][sc], low[3][sc]));
+    zero |= smin[sc] == 0.0f;
+  }
+  if (zero) {
+    const GroundGrid::SortedPoint* P = grid.sorted.data();
+    std::fill(smin, smin + nsub, kInf);
+    for (uint32_t k = b; k < e; ++k) smin[sidx[k - b]] = std::min(smin[sidx[k - b]], P[k].z);
+  }
+  const uint32_t closed = closedAvx2(grid, b, e, sidx, smin, p);
+  for (size_t sc = 0; sc < nsub; ++sc) s->sopen[sc] = static_cast<char>(!((closed >> sc) & 1));
+}
+#endif
 
 // The sub-columns of the points b..e-1 of a cell with corner (x0, y0): each point's sub-column
 // (s->sidx, by k - b), their lowest points and which are open. Raw pointers and locals: through
@@ -36,6 +153,9 @@ struct SubColumns {
 // open test branch-free: it follows no pattern.
 void openSubColumns(const GroundGrid& grid, uint32_t b, uint32_t e, double x0, double y0,
                     const TrunkExtractorParams& p, SubColumns* s) {
+#if DTIF_AVX2_PATHS
+  if (s->avx2 && s->smin.size() <= 32) return openSubColumnsAvx2(grid, b, e, x0, y0, p, s);
+#endif
   const int ns = s->ns;
   std::fill(s->smin.begin(), s->smin.end(), std::numeric_limits<float>::infinity());
   std::fill(s->sopen.begin(), s->sopen.end(), 1);
@@ -141,17 +261,6 @@ class PointCell {
 };
 
 #if DTIF_AVX2_PATHS
-// Divisor d of four lanes: x * (1 / d) or x / d, as d computes it.
-struct DivisorLanes {
-  DTIF_TARGET_AVX2 explicit DivisorLanes(const Divisor& d)
-      : mul(d.multiplies()), f(_mm256_set1_pd(d.factor())) {}
-  DTIF_TARGET_AVX2 __m256d operator()(__m256d x) const {
-    return mul ? _mm256_mul_pd(x, f) : _mm256_div_pd(x, f);
-  }
-  bool mul;
-  __m256d f;
-};
-
 // PointCell of four points, and their cells' centres as GroundGrid::cellCentre computes them
 // (c % nx is the column: the column is clamped to [0, nx - 1]).
 struct GroundCellLanes {
@@ -385,6 +494,7 @@ GroundCells openGroundCells(const LocalPoints& /*pts: read through grid.sorted*/
   s.by_sub = Divisor(s.sub);
   s.smin.resize(static_cast<size_t>(s.ns) * s.ns);
   s.sopen.resize(s.smin.size());
+  s.avx2 = useAvx2();
   for (size_t c = 0; c < gcells; ++c) {
     if (grid.start[c] == grid.start[c + 1]) continue;
     cells.any[c] = 1;

@@ -276,16 +276,9 @@ uint32_t gatherPairs(const GroundGrid::SortedPoint* sorted, size_t ns, uint32_t 
 // Four sorted points (lanes of x, y, z, as doubles) from their 48 bytes.
 DTIF_TARGET_AVX2 void quadLanes(const GroundGrid::SortedPoint* q, __m256d* x, __m256d* y,
                                 __m256d* z) {
-  const float* f = &q->x;
-  const __m128 m0 = _mm_loadu_ps(f), m1 = _mm_loadu_ps(f + 4), m2 = _mm_loadu_ps(f + 8);
-  // m0 = x0 y0 z0 x1, m1 = y1 z1 x2 y2, m2 = z2 x3 y3 z3.
-  const __m128 u = _mm_shuffle_ps(m1, m2, _MM_SHUFFLE(1, 1, 2, 2));  // x2 x2 x3 x3
-  const __m128 v = _mm_shuffle_ps(m0, m1, _MM_SHUFFLE(0, 0, 1, 1));  // y0 y0 y1 y1
-  const __m128 w = _mm_shuffle_ps(m1, m2, _MM_SHUFFLE(2, 2, 3, 3));  // y2 y2 y3 y3
-  const __m128 a = _mm_shuffle_ps(m0, m1, _MM_SHUFFLE(1, 1, 2, 2));  // z0 z0 z1 z1
-  *x = _mm256_cvtps_pd(_mm_shuffle_ps(m0, u, _MM_SHUFFLE(2, 0, 3, 0)));
-  *y = _mm256_cvtps_pd(_mm_shuffle_ps(v, w, _MM_SHUFFLE(2, 0, 2, 0)));
-  *z = _mm256_cvtps_pd(_mm_shuffle_ps(a, m2, _MM_SHUFFLE(3, 0, 2, 0)));
+  __m128 fx, fy, fz;
+  deinterleave4(&q->x, &fx, &fy, &fz);
+  *x = _mm256_cvtps_pd(fx), *y = _mm256_cvtps_pd(fy), *z = _mm256_cvtps_pd(fz);
 }
 
 // For each mask of four lanes, its set lanes in order (then zeros) and their count.
