@@ -667,7 +667,7 @@ struct MapCellLanes {
   __m256d x0, y0, w, h;
 };
 
-static_assert(sizeof(GroundPlane) == 3 * sizeof(double), "planes are gathered as doubles");
+static_assert(sizeof(GroundPlane) == 3 * sizeof(double), "planes are read as rows of doubles");
 
 // heightsSlabPass four points at a time: the cells, centres, planes and heights in lanes, the
 // same IEEE operations per point as heightsSlabScalar (no fused multiply-add); the slab and the
@@ -689,7 +689,8 @@ struct HeightsAvx2 {
     __m256d cx, cy;
     const __m128i c = cell_of(vx, vy, &cx, &cy);
     const __m128i c3 = _mm_add_epi32(c, _mm_add_epi32(c, c));
-    const __m256d a = gather(plane, c3), b = gather(plane + 1, c3), s = gather(plane + 2, c3);
+    __m256d a, b, s;
+    planes(c3, &a, &b, &s);
     // pl.at(x - x0, y - y0) = (a + b (x - x0)) + s (y - y0); h rounded to float, as stored.
     const __m256d at = _mm256_add_pd(_mm256_add_pd(a, _mm256_mul_pd(b, _mm256_sub_pd(vx, cx))),
                                      _mm256_mul_pd(s, _mm256_sub_pd(vy, cy)));
@@ -707,10 +708,19 @@ struct HeightsAvx2 {
       run->add<kMapCells>(S, i + j, (slab >> j) & 1, kj, zv[j], mc);
     }
   }
-  // v[index] of four lanes. The masked form: GCC 12 warns of the unmasked one's undefined source.
-  DTIF_TARGET_AVX2 static __m256d gather(const double* v, __m128i index) {
-    const __m256d all = _mm256_castsi256_pd(_mm256_set1_epi64x(-1));
-    return _mm256_mask_i32gather_pd(_mm256_setzero_pd(), v, index, all, 8);
+  // The planes (a, b, c) of the four cells at 3 c: four masked loads of a row (nothing read past
+  // it) and a transpose, shorter in latency than three gathers.
+  DTIF_TARGET_AVX2 void planes(__m128i c3, __m256d* a, __m256d* b, __m256d* s) const {
+    const __m256i row = _mm256_setr_epi64x(-1, -1, -1, 0);
+    const __m256d r0 = _mm256_maskload_pd(plane + _mm_cvtsi128_si32(c3), row);
+    const __m256d r1 = _mm256_maskload_pd(plane + _mm_extract_epi32(c3, 1), row);
+    const __m256d r2 = _mm256_maskload_pd(plane + _mm_extract_epi32(c3, 2), row);
+    const __m256d r3 = _mm256_maskload_pd(plane + _mm_extract_epi32(c3, 3), row);
+    const __m256d t0 = _mm256_unpacklo_pd(r0, r1), t1 = _mm256_unpackhi_pd(r0, r1);
+    const __m256d t2 = _mm256_unpacklo_pd(r2, r3), t3 = _mm256_unpackhi_pd(r2, r3);
+    *a = _mm256_permute2f128_pd(t0, t2, 0x20);
+    *b = _mm256_permute2f128_pd(t1, t3, 0x20);
+    *s = _mm256_permute2f128_pd(t0, t2, 0x31);
   }
   GroundCellLanes cell_of;
   MapCellLanes map_of;
