@@ -8,8 +8,13 @@
 #include <cmath>
 #include <limits>
 
+#include "dtif/core/extraction/avx2.h"
 #include "dtif/core/extraction/extraction_stages.h"
 #include "dtif/core/robust.h"
+
+#if DTIF_AVX2_PATHS
+#include <immintrin.h>
+#endif
 
 namespace dtif {
 namespace {
@@ -23,7 +28,124 @@ struct SubColumns {
   std::vector<char> sopen;  // nothing in the open gap above the lowest point
   std::vector<int> sidx;    // sub-column of each point of the cell
   std::vector<float> zs;    // ground points of the cell [m]
+  bool avx2 = false;        // useAvx2()
 };
+
+#if DTIF_AVX2_PATHS
+// Divisor d of four lanes: x * (1 / d) or x / d, as d computes it.
+struct DivisorLanes {
+  DTIF_TARGET_AVX2 explicit DivisorLanes(const Divisor& d)
+      : mul(d.multiplies()), f(_mm256_set1_pd(d.factor())) {}
+  DTIF_TARGET_AVX2 __m256d operator()(__m256d x) const {
+    return mul ? _mm256_mul_pd(x, f) : _mm256_div_pd(x, f);
+  }
+  bool mul;
+  __m256d f;
+};
+
+static_assert(sizeof(GroundGrid::SortedPoint) == 3 * sizeof(float), "sorted points are xyz");
+
+// openSubColumns' sub-columns of the points b..e-1 (into sidx), and their lowest points in four
+// interleaved sets (point k in set (k - b) % 4: one set made a chain through memory from point to
+// point), four points at a time.
+DTIF_TARGET_AVX2 void subColumnsAvx2(const GroundGrid& grid, uint32_t b, uint32_t e, double x0,
+                                     double y0, const SubColumns& s, int* sidx, float (*low)[32]) {
+  const GroundGrid::SortedPoint* P = grid.sorted.data();
+  const DivisorLanes by_sub(s.by_sub);
+  const __m256d vx0 = _mm256_set1_pd(x0), vy0 = _mm256_set1_pd(y0);
+  const __m128i last = _mm_set1_epi32(s.ns - 1), zero = _mm_setzero_si128();
+  const __m128i ns = _mm_set1_epi32(s.ns);
+  uint32_t k = b;
+  for (; k + 4 <= e; k += 4) {
+    prefetchAhead(P, k, grid.sorted.size());  // the first read since binGroundGrid wrote them
+    __m128 x, y, z;
+    deinterleave4(&P[k].x, &x, &y, &z);
+    // std::clamp(static_cast<int>(by_sub(q.x - x0)), 0, ns - 1), and for y.
+    const __m128i sx = _mm_max_epi32(
+        _mm_min_epi32(_mm256_cvttpd_epi32(by_sub(_mm256_sub_pd(_mm256_cvtps_pd(x), vx0))), last),
+        zero);
+    const __m128i sy = _mm_max_epi32(
+        _mm_min_epi32(_mm256_cvttpd_epi32(by_sub(_mm256_sub_pd(_mm256_cvtps_pd(y), vy0))), last),
+        zero);
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(sidx + (k - b)),
+                     _mm_add_epi32(_mm_mullo_epi32(sy, ns), sx));
+    alignas(16) float zv[4];
+    _mm_store_ps(zv, z);
+    for (int j = 0; j < 4; ++j) low[j][sidx[k - b + j]] = std::min(low[j][sidx[k - b + j]], zv[j]);
+  }
+  for (; k < e; ++k) {
+    const GroundGrid::SortedPoint& q = P[k];
+    const int sx = std::clamp(static_cast<int>(s.by_sub(q.x - x0)), 0, s.ns - 1);
+    const int sy = std::clamp(static_cast<int>(s.by_sub(q.y - y0)), 0, s.ns - 1);
+    const int sc = sy * s.ns + sx;
+    sidx[k - b] = sc;
+    float& m = low[(k - b) & 3][sc];
+    m = std::min(m, q.z);
+  }
+}
+
+// openSubColumns' open tests of the points b..e-1 as bits of the sub-columns closed, four points
+// at a time.
+DTIF_TARGET_AVX2 uint32_t closedAvx2(const GroundGrid& grid, uint32_t b, uint32_t e,
+                                     const int* sidx, const float* smin,
+                                     const TrunkExtractorParams& p) {
+  const GroundGrid::SortedPoint* P = grid.sorted.data();
+  const double gap = p.ground_open_gap_m, top = p.ground_open_top_m;
+  const __m256d vgap = _mm256_set1_pd(gap), vtop = _mm256_set1_pd(top);
+  const __m128 all = _mm_castsi128_ps(_mm_set1_epi32(-1));
+  const __m256i even = _mm256_setr_epi32(0, 2, 4, 6, 0, 2, 4, 6);
+  __m128i closed4 = _mm_setzero_si128();
+  uint32_t k = b;
+  for (; k + 4 <= e; k += 4) {
+    __m128 x, y, z;
+    deinterleave4(&P[k].x, &x, &y, &z);
+    const __m128i sc = _mm_loadu_si128(reinterpret_cast<const __m128i*>(sidx + (k - b)));
+    const __m128 low = _mm_mask_i32gather_ps(_mm_setzero_ps(), smin, sc, all, 4);
+    const __m256d dz = _mm256_cvtps_pd(_mm_sub_ps(z, low));  // the float dz, compared in double
+    const __m256d in =
+        _mm256_and_pd(_mm256_cmp_pd(dz, vgap, _CMP_GT_OQ), _mm256_cmp_pd(dz, vtop, _CMP_LE_OQ));
+    const __m128i in4 = _mm256_castsi256_si128(
+        _mm256_permutevar8x32_epi32(_mm256_castpd_si256(in), even));  // 64 -> 32-bit lanes
+    closed4 = _mm_or_si128(closed4, _mm_and_si128(in4, _mm_sllv_epi32(_mm_set1_epi32(1), sc)));
+  }
+  closed4 = _mm_or_si128(closed4, _mm_shuffle_epi32(closed4, _MM_SHUFFLE(1, 0, 3, 2)));
+  closed4 = _mm_or_si128(closed4, _mm_shuffle_epi32(closed4, _MM_SHUFFLE(2, 3, 0, 1)));
+  uint32_t closed = static_cast<uint32_t>(_mm_cvtsi128_si32(closed4));
+  for (; k < e; ++k) {
+    const int sc = sidx[k - b];
+    const float dz = P[k].z - smin[sc];
+    closed |= static_cast<uint32_t>((dz > gap) & (dz <= top)) << sc;
+  }
+  return closed;
+}
+
+// openSubColumns with AVX2, for at most 32 sub-columns (the caller checks useAvx2()). The four
+// sets' joined minimum has the one chain's bits unless it is a zero (the chain keeps the first
+// zero's sign): then the one chain.
+DTIF_TARGET_AVX2 void openSubColumnsAvx2(const GroundGrid& grid, uint32_t b, uint32_t e, double x0,
+                                         double y0, const TrunkExtractorParams& p, SubColumns* s) {
+  const size_t nsub = s->smin.size();
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  float low[4][32];
+  for (auto& set : low) std::fill(set, set + nsub, kInf);
+  s->sidx.resize(e - b);
+  int* sidx = s->sidx.data();
+  subColumnsAvx2(grid, b, e, x0, y0, *s, sidx, low);
+  float* smin = s->smin.data();
+  bool zero = false;
+  for (size_t sc = 0; sc < nsub; ++sc) {
+    smin[sc] = std::min(std::min(low[0][sc], low[1][sc]), std::min(low[2][sc], low[3][sc]));
+    zero |= smin[sc] == 0.0f;
+  }
+  if (zero) {
+    const GroundGrid::SortedPoint* P = grid.sorted.data();
+    std::fill(smin, smin + nsub, kInf);
+    for (uint32_t k = b; k < e; ++k) smin[sidx[k - b]] = std::min(smin[sidx[k - b]], P[k].z);
+  }
+  const uint32_t closed = closedAvx2(grid, b, e, sidx, smin, p);
+  for (size_t sc = 0; sc < nsub; ++sc) s->sopen[sc] = static_cast<char>(!((closed >> sc) & 1));
+}
+#endif
 
 // The sub-columns of the points b..e-1 of a cell with corner (x0, y0): each point's sub-column
 // (s->sidx, by k - b), their lowest points and which are open. Raw pointers and locals: through
@@ -31,6 +153,9 @@ struct SubColumns {
 // open test branch-free: it follows no pattern.
 void openSubColumns(const GroundGrid& grid, uint32_t b, uint32_t e, double x0, double y0,
                     const TrunkExtractorParams& p, SubColumns* s) {
+#if DTIF_AVX2_PATHS
+  if (s->avx2 && s->smin.size() <= 32) return openSubColumnsAvx2(grid, b, e, x0, y0, p, s);
+#endif
   const int ns = s->ns;
   std::fill(s->smin.begin(), s->smin.end(), std::numeric_limits<float>::infinity());
   std::fill(s->sopen.begin(), s->sopen.end(), 1);
@@ -135,6 +260,105 @@ class PointCell {
   int nx_, ny_;
 };
 
+#if DTIF_AVX2_PATHS
+// PointCell of four points, and their cells' centres as GroundGrid::cellCentre computes them
+// (c % nx is the column: the column is clamped to [0, nx - 1]).
+struct GroundCellLanes {
+  DTIF_TARGET_AVX2 explicit GroundCellLanes(const GroundGrid& g)
+      : x0(_mm256_set1_pd(g.minx)),
+        y0(_mm256_set1_pd(g.miny)),
+        by_g(Divisor(g.cell_m)),
+        cell(_mm256_set1_pd(g.cell_m)),
+        nx1(_mm_set1_epi32(g.nx - 1)),
+        ny1(_mm_set1_epi32(g.ny - 1)),
+        nx(_mm_set1_epi32(g.nx)) {}
+  DTIF_TARGET_AVX2 __m128i operator()(__m256d x, __m256d y, __m256d* cx, __m256d* cy) const {
+    const __m128i gx = column(x, x0, nx1), gy = column(y, y0, ny1);
+    const __m256d half = _mm256_set1_pd(0.5);
+    *cx = _mm256_add_pd(x0, _mm256_mul_pd(_mm256_add_pd(_mm256_cvtepi32_pd(gx), half), cell));
+    *cy = _mm256_add_pd(y0, _mm256_mul_pd(_mm256_add_pd(_mm256_cvtepi32_pd(gy), half), cell));
+    return _mm_add_epi32(_mm_mullo_epi32(gy, nx), gx);
+  }
+  // The cells of the eight points (x, y)[0..7].
+  DTIF_TARGET_AVX2 __m256i eight(const float* x, const float* y) const {
+    return _mm256_setr_m128i(four(_mm_loadu_ps(x), _mm_loadu_ps(y)),
+                             four(_mm_loadu_ps(x + 4), _mm_loadu_ps(y + 4)));
+  }
+  // The cells of four points.
+  DTIF_TARGET_AVX2 __m128i four(__m128 x, __m128 y) const {
+    const __m128i gx = column(_mm256_cvtps_pd(x), x0, nx1);
+    return _mm_add_epi32(_mm_mullo_epi32(column(_mm256_cvtps_pd(y), y0, ny1), nx), gx);
+  }
+  // PointCell's column (or row) of coordinates v from corner v0, at most last.
+  DTIF_TARGET_AVX2 __m128i column(__m256d v, __m256d v0, __m128i last) const {
+    return _mm_min_epi32(_mm256_cvttpd_epi32(by_g(_mm256_sub_pd(v, v0))), last);
+  }
+  __m256d x0, y0;
+  DivisorLanes by_g;
+  __m256d cell;
+  __m128i nx1, ny1, nx;
+};
+
+// binGroundGrid's counts per cell (into count) of the points 0.. eight at a time: a run of points
+// in one cell (neighbours on a scan line mostly are) is counted in a register, not by an
+// increment of the cell per point, whose chain through memory bounded the pass. Returns the
+// count of points done (the rest: fewer than eight).
+DTIF_TARGET_AVX2 size_t binCountAvx2(const LocalPoints& pts, const GroundGrid& grid,
+                                     uint32_t* count) {
+  const size_t n = pts.size();
+  const float *X = pts.x.data(), *Y = pts.y.data();
+  const GroundCellLanes cells(grid);
+  uint32_t run = 0, hits = 0;
+  size_t i = 0;
+  for (; i + 8 <= n; i += 8) {
+    prefetchAhead(X, i, n), prefetchAhead(Y, i, n);
+    const __m256i c = cells.eight(X + i, Y + i);
+    const __m256i same = _mm256_cmpeq_epi32(c, _mm256_set1_epi32(static_cast<int32_t>(run)));
+    if (_mm256_movemask_epi8(same) == -1) {
+      hits += 8;
+      continue;
+    }
+    alignas(32) uint32_t k[8];
+    _mm256_store_si256(reinterpret_cast<__m256i*>(k), c);
+    for (int j = 0; j < 8; ++j) {
+      if (k[j] != run) count[run] += hits, run = k[j], hits = 0;
+      ++hits;
+    }
+  }
+  count[run] += hits;
+  return i;
+}
+
+// binGroundGrid's placing of the points 0.. by their cells' next places (fill), eight at a
+// time: within a run of one cell the place is a register (see binCountAvx2). Returns the count
+// of points done.
+DTIF_TARGET_AVX2 size_t binFillAvx2(const LocalPoints& pts, const GroundGrid& grid, uint32_t* fill,
+                                    GroundGrid::SortedPoint* out) {
+  const size_t n = pts.size();
+  const float *X = pts.x.data(), *Y = pts.y.data(), *Z = pts.z.data();
+  const GroundCellLanes cells(grid);
+  uint32_t run = 0, at = fill[0];
+  size_t i = 0;
+  for (; i + 8 <= n; i += 8) {
+    prefetchAhead(X, i, n), prefetchAhead(Y, i, n), prefetchAhead(Z, i, n);
+    const __m256i c = cells.eight(X + i, Y + i);
+    const __m256i same = _mm256_cmpeq_epi32(c, _mm256_set1_epi32(static_cast<int32_t>(run)));
+    if (_mm256_movemask_epi8(same) == -1) {
+      for (size_t j = i; j < i + 8; ++j) out[at++] = {X[j], Y[j], Z[j]};
+      continue;
+    }
+    alignas(32) uint32_t k[8];
+    _mm256_store_si256(reinterpret_cast<__m256i*>(k), c);
+    for (size_t j = 0; j < 8; ++j) {
+      if (k[j] != run) fill[run] = at, run = k[j], at = fill[run];
+      out[at++] = {X[i + j], Y[i + j], Z[i + j]};
+    }
+  }
+  fill[run] = at;
+  return i;
+}
+#endif
+
 }  // namespace
 
 LocalPoints toLocalPoints(const Cloud& cloud) {
@@ -236,7 +460,12 @@ void binGroundGrid(const LocalPoints& pts, const TrunkExtractorParams& p, Ground
   const PointCell cell_of(grid);
   // Raw pointers: through the members the compiler reloads them at every point.
   uint32_t* count = grid.start.data() + 1;
-  for (size_t i = 0; i < n; ++i) {
+  size_t done = 0;
+#if DTIF_AVX2_PATHS
+  const bool avx2 = useAvx2();
+  if (avx2) done = binCountAvx2(pts, grid, count);
+#endif
+  for (size_t i = done; i < n; ++i) {
     prefetchAhead(X, i, n), prefetchAhead(Y, i, n);
     ++count[cell_of(X[i], Y[i])];
   }
@@ -245,7 +474,10 @@ void binGroundGrid(const LocalPoints& pts, const TrunkExtractorParams& p, Ground
   grid.sorted.resize(n);
   GroundGrid::SortedPoint* out_pts = grid.sorted.data();
   const float* Z = pts.z.data();
-  for (size_t i = 0; i < n; ++i) {
+#if DTIF_AVX2_PATHS
+  if (avx2) done = binFillAvx2(pts, grid, fill.data(), out_pts);
+#endif
+  for (size_t i = done; i < n; ++i) {
     prefetchAhead(X, i, n), prefetchAhead(Y, i, n), prefetchAhead(Z, i, n);
     out_pts[fill[cell_of(X[i], Y[i])]++] = {X[i], Y[i], Z[i]};
   }
@@ -265,6 +497,7 @@ GroundCells openGroundCells(const LocalPoints& /*pts: read through grid.sorted*/
   s.by_sub = Divisor(s.sub);
   s.smin.resize(static_cast<size_t>(s.ns) * s.ns);
   s.sopen.resize(s.smin.size());
+  s.avx2 = useAvx2();
   for (size_t c = 0; c < gcells; ++c) {
     if (grid.start[c] == grid.start[c + 1]) continue;
     cells.any[c] = 1;
@@ -385,42 +618,21 @@ GroundMapCells cellGeometry(const GroundMapCells& mc) {
   return g;
 }
 
-// heightsAndSlab, and with kMapCells each point added to *map_cells.
-template <bool kMapCells>
-void heightsSlabPass(const LocalPoints& pts, const GroundGrid& grid, const TrunkExtractorParams& p,
-                     std::vector<float>* out, std::vector<uint32_t>* slab,
-                     GroundMapCells* map_cells) {
-  std::vector<float>& h = *out;
-  const size_t n = pts.size();
-  const std::vector<Centred> cells = centredPlanes(grid);
-  h.resize(n);
-  const PointCell cell_of(grid);
-  const float *X = pts.x.data(), *Y = pts.y.data(), *Z = pts.z.data();
-  float* H = h.data();
-  // Branch-free, as slabColumns selects: about a quarter of the points are in the slab, in no
-  // predictable pattern.
-  slab->resize(n);
-  uint32_t* S = slab->data();
+// What heightsSlabPass carries from point to point: the slab's count and the map cells' run of
+// points in one cell (consecutive returns mostly are), whose lowest point and count stay in
+// registers instead of a read-modify-write of the cell per point.
+struct SlabRun {
   size_t ns = 0;
-  const double lo = p.slab_min_h_m, hi = p.slab_max_h_m;
-  // The map cells' lowest point and count per run of points in one cell (consecutive returns
-  // mostly are): in registers, not a read-modify-write of the cell per point. A copy of the
-  // cells' geometry in locals: through the pointer, each store to a cell would make the
-  // compiler reload it and the point arrays.
-  const GroundMapCells geometry = kMapCells ? cellGeometry(*map_cells) : GroundMapCells();
   size_t run = GroundMapCells::npos;
   float run_low = std::numeric_limits<float>::infinity();
   uint32_t run_hits = 0;
-  for (size_t i = 0; i < n; ++i) {
-    prefetchAhead(X, i, n), prefetchAhead(Y, i, n), prefetchAhead(Z, i, n);
-    const float x = X[i], y = Y[i], z = Z[i];
-    const Centred& cc = cells[cell_of(x, y)];
-    const float hv = static_cast<float>(z - cc.pl.at(x - cc.x0, y - cc.y0));
-    H[i] = hv;
+
+  // Point i of height class `in_slab`, and with kMapCells its map cell k and local z.
+  template <bool kMapCells>
+  void add(uint32_t* S, size_t i, bool in_slab, size_t k, float z, GroundMapCells* map_cells) {
     S[ns] = static_cast<uint32_t>(i);
-    ns += static_cast<size_t>((hv >= lo) & (hv < hi));
+    ns += static_cast<size_t>(in_slab);
     if (kMapCells) {
-      const size_t k = geometry.cellOf(x, y);
       if (k != run) {
         map_cells->addRun(run, run_low, run_hits);
         run = k, run_low = z, run_hits = 0;
@@ -429,8 +641,172 @@ void heightsSlabPass(const LocalPoints& pts, const GroundGrid& grid, const Trunk
       ++run_hits;
     }
   }
-  if (kMapCells) map_cells->addRun(run, run_low, run_hits);
-  slab->resize(ns);
+};
+
+#if DTIF_AVX2_PATHS
+// GroundMapCells::cellOf of four points, -1 for npos. In double: the floors and the corner are
+// whole numbers far below 2^53, so their differences and the index are exact.
+struct MapCellLanes {
+  DTIF_TARGET_AVX2 explicit MapCellLanes(const GroundMapCells& m)
+      : ox(_mm256_set1_pd(m.ox)),
+        oy(_mm256_set1_pd(m.oy)),
+        by_cell(m.byCell()),
+        x0(_mm256_set1_pd(static_cast<double>(m.x0))),
+        y0(_mm256_set1_pd(static_cast<double>(m.y0))),
+        w(_mm256_set1_pd(static_cast<double>(m.width))),
+        h(_mm256_set1_pd(static_cast<double>(m.height))) {}
+  DTIF_TARGET_AVX2 __m128i operator()(__m256d x, __m256d y) const {
+    const __m256d ix = _mm256_sub_pd(_mm256_floor_pd(by_cell(_mm256_add_pd(x, ox))), x0);
+    const __m256d iy = _mm256_sub_pd(_mm256_floor_pd(by_cell(_mm256_add_pd(y, oy))), y0);
+    const __m256d zero = _mm256_setzero_pd();
+    const __m256d in = _mm256_and_pd(
+        _mm256_and_pd(_mm256_cmp_pd(ix, zero, _CMP_GE_OQ), _mm256_cmp_pd(ix, w, _CMP_LT_OQ)),
+        _mm256_and_pd(_mm256_cmp_pd(iy, zero, _CMP_GE_OQ), _mm256_cmp_pd(iy, h, _CMP_LT_OQ)));
+    const __m256d k = _mm256_add_pd(_mm256_mul_pd(iy, w), ix);
+    return _mm256_cvttpd_epi32(_mm256_blendv_pd(_mm256_set1_pd(-1.0), k, in));
+  }
+  __m256d ox, oy;
+  DivisorLanes by_cell;
+  __m256d x0, y0, w, h;
+};
+
+static_assert(sizeof(GroundPlane) == 3 * sizeof(double), "planes are read as rows of doubles");
+
+// heightsSlabPass four points at a time: the cells, centres, planes and heights in lanes, the
+// same IEEE operations per point as heightsSlabScalar (no fused multiply-add); the slab and the
+// runs lane by lane.
+struct HeightsAvx2 {
+  DTIF_TARGET_AVX2 HeightsAvx2(const GroundGrid& g, const GroundMapCells& geometry, double lo,
+                               double hi)
+      : cell_of(g),
+        map_of(geometry),
+        plane(&g.plane.data()->a),
+        lo(_mm256_set1_pd(lo)),
+        hi(_mm256_set1_pd(hi)) {}
+  // Points i.. (count of them, <= 4) of X, Y, Z from x, y, z (four readable each).
+  template <bool kMapCells>
+  DTIF_TARGET_AVX2 void block(const float* x, const float* y, const float* z, size_t i, int count,
+                              float* H, uint32_t* S, SlabRun* run, GroundMapCells* mc) const {
+    const __m128 zf = _mm_loadu_ps(z);
+    const __m256d vx = _mm256_cvtps_pd(_mm_loadu_ps(x)), vy = _mm256_cvtps_pd(_mm_loadu_ps(y));
+    __m256d cx, cy;
+    const __m128i c = cell_of(vx, vy, &cx, &cy);
+    const __m128i c3 = _mm_add_epi32(c, _mm_add_epi32(c, c));
+    __m256d a, b, s;
+    planes(c3, &a, &b, &s);
+    // pl.at(x - x0, y - y0) = (a + b (x - x0)) + s (y - y0); h rounded to float, as stored.
+    const __m256d at = _mm256_add_pd(_mm256_add_pd(a, _mm256_mul_pd(b, _mm256_sub_pd(vx, cx))),
+                                     _mm256_mul_pd(s, _mm256_sub_pd(vy, cy)));
+    alignas(16) float hv[4], zv[4];
+    const __m128 h = _mm256_cvtpd_ps(_mm256_sub_pd(_mm256_cvtps_pd(zf), at));
+    _mm_store_ps(hv, h), _mm_store_ps(zv, zf);
+    const __m256d hd = _mm256_cvtps_pd(h);
+    const int slab = _mm256_movemask_pd(
+        _mm256_and_pd(_mm256_cmp_pd(hd, lo, _CMP_GE_OQ), _mm256_cmp_pd(hd, hi, _CMP_LT_OQ)));
+    alignas(16) int32_t k[4] = {0, 0, 0, 0};
+    if (kMapCells) _mm_store_si128(reinterpret_cast<__m128i*>(k), map_of(vx, vy));
+    for (int j = 0; j < count; ++j) {
+      H[i + j] = hv[j];
+      const size_t kj = k[j] < 0 ? GroundMapCells::npos : static_cast<size_t>(k[j]);
+      run->add<kMapCells>(S, i + j, (slab >> j) & 1, kj, zv[j], mc);
+    }
+  }
+  // The planes (a, b, c) of the four cells at 3 c: four masked loads of a row (nothing read past
+  // it) and a transpose, shorter in latency than three gathers.
+  DTIF_TARGET_AVX2 void planes(__m128i c3, __m256d* a, __m256d* b, __m256d* s) const {
+    const __m256i row = _mm256_setr_epi64x(-1, -1, -1, 0);
+    const __m256d r0 = _mm256_maskload_pd(plane + _mm_cvtsi128_si32(c3), row);
+    const __m256d r1 = _mm256_maskload_pd(plane + _mm_extract_epi32(c3, 1), row);
+    const __m256d r2 = _mm256_maskload_pd(plane + _mm_extract_epi32(c3, 2), row);
+    const __m256d r3 = _mm256_maskload_pd(plane + _mm_extract_epi32(c3, 3), row);
+    const __m256d t0 = _mm256_unpacklo_pd(r0, r1), t1 = _mm256_unpackhi_pd(r0, r1);
+    const __m256d t2 = _mm256_unpacklo_pd(r2, r3), t3 = _mm256_unpackhi_pd(r2, r3);
+    *a = _mm256_permute2f128_pd(t0, t2, 0x20);
+    *b = _mm256_permute2f128_pd(t1, t3, 0x20);
+    *s = _mm256_permute2f128_pd(t0, t2, 0x31);
+  }
+  GroundCellLanes cell_of;
+  MapCellLanes map_of;
+  const double* plane;  // a, b, c of each cell
+  __m256d lo, hi;
+};
+
+// heightsSlabPass's points, all of them: the last few through a padded copy (the last point
+// repeated, so every lane has a cell). Returns the count of points done.
+template <bool kMapCells>
+DTIF_TARGET_AVX2 size_t heightsSlabAvx2(const LocalPoints& pts, const GroundGrid& grid, double lo,
+                                        double hi, float* H, uint32_t* S, SlabRun* r,
+                                        GroundMapCells* map_cells) {
+  const size_t n = pts.size();
+  const float *X = pts.x.data(), *Y = pts.y.data(), *Z = pts.z.data();
+  const GroundMapCells geometry = kMapCells ? cellGeometry(*map_cells) : GroundMapCells();
+  const HeightsAvx2 lanes(grid, geometry, lo, hi);
+  SlabRun run = *r;
+  size_t i = 0;
+  for (; i + 4 <= n; i += 4) {
+    prefetchAhead(X, i, n), prefetchAhead(Y, i, n), prefetchAhead(Z, i, n);
+    lanes.block<kMapCells>(X + i, Y + i, Z + i, i, 4, H, S, &run, map_cells);
+  }
+  if (i < n) {
+    float x[4], y[4], z[4];
+    for (size_t j = 0; j < 4; ++j) {
+      const size_t k = std::min(i + j, n - 1);
+      x[j] = X[k], y[j] = Y[k], z[j] = Z[k];
+    }
+    lanes.block<kMapCells>(x, y, z, i, static_cast<int>(n - i), H, S, &run, map_cells);
+  }
+  *r = run;
+  return n;
+}
+#endif
+
+// heightsSlabPass over the points from..n-1, one at a time.
+template <bool kMapCells>
+void heightsSlabScalar(const LocalPoints& pts, const GroundGrid& grid,
+                       const std::vector<Centred>& cells, double lo, double hi, size_t from,
+                       float* H, uint32_t* S, SlabRun* r, GroundMapCells* map_cells) {
+  const size_t n = pts.size();
+  const PointCell cell_of(grid);
+  const float *X = pts.x.data(), *Y = pts.y.data(), *Z = pts.z.data();
+  // A copy of the cells' geometry in locals: through the pointer, each store to a cell would
+  // make the compiler reload it and the point arrays.
+  const GroundMapCells geometry = kMapCells ? cellGeometry(*map_cells) : GroundMapCells();
+  SlabRun run = *r;
+  for (size_t i = from; i < n; ++i) {
+    prefetchAhead(X, i, n), prefetchAhead(Y, i, n), prefetchAhead(Z, i, n);
+    const float x = X[i], y = Y[i], z = Z[i];
+    const Centred& cc = cells[cell_of(x, y)];
+    const float hv = static_cast<float>(z - cc.pl.at(x - cc.x0, y - cc.y0));
+    H[i] = hv;
+    // Branch-free, as slabColumns selects: about a quarter of the points are in the slab, in no
+    // predictable pattern.
+    const size_t k = kMapCells ? geometry.cellOf(x, y) : 0;
+    run.add<kMapCells>(S, i, (hv >= lo) & (hv < hi), k, z, map_cells);
+  }
+  *r = run;
+}
+
+// heightsAndSlab, and with kMapCells each point added to *map_cells.
+template <bool kMapCells>
+void heightsSlabPass(const LocalPoints& pts, const GroundGrid& grid, const TrunkExtractorParams& p,
+                     std::vector<float>* out, std::vector<uint32_t>* slab,
+                     GroundMapCells* map_cells) {
+  const size_t n = pts.size();
+  out->resize(n);
+  slab->resize(n);
+  SlabRun run;
+  size_t from = 0;
+#if DTIF_AVX2_PATHS
+  if (useAvx2()) {
+    from = heightsSlabAvx2<kMapCells>(pts, grid, p.slab_min_h_m, p.slab_max_h_m, out->data(),
+                                      slab->data(), &run, map_cells);
+  }
+#endif
+  const std::vector<Centred> cells = from < n ? centredPlanes(grid) : std::vector<Centred>();
+  heightsSlabScalar<kMapCells>(pts, grid, cells, p.slab_min_h_m, p.slab_max_h_m, from, out->data(),
+                               slab->data(), &run, map_cells);
+  if (kMapCells) map_cells->addRun(run.run, run.run_low, run.run_hits);
+  slab->resize(run.ns);
 }
 
 }  // namespace

@@ -16,12 +16,16 @@
 #include <limits>
 #include <sstream>
 
+#include "dtif/core/extraction/avx2.h"
+#include "dtif/core/extraction/extraction_stages.h"
+#include "dtif/core/extraction/point_bounds.h"
+
 #ifdef __SSE2__
 #include <emmintrin.h>
 #endif
-
-#include "dtif/core/extraction/extraction_stages.h"
-#include "dtif/core/extraction/point_bounds.h"
+#if DTIF_AVX2_PATHS
+#include <immintrin.h>
+#endif
 
 namespace dtif {
 namespace {
@@ -204,6 +208,7 @@ struct RingTests {
   double cx, cy, r_stem2, r_in2, r_out2, max_dh;
   GroundPlane pl;
   double x0, y0;
+  bool avx2;  // useAvx2()
 };
 
 // Point k written at every point as a ring point and as a ground point, kept by the counts.
@@ -267,6 +272,79 @@ uint32_t gatherPairs(const GroundGrid::SortedPoint* sorted, size_t ns, uint32_t 
   return k;
 }
 
+#if DTIF_AVX2_PATHS
+// Four sorted points (lanes of x, y, z, as doubles) from their 48 bytes.
+DTIF_TARGET_AVX2 void quadLanes(const GroundGrid::SortedPoint* q, __m256d* x, __m256d* y,
+                                __m256d* z) {
+  __m128 fx, fy, fz;
+  deinterleave4(&q->x, &fx, &fy, &fz);
+  *x = _mm256_cvtps_pd(fx), *y = _mm256_cvtps_pd(fy), *z = _mm256_cvtps_pd(fz);
+}
+
+// For each mask of four lanes, its set lanes in order (then zeros) and their count.
+struct MaskLanes {
+  alignas(16) int32_t lane[16][4];
+  int count[16];
+};
+constexpr MaskLanes maskLanes() {
+  MaskLanes t{};
+  for (int m = 0; m < 16; ++m) {
+    for (int j = 0; j < 4; ++j) {
+      if ((m >> j) & 1) t.lane[m][t.count[m]++] = j;
+    }
+  }
+  return t;
+}
+constexpr MaskLanes kLanes = maskLanes();
+
+// gatherPairs four points at a time (AVX2; the caller checks useAvx2()): the same IEEE
+// operations per point, the stem's lowest point a minimum per lane as there. Returns the first
+// point not taken.
+DTIF_TARGET_AVX2 uint32_t gatherQuads(const GroundGrid::SortedPoint* sorted, size_t ns, uint32_t k0,
+                                      uint32_t k1, const RingTests& t, RingOut* out) {
+  const __m256d vcx = _mm256_set1_pd(t.cx), vcy = _mm256_set1_pd(t.cy);
+  const __m256d vx0 = _mm256_set1_pd(t.x0), vy0 = _mm256_set1_pd(t.y0);
+  const __m256d va = _mm256_set1_pd(t.pl.a), vb = _mm256_set1_pd(t.pl.b);
+  const __m256d vc = _mm256_set1_pd(t.pl.c), vstem = _mm256_set1_pd(t.r_stem2);
+  const __m256d vin = _mm256_set1_pd(t.r_in2), vout = _mm256_set1_pd(t.r_out2);
+  const __m256d vdh = _mm256_set1_pd(t.max_dh);
+  const __m256d inf = _mm256_set1_pd(std::numeric_limits<double>::infinity());
+  const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
+  __m256d low = inf;
+  uint32_t k = k0;
+  for (; k + 4 <= k1; k += 4) {
+    prefetchAhead(sorted, k, ns);  // the row's next cells
+    __m256d x, y, z;
+    quadLanes(sorted + k, &x, &y, &z);
+    const __m256d dx = _mm256_sub_pd(x, vcx), dy = _mm256_sub_pd(y, vcy);
+    const __m256d d2 = _mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy));
+    low = _mm256_min_pd(_mm256_blendv_pd(inf, z, _mm256_cmp_pd(d2, vstem, _CMP_LT_OQ)), low);
+    const int in_ring = _mm256_movemask_pd(
+        _mm256_and_pd(_mm256_cmp_pd(d2, vin, _CMP_GE_OQ), _mm256_cmp_pd(d2, vout, _CMP_LE_OQ)));
+    // pl.at(x - x0, y - y0) = (a + b (x - x0)) + c (y - y0); h rounded to float, as stored.
+    const __m256d at = _mm256_add_pd(_mm256_add_pd(va, _mm256_mul_pd(vb, _mm256_sub_pd(x, vx0))),
+                                     _mm256_mul_pd(vc, _mm256_sub_pd(y, vy0)));
+    const __m128 h = _mm_and_ps(_mm256_cvtpd_ps(_mm256_sub_pd(z, at)), abs_mask);
+    const int high = _mm256_movemask_pd(_mm256_cmp_pd(_mm256_cvtps_pd(h), vdh, _CMP_GT_OQ));
+    // put() of the four, packed: the lanes kept in order at the counts (room for four: the
+    // arrays have room for every point of the cell).
+    const __m128i kk = _mm_set1_epi32(static_cast<int32_t>(k));
+    const int ground = in_ring & ~high;
+    _mm_storeu_si128(
+        reinterpret_cast<__m128i*>(out->ring + out->over),
+        _mm_add_epi32(kk, _mm_load_si128(reinterpret_cast<const __m128i*>(kLanes.lane[in_ring]))));
+    _mm_storeu_si128(
+        reinterpret_cast<__m128i*>(out->ground_at + out->ground),
+        _mm_add_epi32(kk, _mm_load_si128(reinterpret_cast<const __m128i*>(kLanes.lane[ground]))));
+    out->over += kLanes.count[in_ring], out->ground += kLanes.count[ground];
+  }
+  const __m128d low2 = _mm_min_pd(_mm256_castpd256_pd128(low), _mm256_extractf128_pd(low, 1));
+  const double lane_low = std::min(_mm_cvtsd_f64(low2), _mm_cvtsd_f64(_mm_unpackhi_pd(low2, low2)));
+  out->stem_low = std::min(out->stem_low, lane_low);
+  return k;
+}
+#endif
+
 // The points of ground cell c in the ring: every one is written and the counts advance by its
 // tests (branch-free: whether a point is in the ring or on the ground follows no pattern).
 void gatherCell(const GroundGrid& grid, size_t c, RingTests t, BaseRing* b) {
@@ -279,7 +357,11 @@ void gatherCell(const GroundGrid& grid, size_t c, RingTests t, BaseRing* b) {
   RingOut out{b->on_ground.data(), b->ring.data(), b->ground, b->over, b->stem_low};
   const GroundGrid::SortedPoint* sorted = grid.sorted.data();
   constexpr double kInf = std::numeric_limits<double>::infinity();
-  for (uint32_t k = gatherPairs(sorted, grid.sorted.size(), k0, k1, t, &out); k < k1; ++k) {
+  uint32_t from = k0;
+#if DTIF_AVX2_PATHS
+  if (t.avx2) from = gatherQuads(sorted, grid.sorted.size(), k0, k1, t, &out);
+#endif
+  for (uint32_t k = gatherPairs(sorted, grid.sorted.size(), from, k1, t, &out); k < k1; ++k) {
     const GroundGrid::SortedPoint& q = sorted[k];
     const double dx = q.x - t.cx, dy = q.y - t.cy;
     const double d2 = dx * dx + dy * dy;
@@ -300,7 +382,8 @@ void gatherBaseRing(const GroundGrid& grid, double cx, double cy, double r,
   // Lowest point on the stem itself: a base counts as seen only if the stem is visible
   // down to the ground (not hidden by shrubs or below the sensor's field of view).
   const double r_stem2 = (r + p.stem_shell_m) * (r + p.stem_shell_m);
-  const RingTests t{cx, cy, r_stem2, r_in * r_in, r_out * r_out, p.base_max_dh_m, {}, 0.0, 0.0};
+  RingTests t{cx, cy, r_stem2, r_in * r_in, r_out * r_out, p.base_max_dh_m, {}, 0.0, 0.0, false};
+  t.avx2 = useAvx2();
   int gx0, gy0, gx1, gy1;
   grid.cellOf(cx - r_out, cy - r_out, &gx0, &gy0);
   grid.cellOf(cx + r_out, cy + r_out, &gx1, &gy1);
@@ -413,6 +496,96 @@ float horizontalMax(__m128 v) {
 }
 #endif
 
+#if DTIF_AVX2_PATHS
+// What firstPassLoop carries through eightAtATime: its counts, marks and extent lanes.
+struct EightState {
+  size_t n, nf;
+  HeightCellMarks::Pass marker;
+  __m128 lox, loy, hix, hiy;
+};
+
+// Points P[0] and P[4] (x, y, z, padding each), one in each half.
+DTIF_TARGET_AVX2 __m256 pointPair(const pcl::PointXYZ* P) {
+  return _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(P[0].data)),
+                              _mm_loadu_ps(P[4].data), 1);
+}
+
+// The minimum (maximum) of four lanes' and of eight lanes' values, as four lanes.
+DTIF_TARGET_AVX2 __m128 joinMin(__m128 a, __m256 v) {
+  return _mm_min_ps(a, _mm_min_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps(v, 1)));
+}
+DTIF_TARGET_AVX2 __m128 joinMax(__m128 a, __m256 v) {
+  return _mm_max_ps(a, _mm_max_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps(v, 1)));
+}
+
+// Eight points (lanes of x, y, z) from P[0..7]: two 4 x 4 transposes side by side.
+DTIF_TARGET_AVX2 void transpose8(const pcl::PointXYZ* P, __m256* x, __m256* y, __m256* z) {
+  const __m256 r0 = pointPair(P), r1 = pointPair(P + 1), r2 = pointPair(P + 2);
+  const __m256 r3 = pointPair(P + 3);
+  const __m256 t0 = _mm256_unpacklo_ps(r0, r1), t1 = _mm256_unpackhi_ps(r0, r1);
+  const __m256 t2 = _mm256_unpacklo_ps(r2, r3), t3 = _mm256_unpackhi_ps(r2, r3);
+  *x = _mm256_shuffle_ps(t0, t2, _MM_SHUFFLE(1, 0, 1, 0));
+  *y = _mm256_shuffle_ps(t0, t2, _MM_SHUFFLE(3, 2, 3, 2));
+  *z = _mm256_shuffle_ps(t1, t3, _MM_SHUFFLE(1, 0, 1, 0));
+}
+
+// fourUsable of eight points: mask of the lanes with |v - c| <= hs, in double.
+DTIF_TARGET_AVX2 int insideLanes(__m256 v, __m256d c, __m256d hs) {
+  const __m256d sign = _mm256_set1_pd(-0.0);
+  const __m256d lo =
+      _mm256_andnot_pd(sign, _mm256_sub_pd(_mm256_cvtps_pd(_mm256_castps256_ps128(v)), c));
+  const __m256d hi =
+      _mm256_andnot_pd(sign, _mm256_sub_pd(_mm256_cvtps_pd(_mm256_extractf128_ps(v, 1)), c));
+  return _mm256_movemask_pd(_mm256_cmp_pd(lo, hs, _CMP_LE_OQ)) |
+         _mm256_movemask_pd(_mm256_cmp_pd(hi, hs, _CMP_LE_OQ)) << 4;
+}
+
+DTIF_TARGET_AVX2 bool eightUsable(__m256 x, __m256 y, __m256 z, const PointBounds& b) {
+  const __m256 abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
+  const __m256 sane = _mm256_set1_ps(1e8f);  // finite (no NaN, no inf) and not absurd
+  const __m256 ok =
+      _mm256_and_ps(_mm256_and_ps(_mm256_cmp_ps(_mm256_and_ps(x, abs_mask), sane, _CMP_LE_OQ),
+                                  _mm256_cmp_ps(_mm256_and_ps(y, abs_mask), sane, _CMP_LE_OQ)),
+                    _mm256_cmp_ps(_mm256_and_ps(z, abs_mask), sane, _CMP_LE_OQ));
+  if (_mm256_movemask_ps(ok) != 255) return false;
+  const __m256d hs = _mm256_set1_pd(b.half_side_m);
+  return (insideLanes(x, _mm256_set1_pd(b.centre.x()), hs) &
+          insideLanes(y, _mm256_set1_pd(b.centre.y()), hs) &
+          insideLanes(z, _mm256_set1_pd(b.centre.z()), hs)) == 255;
+}
+
+// firstPassLoop's four-at-a-time step eight points at a time (AVX2; the caller checks
+// useAvx2()) from point i on, while all eight are usable: the same local points, marks and
+// extent (the lanes' minima joined in another order: the same values, as there). Returns where
+// it stopped: at eight points not all usable (firstPassLoop takes them) or fewer than eight left.
+DTIF_TARGET_AVX2 size_t eightAtATime(const pcl::PointXYZ* P, size_t size, size_t i,
+                                     const PointBounds& b, const float origin[3], bool marking,
+                                     float* X, float* Y, float* Z, EightState* st) {
+  HeightCellMarks::Pass marker = st->marker;
+  size_t n = st->n;
+  const __m256 ox = _mm256_set1_ps(origin[0]), oy = _mm256_set1_ps(origin[1]);
+  const __m256 oz = _mm256_set1_ps(origin[2]);
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  __m256 lox = _mm256_set1_ps(kInf), loy = lox, hix = _mm256_set1_ps(-kInf), hiy = hix;
+  for (; i + 8 <= size; i += 8) {
+    __m256 x, y, z;
+    transpose8(P + i, &x, &y, &z);
+    if (!eightUsable(x, y, z, b)) break;
+    if (marking) marker.add8(x, y, z);
+    const __m256 lx = _mm256_sub_ps(x, ox), ly = _mm256_sub_ps(y, oy);
+    _mm256_storeu_ps(X + n, lx), _mm256_storeu_ps(Y + n, ly);
+    _mm256_storeu_ps(Z + n, _mm256_sub_ps(z, oz));
+    lox = _mm256_min_ps(lx, lox), loy = _mm256_min_ps(ly, loy);
+    hix = _mm256_max_ps(lx, hix), hiy = _mm256_max_ps(ly, hiy);
+    n += 8;
+  }
+  st->lox = joinMin(st->lox, lox), st->loy = joinMin(st->loy, loy);
+  st->hix = joinMax(st->hix, hix), st->hiy = joinMax(st->hiy, hiy);
+  st->nf += n - st->n, st->n = n, st->marker = marker;
+  return i;
+}
+#endif
+
 // What firstPass's loop finds: the local origin (a floor of the first usable point), the local
 // points' extent and how many points it kept (n) and found finite (nf).
 struct FirstPassFound {
@@ -422,24 +595,25 @@ struct FirstPassFound {
 };
 
 #ifdef __SSE2__
-// firstPass's loop over the cloud: the local points into X, Y, Z, each finite point marked
-// (marking), the rest into *found. false when a finite point lies outside b. Raw pointers and
-// locals: through members, the compiler reloads them at every point.
-bool firstPassLoop(const Cloud& cloud, const PointBounds& b, float* X, float* Y, float* Z,
-                   bool marking, HeightCellMarks::Pass* marks, FirstPassFound* found) {
-  const pcl::PointXYZ* P = cloud.points.data();
-  const size_t size = cloud.size();
-  HeightCellMarks::Pass marker = *marks;
+// firstPassLoop's state and steps. A local of firstPassLoop, all of it inlined there: through
+// the members of an object in memory (or raw pointers' targets), the compiler reloads them at
+// every point.
+struct FirstPassSse2 {
+  const pcl::PointXYZ* P;
+  float *X, *Y, *Z;
+  bool marking;
+  HeightCellMarks::Pass marker;
+  __m128d cxy, cz, hs;
   float ox = 0.0f, oy = 0.0f, oz = 0.0f;
   bool have_origin = false;
   size_t n = 0, nf = 0;
-  constexpr float kInf = std::numeric_limits<float>::infinity();
-  const __m128d cxy = _mm_set_pd(b.centre.y(), b.centre.x()), cz = _mm_set1_pd(b.centre.z());
-  const __m128d hs = _mm_set1_pd(b.half_side_m);
-  // The extent in lanes x and y, in the order binGroundGrid would take it.
-  __m128 origin = _mm_setzero_ps(), lo = _mm_set1_ps(kInf), hi = _mm_set1_ps(-kInf);
+  // The extent in lanes x and y, in the order binGroundGrid would take it (one by one), and in
+  // lanes of four points (four at a time), joined at the end: the same values (only the sign of
+  // a zero extent may differ, which no cell index depends on).
+  __m128 origin{}, lo{}, hi{}, lox{}, loy{}, hix{}, hiy{};
+
   // One point; false when it is finite and outside b.
-  const auto one = [&](size_t i) {
+  bool one(size_t i) {
     const PointLanes q(P[i]);
     if (!q.finite()) return true;
     ++nf;
@@ -457,27 +631,14 @@ bool firstPassLoop(const Cloud& cloud, const PointBounds& b, float* X, float* Y,
     lo = _mm_min_ps(l, lo), hi = _mm_max_ps(l, hi);  // std::min(lo, l), std::max(hi, l)
     ++n;
     return true;
-  };
-  size_t i = 0;
-  for (; i < size && !have_origin; ++i) {
-    if (!one(i)) return false;
   }
-  // Then four points at a time (point i + j in lane j), where all four are finite, inside b and
-  // of sane magnitude (in survey data, every block), else one by one as above. The minima and
-  // maxima per lane are joined at the end: the same values (only the sign of a zero extent may
-  // differ, which no cell index depends on).
-  const __m128 ox4 = _mm_set1_ps(ox), oy4 = _mm_set1_ps(oy), oz4 = _mm_set1_ps(oz);
-  __m128 lox = _mm_set1_ps(kInf), loy = lox, hix = _mm_set1_ps(-kInf), hiy = hix;
-  for (; i + 4 <= size; i += 4) {
+  // Points i..i+3 (point i + j in lane j) at once where all four are finite, inside b and of
+  // sane magnitude (in survey data, every block), else one by one. false as one().
+  bool four(size_t i, __m128 ox4, __m128 oy4, __m128 oz4) {
     __m128 x = _mm_loadu_ps(P[i].data), y = _mm_loadu_ps(P[i + 1].data);
     __m128 z = _mm_loadu_ps(P[i + 2].data), w = _mm_loadu_ps(P[i + 3].data);
     _MM_TRANSPOSE4_PS(x, y, z, w);
-    if (!fourUsable(x, y, z, cxy, cz, hs)) {
-      for (size_t k = i; k < i + 4; ++k) {
-        if (!one(k)) return false;
-      }
-      continue;
-    }
+    if (!fourUsable(x, y, z, cxy, cz, hs)) return one(i) && one(i + 1) && one(i + 2) && one(i + 3);
     nf += 4;
     if (marking) marker.add4(x, y, z);
     const __m128 lx = _mm_sub_ps(x, ox4), ly = _mm_sub_ps(y, oy4);
@@ -485,16 +646,65 @@ bool firstPassLoop(const Cloud& cloud, const PointBounds& b, float* X, float* Y,
     lox = _mm_min_ps(lx, lox), loy = _mm_min_ps(ly, loy);
     hix = _mm_max_ps(lx, hix), hiy = _mm_max_ps(ly, hiy);
     n += 4;
+    return true;
+  }
+#if DTIF_AVX2_PATHS
+  // eightAtATime from point i on: returns where it stopped.
+  size_t eights(size_t size, size_t i, const PointBounds& b) {
+    const float o[3] = {ox, oy, oz};
+    EightState st{n, nf, marker, lox, loy, hix, hiy};
+    i = eightAtATime(P, size, i, b, o, marking, X, Y, Z, &st);
+    n = st.n, nf = st.nf, marker = st.marker;
+    lox = st.lox, loy = st.loy, hix = st.hix, hiy = st.hiy;
+    return i;
+  }
+#endif
+  void found(FirstPassFound* f) const {
+    f->ox = ox, f->oy = oy, f->oz = oz, f->n = n, f->nf = nf;
+    f->minx = std::min(_mm_cvtss_f32(lo), horizontalMin(lox));
+    f->miny = std::min(_mm_cvtss_f32(_mm_shuffle_ps(lo, lo, 1)), horizontalMin(loy));
+    f->maxx = std::max(_mm_cvtss_f32(hi), horizontalMax(hix));
+    f->maxy = std::max(_mm_cvtss_f32(_mm_shuffle_ps(hi, hi, 1)), horizontalMax(hiy));
+  }
+};
+
+// firstPass's loop over the cloud: the local points into X, Y, Z, each finite point marked
+// (marking), the rest into *found. false when a finite point lies outside b.
+bool firstPassLoop(const Cloud& cloud, const PointBounds& b, float* X, float* Y, float* Z,
+                   bool marking, HeightCellMarks::Pass* marks, FirstPassFound* found) {
+  const size_t size = cloud.size();
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  const __m128 inf = _mm_set1_ps(kInf), minus_inf = _mm_set1_ps(-kInf);
+  FirstPassSse2 s{cloud.points.data(),
+                  X,
+                  Y,
+                  Z,
+                  marking,
+                  *marks,
+                  _mm_set_pd(b.centre.y(), b.centre.x()),
+                  _mm_set1_pd(b.centre.z()),
+                  _mm_set1_pd(b.half_side_m)};
+  s.lo = s.lox = s.loy = inf, s.hi = s.hix = s.hiy = minus_inf;
+  size_t i = 0;
+  for (; i < size && !s.have_origin; ++i) {
+    if (!s.one(i)) return false;
+  }
+  const __m128 ox4 = _mm_set1_ps(s.ox), oy4 = _mm_set1_ps(s.oy), oz4 = _mm_set1_ps(s.oz);
+#if DTIF_AVX2_PATHS
+  const bool avx2 = useAvx2();
+#endif
+  for (; i + 4 <= size; i += 4) {
+#if DTIF_AVX2_PATHS
+    // Eight at a time while all eight are usable; four (or one by one) where they are not.
+    if (avx2 && i + 8 <= size && (i = s.eights(size, i, b)) + 4 > size) break;
+#endif
+    if (!s.four(i, ox4, oy4, oz4)) return false;
   }
   for (; i < size; ++i) {
-    if (!one(i)) return false;
+    if (!s.one(i)) return false;
   }
-  *marks = marker;
-  found->ox = ox, found->oy = oy, found->oz = oz, found->n = n, found->nf = nf;
-  found->minx = std::min(_mm_cvtss_f32(lo), horizontalMin(lox));
-  found->miny = std::min(_mm_cvtss_f32(_mm_shuffle_ps(lo, lo, 1)), horizontalMin(loy));
-  found->maxx = std::max(_mm_cvtss_f32(hi), horizontalMax(hix));
-  found->maxy = std::max(_mm_cvtss_f32(_mm_shuffle_ps(hi, hi, 1)), horizontalMax(hiy));
+  *marks = s.marker;
+  s.found(found);
   return true;
 }
 #else
@@ -530,10 +740,8 @@ bool firstPassLoop(const Cloud& cloud, const PointBounds& b, float* X, float* Y,
 }
 #endif
 
-// toLocalPoints of a cloud whose finite points all lie inside b, and (marks not null) each
-// finite point added to the footprint's marks, in one pass over the cloud, the largest array
-// extraction reads. *finite counts the finite points. false when a finite point lies outside b
-// (then nothing is usable).
+}  // namespace
+
 bool firstPass(const Cloud& cloud, const PointBounds& b, LocalPoints* pts, HeightCellMarks* marks,
                size_t* finite) {
   const size_t size = cloud.size();
@@ -552,6 +760,8 @@ bool firstPass(const Cloud& cloud, const PointBounds& b, LocalPoints* pts, Heigh
   *finite = f.nf;
   return true;
 }
+
+namespace {
 
 // The largest arrays of an extraction, kept per thread between submaps: reused storage needs no
 // fresh pages (page faults on ~50 MB cost ~10 % of a 1 M-point extraction). Held: ~40 bytes per

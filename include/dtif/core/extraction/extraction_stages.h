@@ -1,7 +1,7 @@
 // The stages of trunk extraction (paper Sec. 3.B), each usable and testable on its own.
 // extractTrunks (trunk_extractor.h) runs them in this order:
-//   toLocalPoints -> estimateLocalGround -> heightsAboveGround with the slab and the ground
-//   map's cells (heightsAndSlab, GroundMapCells) -> (trunkFootprint) -> slabColumns
+//   toLocalPoints (firstPass) -> estimateLocalGround -> heightsAboveGround with the slab and the
+//   ground map's cells (heightsAndSlab, GroundMapCells) -> (trunkFootprint) -> slabColumns
 //   (columnsOfSlab) -> clusterColumns -> fitCandidate per candidate (fitCircleRobust,
 //   stemLeans, stemBase) -> keepDistinctTrunks -> the ground map when fewBasesSeen and the
 //   caller wants it (groundMapOfCells, else groundMapIfFewBasesSeen).
@@ -22,6 +22,7 @@
 #include "dtif/core/cloud.h"
 #include "dtif/core/extraction/footprint.h"
 #include "dtif/core/extraction/ground_map.h"
+#include "dtif/core/extraction/point_bounds.h"
 #include "dtif/core/extraction/trunk_extractor.h"
 #include "dtif/core/types.h"
 
@@ -45,6 +46,9 @@ class Divisor {
     inv_ = pow2_ ? 1.0 / d : 0.0;
   }
   double operator()(double x) const { return pow2_ ? x * inv_ : x / d_; }
+  /// Whether operator() multiplies (by factor()) rather than divides (by factor()).
+  bool multiplies() const { return pow2_; }
+  double factor() const { return pow2_ ? inv_ : d_; }
 
  private:
   double d_, inv_;
@@ -88,6 +92,12 @@ struct LocalPoints {
 /// Keeps the finite points with coordinates below 1e8 m (larger ones would overflow the cell
 /// indices; they are no survey points), relative to the floor of the first kept point.
 LocalPoints toLocalPoints(const Cloud& cloud);
+/// toLocalPoints of a cloud whose finite points all lie inside b (with the points' extent), and
+/// (marks not null) each finite point added to the footprint's marks, in one pass over the
+/// cloud, the largest array extraction reads. *finite counts the finite points. false when a
+/// finite point lies outside b (then nothing is usable).
+bool firstPass(const Cloud& cloud, const PointBounds& b, LocalPoints* pts, HeightCellMarks* marks,
+               size_t* finite);
 
 // --- Local ground ---------------------------------------------------------------------------
 
@@ -226,6 +236,8 @@ struct GroundMapCells {
     hits[k] += count;
   }
   static constexpr size_t npos = ~size_t{0};
+  /// x / cell_m as cellOf computes it.
+  const Divisor& byCell() const { return by_cell_; }
   /// The cell size, origin and extent of `other`, not its cells (cellOf works on those alone).
   void copyGeometry(const GroundMapCells& other) {
     cell_m = other.cell_m, ox = other.ox, oy = other.oy, oz = other.oz;

@@ -12,7 +12,12 @@
 #include <vector>
 
 #include "dtif/core/cloud.h"
+#include "dtif/core/extraction/avx2.h"
 #include "dtif/core/types.h"
+
+#if DTIF_AVX2_PATHS
+#include <immintrin.h>
+#endif
 
 namespace dtif {
 
@@ -119,8 +124,64 @@ class HeightCellMarks {
     }
 #endif
 
+#if DTIF_AVX2_PATHS
+    /// add4 of eight finite points (AVX2; the caller checks useAvx2()): the tiles' ground
+    /// gathered and the indices selected in lanes, only the marks' byte stores one by one.
+    DTIF_TARGET_AVX2 void add8(__m256 x, __m256 y, __m256 z) {
+      if (shift_ < 0) {  // cells not of 2^k m: add() lane by lane
+        alignas(32) float px[8], py[8], pz[8];
+        _mm256_store_ps(px, x), _mm256_store_ps(py, y), _mm256_store_ps(pz, z);
+        for (int j = 0; j < 8; ++j) add(px[j], py[j], pz[j]);
+        return;
+      }
+      const __m256i fx = floor8(x), fy = floor8(y);
+      const __m256i tx = _mm256_sub_epi32(_mm256_srai_epi32(fx, 1), set8(tx0_));
+      const __m256i ty = _mm256_sub_epi32(_mm256_srai_epi32(fy, 1), set8(ty0_));
+      const __m256i tile = _mm256_and_si256(below8(tx, tw_), below8(ty, th_));
+      // tileGround: tile 0's ground outside the tile grid, as there (the products of those
+      // lanes, which may wrap, are not used).
+      const __m256i at =
+          _mm256_and_si256(tile, _mm256_add_epi32(_mm256_mullo_epi32(ty, set8(tw_)), tx));
+      const __m256 all = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
+      const __m256 g = _mm256_mask_i32gather_ps(_mm256_setzero_ps(), ground_, at, all, 4);
+      const __m256 h = _mm256_sub_ps(z, g);
+      const __m256i band = _mm256_and_si256(
+          tile,
+          _mm256_castps_si256(_mm256_and_ps(_mm256_cmp_ps(h, _mm256_set1_ps(kMinF), _CMP_GE_OQ),
+                                            _mm256_cmp_ps(h, _mm256_set1_ps(kMaxF), _CMP_LE_OQ))));
+      const __m128i shift = _mm_cvtsi32_si128(shift_);
+      const __m256i cx = _mm256_sub_epi32(_mm256_sra_epi32(fx, shift), set8(cx0_));
+      const __m256i cy = _mm256_sub_epi32(_mm256_sra_epi32(fy, shift), set8(cy0_));
+      const __m256i box = _mm256_and_si256(below8(cx, cw_), below8(cy, ch_));
+      outside_ |= _mm256_movemask_epi8(_mm256_andnot_si256(box, band)) != 0;
+      // mark: the cell where in the band and the box, else the sink.
+      const __m256i cell = _mm256_add_epi32(_mm256_mullo_epi32(cx, set8(ch_)), cy);
+      const __m256i in = _mm256_and_si256(band, box);
+      alignas(32) int32_t k[8];
+      _mm256_store_si256(reinterpret_cast<__m256i*>(k),
+                         _mm256_blendv_epi8(set8(static_cast<int64_t>(sink_)), cell, in));
+      for (int j = 0; j < 8; ++j) marks_[static_cast<uint32_t>(k[j])] = 1;
+    }
+#endif
+
    private:
     friend class HeightCellMarks;
+#if DTIF_AVX2_PATHS
+    // floor4 of eight floats.
+    DTIF_TARGET_AVX2 static __m256i floor8(__m256 v) {
+      const __m256i i = _mm256_cvttps_epi32(v);
+      return _mm256_add_epi32(
+          i, _mm256_castps_si256(_mm256_cmp_ps(v, _mm256_cvtepi32_ps(i), _CMP_LT_OQ)));
+    }
+    DTIF_TARGET_AVX2 static __m256i set8(int64_t v) {
+      return _mm256_set1_epi32(static_cast<int32_t>(v));
+    }
+    // Lanes with 0 <= v < n (n > 0): the unsigned comparison of tileGround and mark.
+    DTIF_TARGET_AVX2 static __m256i below8(__m256i v, int64_t n) {
+      const __m256i nonneg = _mm256_cmpgt_epi32(v, _mm256_set1_epi32(-1));
+      return _mm256_and_si256(nonneg, _mm256_cmpgt_epi32(set8(n), v));
+    }
+#endif
     // The ground of tile (tx, ty) (tile grid indices); *tile false when it lies outside the grid
     // (then tile 0's ground, which band tests discard).
     float tileGround(int64_t tx, int64_t ty, bool* tile) const {
