@@ -20,7 +20,7 @@ if [ ${#TESTS[@]} -eq 0 ]; then
     imu_gravity_test extraction_stages_test trunk_extractor_test trunk_accumulator_test
     loop_detector_test query_index_test
     elevation_test verification_test matcher_test pair_vote_test pose_estimator_test
-    robot_links_test database_odometry_test voxel_grid_test lattice_test
+    robot_links_test database_odometry_test voxel_grid_test lattice_test avx2_paths_test
     map_merger_test factor_cost_test stem_inventory_test stemmap_registration_test stem_map_anchor_test
     config_test dataset_test pcd_reader_test merge_files_test real_data_test evaluation_test
     fpfh_registration_test scan_context_test solvers_test cli_test
