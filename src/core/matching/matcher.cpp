@@ -414,11 +414,11 @@ struct TriangleColumns {
 /// mask is 7 exactly when every value is in its interval (each edge needs its length and both
 /// end radii), so the non-face case is "partial mask == 7". Comparisons only, so the AVX2
 /// clone (32 pairs a step where the CPU has AVX2) gives the same masks.
-__attribute__((target_clones("avx2", "default"))) void boundsMasks(const TriangleColumns& c,
-                                                                   const ConsistencyBounds& b,
-                                                                   bool q_face, size_t from,
-                                                                   size_t to,
-                                                                   std::vector<uint8_t>* mask) {
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+__attribute__((target_clones("avx2", "default")))
+#endif
+void boundsMasks(const TriangleColumns& c, const ConsistencyBounds& b, bool q_face, size_t from,
+                 size_t to, std::vector<uint8_t>* mask) {
   const size_t n = to - from;
   mask->resize(n);
   uint8_t* m = mask->data();
