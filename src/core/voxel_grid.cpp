@@ -70,15 +70,6 @@ void VoxelCentroidGrid::grow() {
 
 namespace {
 
-/// cellIndex(v) without libm's floor call (not inlined on baseline x86-64; three per return):
-/// below 10^12 in magnitude the truncation, one lower where it rounded up, is the floor and
-/// needs no saturation.
-int64_t voxelIndex(double v) {
-  if (!(std::fabs(v) < 1e12)) return cellIndex(v);  // NaN too
-  const int64_t i = static_cast<int64_t>(v);
-  return i - (v < static_cast<double>(i));
-}
-
 constexpr int64_t kAxisOffset = int64_t{1} << 20;  // VoxelCentroidGrid::add's
 constexpr int64_t kAxisEnd = int64_t{1} << 21;
 constexpr int kDigitBits = 11;
@@ -102,9 +93,9 @@ int VoxelCentroidSorter::packedKeys(const Cloud& cloud) {
   size_t m = 0;
   for (size_t i = 0; i < n; ++i) {
     const pcl::PointXYZ& p = cloud.points[i];
-    const std::array<int64_t, 3> a = {voxelIndex(p.x * inv_) + kAxisOffset,
-                                      voxelIndex(p.y * inv_) + kAxisOffset,
-                                      voxelIndex(p.z * inv_) + kAxisOffset};
+    const std::array<int64_t, 3> a = {cellIndex(p.x * inv_) + kAxisOffset,
+                                      cellIndex(p.y * inv_) + kAxisOffset,
+                                      cellIndex(p.z * inv_) + kAxisOffset};
     bool in = true;
     for (int d = 0; d < 3; ++d) in &= a[d] >= 0 && a[d] < kAxisEnd;
     if (!in) continue;  // as the grid: beyond 2^20 voxels from the origin

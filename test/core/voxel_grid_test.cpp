@@ -8,6 +8,8 @@
 #include <limits>
 #include <random>
 
+#include "dtif/core/cells.h"
+
 namespace dtif {
 namespace {
 
@@ -58,6 +60,30 @@ TEST(VoxelCentroidGrid, IgnoresPointsBeyondTheGrid) {
   g.add({1.0f, 1.0f, 1.0f});
   EXPECT_EQ(g.raw(), 1u);
   EXPECT_EQ(g.centroids().size(), 1u);
+}
+
+TEST(CellIndex, IsTheFloorInsideTheRangeSaturatedOutsideAndZeroForNaN) {
+  // Around integers (both sides, one ulp away), at +-0, and up to the saturation's edge.
+  std::vector<double> v = {0.0, -0.0, 0.5, -0.5, 1e12, -1e12, 4.5e15, -4.5e15};
+  for (double k : {1.0, -1.0, 7.0, -7.0, 1e6, -1e6, 1099511627775.0, -1099511627775.0}) {
+    v.push_back(k);
+    v.push_back(std::nextafter(k, 0.0));
+    v.push_back(std::nextafter(k, k > 0 ? 1e300 : -1e300));
+  }
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-1e6, 1e6);
+  for (int i = 0; i < 10000; ++i) v.push_back(u(rng));
+  for (const double x : v) {
+    const double f = std::floor(x);
+    const int64_t want = f >= static_cast<double>(kMaxCellIndex)    ? kMaxCellIndex
+                         : f <= -static_cast<double>(kMaxCellIndex) ? -kMaxCellIndex
+                                                                    : static_cast<int64_t>(f);
+    EXPECT_EQ(cellIndex(x), want) << x;
+  }
+  const double inf = std::numeric_limits<double>::infinity();
+  EXPECT_EQ(cellIndex(inf), kMaxCellIndex);
+  EXPECT_EQ(cellIndex(-inf), -kMaxCellIndex);
+  EXPECT_EQ(cellIndex(std::numeric_limits<double>::quiet_NaN()), 0);
 }
 
 /// The grid's centroids of `cloud`, its points added in order.
