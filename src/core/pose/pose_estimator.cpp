@@ -130,12 +130,18 @@ struct ArcSweep {
   double runner_up = 0.0;
 };
 
-/// |wrapAngle(d)| > sep for d in [-3 pi, 3 pi], without wrapAngle's three libm calls unless d
-/// lies within a hair of the boundary: one turn added or taken off is within rounding
-/// (~1e-15) of wrapAngle's value, and both are within it of the exact wrap (at +-pi they may
-/// differ in sign only), so the comparison decides the same.
+/// a in [-pi, pi] for a in [-3 pi, 3 pi], by one turn at most: within rounding (~1e-15) of
+/// wrapAngle's value without its three libm calls (atan2 of sine and cosine). The arc ends of
+/// consensusYaw (phi -+ half, both in [-pi, pi]): there wrapAngle cost a twentieth of a query,
+/// and the two differ by an ulp or so in a few per cent of the ends, which moves the sweep's yaw
+/// by as much (refineYaw starts from it) and leaves its sums alone.
+double wrapOnce(double a) { return a > M_PI ? a - 2.0 * M_PI : a < -M_PI ? a + 2.0 * M_PI : a; }
+
+/// |wrapAngle(d)| > sep for d in [-3 pi, 3 pi], by wrapOnce unless d lies within a hair of the
+/// boundary: both are within rounding of the exact wrap (at +-pi they may differ in sign only),
+/// so the comparison decides the same.
 bool farFromZero(double d, double sep) {
-  const double w = d > M_PI ? d - 2.0 * M_PI : d < -M_PI ? d + 2.0 * M_PI : d;
+  const double w = wrapOnce(d);
   if (std::fabs(std::fabs(w) - sep) > 1e-9) return std::fabs(w) > sep;
   return std::fabs(wrapAngle(d)) > sep;
 }
@@ -190,12 +196,6 @@ void sortEvents(std::vector<Event>* ev) {
     i = j;
   }
 }
-
-/// a in [-pi, pi] for a in [-3 pi, 3 pi], by one turn at most: the arc ends of consensusYaw,
-/// phi -+ half with both in [-pi, pi]. wrapAngle's three libm calls per end cost a twentieth of
-/// a query; its value differs from this one by an ulp or so in a few per cent of the ends, which
-/// moves the sweep's yaw by as much (refineYaw starts from it) and leaves its sums alone.
-double wrapOnce(double a) { return a > M_PI ? a - 2.0 * M_PI : a < -M_PI ? a + 2.0 * M_PI : a; }
 
 ArcSweep consensusYaw(const std::vector<Tim>& tims, double beta) {
   constexpr double kSeparation = 10.0 * M_PI / 180.0;
