@@ -68,7 +68,7 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
     in_callback.voxel_m = 0.0;
     assembler_ = std::make_unique<ros_glue::SubmapAssembler>(in_callback, node_.first_submap_id);
     if (node_.input == "odometry" && assembler_params_.voxel_m > 0.0) {
-      voxel_grid_ = std::make_unique<VoxelCentroidSorter>(assembler_params_.voxel_m);
+      voxel_filter_ = std::make_unique<VoxelCentroidSorter>(assembler_params_.voxel_m);
     }
     leveller_ = std::make_unique<Leveller>(levelling_params_);
     setUpAccumulator();
@@ -368,7 +368,7 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
   void process(ros_glue::AssembledSubmap& s, const std::string& frame,
                const ImuGravityWindow::Reading& imu) {
     const auto t0 = std::chrono::steady_clock::now();
-    if (voxel_grid_) ros_glue::voxelFilterSubmap(voxel_grid_.get(), s.cloud.get());
+    if (voxel_filter_) ros_glue::voxelFilterSubmap(voxel_filter_.get(), s.cloud.get());
     if (imu.ok) leveller_->addImu(node_.robot, imu.up_O);
     if (imu_sub_ && !imu.ok) {
       NODELET_WARN_THROTTLE(30.0,
@@ -479,8 +479,8 @@ class TrunkExtractionNodelet : public nodelet::Nodelet {
   };
   ros_glue::BoundedQueue<Job> queue_;  // capacity node_.queue_size (onInit)
   std::thread worker_;
-  std::unique_ptr<VoxelCentroidSorter> voxel_grid_;  // worker thread only; null: no voxel filter
-  std::unique_ptr<TrunkAccumulator> accumulator_;    // worker thread only (after onInit)
+  std::unique_ptr<VoxelCentroidSorter> voxel_filter_;  // worker thread only; null: no voxel filter
+  std::unique_ptr<TrunkAccumulator> accumulator_;      // worker thread only (after onInit)
   // The recent submaps' poses, for their forward updates' messages (worker thread only): more
   // than multi_submap/max_submaps + forward_submaps can reach (at most 100 + 100).
   struct RecentPose {
