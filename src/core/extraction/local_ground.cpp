@@ -732,11 +732,11 @@ struct HeightsAvx2 {
 };
 
 // heightsSlabPass's points, all of them: the last few through a padded copy (the last point
-// repeated, so every lane has a cell). Returns the count of points done.
+// repeated, so every lane has a cell).
 template <bool kMapCells>
-DTIF_TARGET_AVX2 size_t heightsSlabAvx2(const LocalPoints& pts, const GroundGrid& grid, double lo,
-                                        double hi, float* H, uint32_t* S, SlabRun* r,
-                                        GroundMapCells* map_cells) {
+DTIF_TARGET_AVX2 void heightsSlabAvx2(const LocalPoints& pts, const GroundGrid& grid, double lo,
+                                      double hi, float* H, uint32_t* S, SlabRun* r,
+                                      GroundMapCells* map_cells) {
   const size_t n = pts.size();
   const float *X = pts.x.data(), *Y = pts.y.data(), *Z = pts.z.data();
   const GroundMapCells geometry = kMapCells ? cellGeometry(*map_cells) : GroundMapCells();
@@ -756,23 +756,22 @@ DTIF_TARGET_AVX2 size_t heightsSlabAvx2(const LocalPoints& pts, const GroundGrid
     lanes.block<kMapCells>(x, y, z, i, static_cast<int>(n - i), H, S, &run, map_cells);
   }
   *r = run;
-  return n;
 }
 #endif
 
-// heightsSlabPass over the points from..n-1, one at a time.
+// heightsSlabPass's points one at a time.
 template <bool kMapCells>
-void heightsSlabScalar(const LocalPoints& pts, const GroundGrid& grid,
-                       const std::vector<Centred>& cells, double lo, double hi, size_t from,
+void heightsSlabScalar(const LocalPoints& pts, const GroundGrid& grid, double lo, double hi,
                        float* H, uint32_t* S, SlabRun* r, GroundMapCells* map_cells) {
   const size_t n = pts.size();
+  const std::vector<Centred> cells = centredPlanes(grid);
   const PointCell cell_of(grid);
   const float *X = pts.x.data(), *Y = pts.y.data(), *Z = pts.z.data();
   // A copy of the cells' geometry in locals: through the pointer, each store to a cell would
   // make the compiler reload it and the point arrays.
   const GroundMapCells geometry = kMapCells ? cellGeometry(*map_cells) : GroundMapCells();
   SlabRun run = *r;
-  for (size_t i = from; i < n; ++i) {
+  for (size_t i = 0; i < n; ++i) {
     prefetchAhead(X, i, n), prefetchAhead(Y, i, n), prefetchAhead(Z, i, n);
     const float x = X[i], y = Y[i], z = Z[i];
     const Centred& cc = cells[cell_of(x, y)];
@@ -795,16 +794,18 @@ void heightsSlabPass(const LocalPoints& pts, const GroundGrid& grid, const Trunk
   out->resize(n);
   slab->resize(n);
   SlabRun run;
-  size_t from = 0;
+  bool done = false;
 #if DTIF_AVX2_PATHS
   if (useAvx2()) {
-    from = heightsSlabAvx2<kMapCells>(pts, grid, p.slab_min_h_m, p.slab_max_h_m, out->data(),
-                                      slab->data(), &run, map_cells);
+    heightsSlabAvx2<kMapCells>(pts, grid, p.slab_min_h_m, p.slab_max_h_m, out->data(), slab->data(),
+                               &run, map_cells);
+    done = true;
   }
 #endif
-  const std::vector<Centred> cells = from < n ? centredPlanes(grid) : std::vector<Centred>();
-  heightsSlabScalar<kMapCells>(pts, grid, cells, p.slab_min_h_m, p.slab_max_h_m, from, out->data(),
-                               slab->data(), &run, map_cells);
+  if (!done) {
+    heightsSlabScalar<kMapCells>(pts, grid, p.slab_min_h_m, p.slab_max_h_m, out->data(),
+                                 slab->data(), &run, map_cells);
+  }
   if (kMapCells) map_cells->addRun(run.run, run.run_low, run.run_hits);
   slab->resize(run.ns);
 }
