@@ -310,5 +310,59 @@ TEST(Avx2Paths, ExtractionGivesTheBaselineBits) {
   EXPECT_GT(found, 1000u);
 }
 
+// Band points of one stem slice: an arc of `arc` radians of a circle of radius r about (cx, cy),
+// with cm noise, plus clutter; some points exactly on the circle's centre and duplicated.
+std::vector<Eigen::Vector2d> slicePoints(size_t n, double arc, double r, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> a(0.0, arc), noise(-0.01, 0.01), clutter(-0.6, 0.6);
+  const double cx = 3.25, cy = -1.5;
+  std::vector<Eigen::Vector2d> xy;
+  for (size_t i = 0; i < n; ++i) {
+    const double t = a(rng);
+    if (i % 7 == 3) {
+      xy.emplace_back(cx + clutter(rng), cy + clutter(rng));  // undergrowth
+    } else if (i % 29 == 5) {
+      xy.emplace_back(cx, cy);  // d = 0: a point the refinement skips
+    } else if (i % 31 == 9 && !xy.empty()) {
+      xy.push_back(xy.back());  // a repeated return
+    } else {
+      xy.emplace_back(cx + (r + noise(rng)) * std::cos(t), cy + (r + noise(rng)) * std::sin(t));
+    }
+  }
+  return xy;
+}
+
+// The circle fit with and without AVX2 (RANSAC's scoring, the refinement's point terms and its
+// gathering of the near points): the same circle, evidence and inliers, bit for bit.
+TEST(Avx2Paths, CircleFitGivesTheBaselineBits) {
+  if (!useAvx2()) GTEST_SKIP() << "no AVX2 on this CPU";
+  CircleFitParams cfp;
+  cfp.min_radius_m = 0.03, cfp.max_radius_m = 0.8;
+  size_t ok = 0;
+  for (size_t n : {3, 5, 7, 33, 130, 401, 1203}) {
+    for (double arc : {0.7, 2.0, 6.3}) {
+      for (double r : {0.05, 0.2, 0.45}) {
+        const std::vector<Eigen::Vector2d> xy = slicePoints(n, arc, r, static_cast<uint32_t>(n));
+        cfp.seed = static_cast<uint32_t>(n * 7 + 1);
+        CircleFit fit[2];
+        bothForms([&](bool avx2) { fit[avx2] = fitCircleRobust(xy, cfp); });
+        SCOPED_TRACE(testing::Message() << "n " << n << " arc " << arc << " r " << r);
+        EXPECT_EQ(fit[0].ok, fit[1].ok);
+        for (const auto& [a, b] :
+             {std::make_pair(fit[0].cx, fit[1].cx), std::make_pair(fit[0].cy, fit[1].cy),
+              std::make_pair(fit[0].r, fit[1].r), std::make_pair(fit[0].rms_m, fit[1].rms_m),
+              std::make_pair(fit[0].arc_deg, fit[1].arc_deg),
+              std::make_pair(fit[0].inlier_ratio, fit[1].inlier_ratio)}) {
+          EXPECT_EQ(std::memcmp(&a, &b, sizeof(a)), 0) << a << " vs " << b;
+        }
+        EXPECT_EQ(fit[0].inliers, fit[1].inliers);
+        EXPECT_TRUE(sameBits(fit[0].is_inlier, fit[1].is_inlier));
+        ok += fit[1].ok;
+      }
+    }
+  }
+  EXPECT_GT(ok, 30u);  // most slices give a circle: the refinement ran on them
+}
+
 }  // namespace
 }  // namespace dtif

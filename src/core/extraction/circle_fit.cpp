@@ -10,6 +10,7 @@
 #include <emmintrin.h>
 #endif
 
+#include "dtif/core/extraction/avx2.h"
 #include "dtif/core/extraction/extraction_stages.h"
 #include "dtif/core/extraction/lazy_mt19937.h"
 #include "dtif/core/extraction/trunk_extractor.h"
@@ -123,6 +124,34 @@ long scoreBlock(const double* sx, const double* sy, size_t m0, size_t m1, double
   return static_cast<long>(score);
 }
 
+#if DTIF_AVX2_PATHS
+// scoreBlock four lanes at a time (the caller checks useAvx2()): the same IEEE operations per
+// point, so the same counts.
+DTIF_TARGET_AVX2 long scoreBlockAvx2(const double* sx, const double* sy, size_t m0, size_t m1,
+                                     double cx, double cy, double in_lo, double in_hi,
+                                     double inside) {
+  const __m256d vcx = _mm256_set1_pd(cx), vcy = _mm256_set1_pd(cy);
+  const __m256d vlo = _mm256_set1_pd(in_lo), vhi = _mm256_set1_pd(in_hi);
+  const __m256d vin = _mm256_set1_pd(inside);
+  __m256i lanes = _mm256_setzero_si256();  // inliers minus inside points, per lane
+  size_t m = m0;
+  for (; m + 4 <= m1; m += 4) {
+    const __m256d dx = _mm256_sub_pd(_mm256_loadu_pd(sx + m), vcx);
+    const __m256d dy = _mm256_sub_pd(_mm256_loadu_pd(sy + m), vcy);
+    const __m256d d2 = _mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy));
+    const __m256d inl =
+        _mm256_and_pd(_mm256_cmp_pd(d2, vlo, _CMP_GT_OQ), _mm256_cmp_pd(d2, vhi, _CMP_LT_OQ));
+    const __m256d ins = _mm256_cmp_pd(d2, vin, _CMP_LT_OQ);
+    lanes = _mm256_add_epi64(lanes,
+                             _mm256_sub_epi64(_mm256_castpd_si256(ins), _mm256_castpd_si256(inl)));
+  }
+  alignas(32) int64_t lane[4];
+  _mm256_store_si256(reinterpret_cast<__m256i*>(lane), lanes);
+  const long score = static_cast<long>(lane[0] + lane[1] + lane[2] + lane[3]);
+  return score + scoreBlock(sx, sy, m, m1, cx, cy, in_lo, in_hi, inside);
+}
+#endif
+
 // RANSAC over 3-point circles with an adaptive stop. Score: inliers minus points well inside
 // the circle (a stem is opaque). Returns the best score; <= 0: no usable hypothesis.
 long ransacCircle(const std::vector<Eigen::Vector2d>& xy, const CircleFitParams& params,
@@ -139,6 +168,7 @@ long ransacCircle(const std::vector<Eigen::Vector2d>& xy, const CircleFitParams&
   for (size_t m = 0; m < n; m += stride) sx.push_back(xy[m].x()), sy.push_back(xy[m].y());
   const size_t scored = sx.size();
   int needed = params.iterations;
+  const bool avx2 = useAvx2();
   for (int it = 0; it < std::min(needed, params.iterations); ++it) {
     const size_t i = pick(rng), j = pick(rng), k = pick(rng);
     if (i == j || j == k || i == k) continue;
@@ -157,6 +187,12 @@ long ransacCircle(const std::vector<Eigen::Vector2d>& xy, const CircleFitParams&
       const size_t m1 = std::min(scored, m0 + kBlock);
       // Branch-free counts (inside < in_lo: a point is an inlier, inside, or neither), which the
       // compiler vectorises.
+#if DTIF_AVX2_PATHS
+      if (avx2) {
+        score += scoreBlockAvx2(sx.data(), sy.data(), m0, m1, cx, cy, in_lo, in_hi, inside);
+        continue;
+      }
+#endif
       score += scoreBlock(sx.data(), sy.data(), m0, m1, cx, cy, in_lo, in_hi, inside);
     }
     if (score > best_score) {
@@ -204,6 +240,40 @@ struct PointTerms {
   std::vector<double> e, w, jx, jy;
 };
 
+#if DTIF_AVX2_PATHS
+// pointTerms' points m.. four at a time (the caller checks useAvx2()), as its SSE2 loop takes
+// them two at a time. Returns the first point not taken.
+DTIF_TARGET_AVX2 size_t pointTermsAvx2(const std::vector<Eigen::Vector2d>& xy, double cx, double cy,
+                                       double r, double c, PointTerms* t) {
+  const size_t n = xy.size();
+  const __m256d vcx = _mm256_set1_pd(cx), vcy = _mm256_set1_pd(cy), vr = _mm256_set1_pd(r);
+  const __m256d vc = _mm256_set1_pd(c), one = _mm256_set1_pd(1.0), sign = _mm256_set1_pd(-0.0);
+  const __m256d tiny = _mm256_set1_pd(1e-9), zero = _mm256_setzero_pd();
+  size_t m = 0;
+  for (; m + 4 <= n; m += 4) {
+    // Four (x, y) pairs: (x0 y0 x1 y1) and (x2 y2 x3 y3), lanes in the order 0 2 1 3 after the
+    // unpacks, put back by one permute each.
+    const __m256d p01 = _mm256_loadu_pd(xy[m].data()), p23 = _mm256_loadu_pd(xy[m + 2].data());
+    const __m256d x = _mm256_permute4x64_pd(_mm256_unpacklo_pd(p01, p23), _MM_SHUFFLE(3, 1, 2, 0));
+    const __m256d y = _mm256_permute4x64_pd(_mm256_unpackhi_pd(p01, p23), _MM_SHUFFLE(3, 1, 2, 0));
+    const __m256d dx = _mm256_sub_pd(x, vcx), dy = _mm256_sub_pd(y, vcy);
+    const __m256d d = _mm256_sqrt_pd(_mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)));
+    const __m256d e = _mm256_sub_pd(d, vr);
+    const __m256d u = _mm256_div_pd(e, vc);
+    const __m256d tt = _mm256_sub_pd(one, _mm256_mul_pd(u, u));
+    const __m256d in = _mm256_cmp_pd(_mm256_andnot_pd(sign, e), vc, _CMP_LT_OQ);  // |e| < c
+    const __m256d w = _mm256_and_pd(in, _mm256_mul_pd(tt, tt));
+    const __m256d keep =
+        _mm256_and_pd(_mm256_cmp_pd(d, tiny, _CMP_NLT_UQ), _mm256_cmp_pd(w, zero, _CMP_NLE_UQ));
+    _mm256_storeu_pd(&t->e[m], _mm256_and_pd(keep, e));
+    _mm256_storeu_pd(&t->w[m], _mm256_and_pd(keep, w));
+    _mm256_storeu_pd(&t->jx[m], _mm256_and_pd(keep, _mm256_div_pd(_mm256_xor_pd(dx, sign), d)));
+    _mm256_storeu_pd(&t->jy[m], _mm256_and_pd(keep, _mm256_div_pd(_mm256_xor_pd(dy, sign), d)));
+  }
+  return m;
+}
+#endif
+
 // The terms of every point, two at a time where SSE2 is: the same IEEE operations as
 // planarDist, tukeyWeight and the divisions (x86-64 has no fused multiply-add here), so the
 // same values; the step's sums stay sequential, in point order.
@@ -212,6 +282,9 @@ void pointTerms(const std::vector<Eigen::Vector2d>& xy, double cx, double cy, do
   const size_t n = xy.size();
   t->e.resize(n), t->w.resize(n), t->jx.resize(n), t->jy.resize(n);
   size_t m = 0;
+#if DTIF_AVX2_PATHS
+  if (useAvx2()) m = pointTermsAvx2(xy, cx, cy, r, c, t);
+#endif
 #ifdef __SSE2__
   const __m128d vcx = _mm_set1_pd(cx), vcy = _mm_set1_pd(cy), vr = _mm_set1_pd(r);
   const __m128d vc = _mm_set1_pd(c), one = _mm_set1_pd(1.0), sign = _mm_set1_pd(-0.0);
@@ -280,6 +353,9 @@ class NearPoints {
                 double reach) {
     Eigen::Vector2d* out = xy.data();
     size_t n = 0, m = 0;
+#if DTIF_AVX2_PATHS
+    if (useAvx2()) m = gatherAvx2(all, cx, cy, r, reach, &n);
+#endif
 #ifdef __SSE2__
     const __m128d vcx = _mm_set1_pd(cx), vcy = _mm_set1_pd(cy), vr = _mm_set1_pd(r);
     const __m128d vreach = _mm_set1_pd(reach), sign = _mm_set1_pd(-0.0);
@@ -302,6 +378,39 @@ class NearPoints {
     }
     return n;
   }
+
+#if DTIF_AVX2_PATHS
+  // gather's points four at a time (the caller checks useAvx2()), the count into *n. Returns
+  // the first point not taken.
+  DTIF_TARGET_AVX2 size_t gatherAvx2(const std::vector<Eigen::Vector2d>& all, double cx, double cy,
+                                     double r, double reach, size_t* n) {
+    Eigen::Vector2d* out = xy.data();
+    const __m256d vcx = _mm256_set1_pd(cx), vcy = _mm256_set1_pd(cy), vr = _mm256_set1_pd(r);
+    const __m256d vreach = _mm256_set1_pd(reach), sign = _mm256_set1_pd(-0.0);
+    size_t k = *n, m = 0;
+    for (; m + 4 <= all.size(); m += 4) {
+      const __m128d p0 = _mm_loadu_pd(all[m].data()), p1 = _mm_loadu_pd(all[m + 1].data());
+      const __m128d p2 = _mm_loadu_pd(all[m + 2].data()), p3 = _mm_loadu_pd(all[m + 3].data());
+      // (x0 y0 x2 y2) and (x1 y1 x3 y3): the unpacks give x and y in the order 0 1 2 3.
+      const __m256d a = _mm256_set_m128d(p2, p0), b = _mm256_set_m128d(p3, p1);
+      const __m256d dx = _mm256_sub_pd(_mm256_unpacklo_pd(a, b), vcx);
+      const __m256d dy = _mm256_sub_pd(_mm256_unpackhi_pd(a, b), vcy);
+      const __m256d d = _mm256_sqrt_pd(_mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)));
+      const int near = _mm256_movemask_pd(
+          _mm256_cmp_pd(_mm256_andnot_pd(sign, _mm256_sub_pd(d, vr)), vreach, _CMP_LT_OQ));
+      _mm_storeu_pd(out[k].data(), p0);
+      k += near & 1;
+      _mm_storeu_pd(out[k].data(), p1);
+      k += (near >> 1) & 1;
+      _mm_storeu_pd(out[k].data(), p2);
+      k += (near >> 2) & 1;
+      _mm_storeu_pd(out[k].data(), p3);
+      k += near >> 3;
+    }
+    *n = k;
+    return m;
+  }
+#endif
 
   static constexpr double kSlack = 0.05;     // [m]
   static constexpr double kRounding = 1e-6;  // far above the rounding of d - r [m]
