@@ -138,26 +138,50 @@ float fromOrderKey(uint32_t key) {
   return v;
 }
 
-// One stable counting-sort pass of records by their 11 bits from `shift` on.
-void radixPass(const std::vector<uint64_t>& in, int shift, std::vector<uint64_t>* out) {
-  std::vector<uint32_t> at(2049, 0);
-  for (const uint64_t r : in) ++at[((r >> shift) & 2047u) + 1];
-  for (size_t d = 0; d < 2048; ++d) at[d + 1] += at[d];
+// Counts of the records' three 11-bit digits of z's order key (from bits 0, 11 and 22), for
+// radixPass: taken as the records are made, not in a read of them per pass.
+struct DigitCounts {
+  uint32_t at[3][2049] = {};
+  void add(uint32_t key) {
+    ++at[0][(key & 2047u) + 1], ++at[1][((key >> 11) & 2047u) + 1], ++at[2][(key >> 22) + 1];
+  }
+};
+
+// One stable counting-sort pass of records by their key's digit d (11 bits from 11 d on; the
+// tile id above the key plays no part), its counts `at` (turned into places here).
+void radixPass(const std::vector<uint64_t>& in, int d, uint32_t* at, std::vector<uint64_t>* out) {
+  const int shift = 11 * d;
+  for (size_t v = 0; v < 2048; ++v) at[v + 1] += at[v];
   uint64_t* o = out->data();
-  for (const uint64_t r : in) o[at[(r >> shift) & 2047u]++] = r;
+  for (const uint64_t r : in) o[at[(static_cast<uint32_t>(r) >> shift) & 2047u]++] = r;
 }
+
+// Sample coordinates, read in place (HeightCellMarks' are the caller's, not copied).
+struct SampleArrays {
+  const float *x, *y, *z;
+  size_t n;
+  explicit SampleArrays(const HeightCellsPrepass& pre)
+      : x(pre.sx.data()), y(pre.sy.data()), z(pre.sz.data()), n(pre.sz.size()) {}
+  SampleArrays(const std::vector<float>& sx, const std::vector<float>& sy,
+               const std::vector<float>& sz)
+      : x(sx.data()), y(sy.data()), z(sz.data()), n(sz.size()) {}
+};
 
 // The samples bucketed by tile, each tile's z sorted: an LSD radix sort of (tile, z) records by
 // z's order key (three passes), then a stable counting sort by tile. Bucketing, then selecting
 // and sorting by comparisons the part of each tile its windows' percentiles read cost ~3x more
 // (6.1 against 1.9 ms for a 1.25 M-point submap's 208k samples; a branch mispredicted per
 // comparison).
-TileSamples sortedTileSamples(const HeightCellsPrepass& pre, Tiles* tiles) {
+TileSamples sortedTileSamples(const SampleArrays& pre, Tiles* tiles) {
   TileSamples s;
-  const size_t n = pre.sz.size();
-  std::vector<uint64_t> a(n), b(n);
+  const size_t n = pre.n;
+  // The records' buffers kept between submaps: each is written whole before it is read.
+  thread_local std::vector<uint64_t> a_of_thread, b_of_thread;
+  std::vector<uint64_t>&a = a_of_thread, &b = b_of_thread;
+  a.resize(n), b.resize(n);
+  DigitCounts digits;
   for (size_t k = 0; k < n; ++k) {
-    const float x = pre.sx[k], y = pre.sy[k];
+    const float x = pre.x[k], y = pre.y[k];
     int id;
     if (tiles->dense()) {
       id = tiles->denseIndex(x, y);
@@ -165,9 +189,12 @@ TileSamples sortedTileSamples(const HeightCellsPrepass& pre, Tiles* tiles) {
       id = tiles->index(tileOf(x), tileOf(y), true);
       if (static_cast<size_t>(id) == s.made.size()) s.made.emplace_back(tileOf(x), tileOf(y));
     }
-    a[k] = static_cast<uint64_t>(id) << 32 | orderKey(pre.sz[k]);
+    const uint32_t key = orderKey(pre.z[k]);
+    a[k] = static_cast<uint64_t>(id) << 32 | key;
+    digits.add(key);
   }
-  radixPass(a, 0, &b), radixPass(b, 11, &a), radixPass(a, 22, &b);
+  radixPass(a, 0, digits.at[0], &b), radixPass(b, 1, digits.at[1], &a);
+  radixPass(a, 2, digits.at[2], &b);
   const size_t ntiles = tiles->dense() ? tiles->denseSize() : s.made.size();
   s.start.assign(ntiles + 1, 0);
   for (const uint64_t r : b) ++s.start[(r >> 32) + 1];
@@ -208,7 +235,7 @@ float kthOfSortedRuns(std::vector<std::pair<const float*, const float*>>* runs, 
 
 // Local ground per tile (in S): 5th percentile of z inside the window around it, on every
 // stride-th finite point. NaN where the window holds no sample.
-std::vector<float> tileGround(const HeightCellsPrepass& pre, Tiles* tiles) {
+std::vector<float> tileGround(const SampleArrays& pre, Tiles* tiles) {
   const TileSamples s = sortedTileSamples(pre, tiles);
   const size_t ntiles = s.start.size() - 1;
   std::vector<float> ground(ntiles, std::numeric_limits<float>::quiet_NaN());
@@ -260,7 +287,8 @@ std::vector<std::pair<int64_t, int64_t>> heightCells(const Cloud& cloud_S, const
   const size_t stride = max_ground_samples > 0 ? std::max<size_t>(1, n / max_ground_samples) : 1;
   HeightCellsPrepass own;
   if (given.stride != stride) takeSamples(cloud_S, stride, &own);
-  const std::vector<float> ground = tileGround(given.stride == stride ? given : own, &tiles);
+  const std::vector<float> ground =
+      tileGround(SampleArrays(given.stride == stride ? given : own), &tiles);
   const Eigen::Isometry3f T = T_F_S.cast<float>();
   // The descriptor's own footprint is in S: no transform (an identity one changes no value).
   const bool identity = T_F_S.matrix() == Eigen::Matrix4d::Identity();
@@ -303,11 +331,10 @@ bool HeightCellMarks::init(const std::vector<float>& sx, const std::vector<float
   pre.maxx = *std::max_element(sx.begin(), sx.end()) + 2.5f;
   pre.miny = *std::min_element(sy.begin(), sy.end()) - 2.5f;
   pre.maxy = *std::max_element(sy.begin(), sy.end()) + 2.5f;
-  pre.sx = sx, pre.sy = sy, pre.sz = sz;
   Tiles tiles;
   tiles.init(pre.minx, pre.maxx, pre.miny, pre.maxy);
   if (!tiles.dense()) return false;
-  ground_ = tileGround(pre, &tiles);
+  ground_ = tileGround(SampleArrays(sx, sy, sz), &tiles);
   Pass& g = grid_;
   g = Pass();
   g.tx0_ = tileOf(pre.minx), g.ty0_ = tileOf(pre.miny);
