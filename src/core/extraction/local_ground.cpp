@@ -183,6 +183,54 @@ void openSubColumns(const GroundGrid& grid, uint32_t b, uint32_t e, double x0, d
   }
 }
 
+#if DTIF_AVX2_PATHS
+// Entries sc of a table of at most 16 (lo: 0..7, hi: 8..15), eight lanes: two in-register
+// permutes and a blend instead of a gather.
+DTIF_TARGET_AVX2 __m256 lookup16(__m256 lo, __m256 hi, __m256i sc) {
+  const __m256 upper = _mm256_castsi256_ps(_mm256_slli_epi32(sc, 28));  // bit 3 -> sign
+  return _mm256_blendv_ps(_mm256_permutevar8x32_ps(lo, sc), _mm256_permutevar8x32_ps(hi, sc),
+                          upper);
+}
+
+// Packs the lanes of v whose bit is set in keep (four bits) to out; returns their count.
+DTIF_TARGET_AVX2 size_t packFour(__m128 v, int keep, float* out) {
+  const __m128i lanes = _mm_load_si128(reinterpret_cast<const __m128i*>(kMaskLanes.lane[keep]));
+  _mm_storeu_ps(out, _mm_permutevar_ps(v, lanes));
+  return static_cast<size_t>(kMaskLanes.count[keep]);
+}
+
+// groundOfCell's ground points of the cell's points b..e-1, eight at a time, for at most 16
+// sub-columns (the caller checks useAvx2()): the same float difference and double comparison per
+// point, the kept z packed in order. open[sc]: -1 where sub-column sc is open, else 0 (both
+// tables padded to 16). Returns the count written to zs and the first point not taken in *k.
+DTIF_TARGET_AVX2 size_t groundPointsAvx2(const GroundGrid::SortedPoint* P, uint32_t b, uint32_t e,
+                                         const int* sidx, const float* smin, const int32_t* open,
+                                         double band, float* zs, uint32_t* k_out) {
+  const __m256d vband = _mm256_set1_pd(band);
+  const __m256 low_lo = _mm256_loadu_ps(smin), low_hi = _mm256_loadu_ps(smin + 8);
+  const __m256 open_lo = _mm256_loadu_ps(reinterpret_cast<const float*>(open));
+  const __m256 open_hi = _mm256_loadu_ps(reinterpret_cast<const float*>(open + 8));
+  size_t nz = 0;
+  uint32_t k = b;
+  for (; k + 8 <= e; k += 8) {
+    __m128 x, y, z0, z1;
+    deinterleave4(&P[k].x, &x, &y, &z0);
+    deinterleave4(&P[k + 4].x, &x, &y, &z1);
+    const __m256i sc = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(sidx + (k - b)));
+    const __m256 d = _mm256_sub_ps(_mm256_set_m128(z1, z0), lookup16(low_lo, low_hi, sc));
+    const int is_open = _mm256_movemask_ps(lookup16(open_lo, open_hi, sc));
+    const int near0 = _mm256_movemask_pd(
+        _mm256_cmp_pd(_mm256_cvtps_pd(_mm256_castps256_ps128(d)), vband, _CMP_LE_OQ));
+    const int near1 = _mm256_movemask_pd(
+        _mm256_cmp_pd(_mm256_cvtps_pd(_mm256_extractf128_ps(d, 1)), vband, _CMP_LE_OQ));
+    nz += packFour(z0, near0 & is_open & 15, zs + nz);
+    nz += packFour(z1, near1 & (is_open >> 4), zs + nz);
+  }
+  *k_out = k;
+  return nz;
+}
+#endif
+
 // Ground evidence of cell c (which holds points): its open sub-columns and their ground points.
 void groundOfCell(const GroundGrid& grid, size_t c, const TrunkExtractorParams& p, SubColumns* s,
                   GroundCells* cells) {
@@ -200,7 +248,16 @@ void groundOfCell(const GroundGrid& grid, size_t c, const TrunkExtractorParams& 
   s->zs.resize(e - b);
   float* zs_out = s->zs.data();
   size_t nz = 0;
-  for (uint32_t k = b; k < e; ++k) {
+  uint32_t from = b;
+#if DTIF_AVX2_PATHS
+  if (s->avx2 && s->smin.size() <= 16) {
+    float low[16] = {};
+    int32_t open[16] = {};
+    for (size_t sc = 0; sc < s->smin.size(); ++sc) low[sc] = smin[sc], open[sc] = -!!sopen[sc];
+    nz = groundPointsAvx2(P, b, e, sidx, low, open, band, zs_out, &from);
+  }
+#endif
+  for (uint32_t k = from; k < e; ++k) {
     const int sc = sidx[k - b];
     const float z = P[k].z;
     zs_out[nz] = z;

@@ -281,22 +281,6 @@ DTIF_TARGET_AVX2 void quadLanes(const GroundGrid::SortedPoint* q, __m256d* x, __
   *x = _mm256_cvtps_pd(fx), *y = _mm256_cvtps_pd(fy), *z = _mm256_cvtps_pd(fz);
 }
 
-// For each mask of four lanes, its set lanes in order (then zeros) and their count.
-struct MaskLanes {
-  alignas(16) int32_t lane[16][4];
-  int count[16];
-};
-constexpr MaskLanes maskLanes() {
-  MaskLanes t{};
-  for (int m = 0; m < 16; ++m) {
-    for (int j = 0; j < 4; ++j) {
-      if ((m >> j) & 1) t.lane[m][t.count[m]++] = j;
-    }
-  }
-  return t;
-}
-constexpr MaskLanes kLanes = maskLanes();
-
 // gatherPairs four points at a time (AVX2; the caller checks useAvx2()): the same IEEE
 // operations per point, the stem's lowest point a minimum per lane as there. Returns the first
 // point not taken.
@@ -332,11 +316,13 @@ DTIF_TARGET_AVX2 uint32_t gatherQuads(const GroundGrid::SortedPoint* sorted, siz
     const int ground = in_ring & ~high;
     _mm_storeu_si128(
         reinterpret_cast<__m128i*>(out->ring + out->over),
-        _mm_add_epi32(kk, _mm_load_si128(reinterpret_cast<const __m128i*>(kLanes.lane[in_ring]))));
+        _mm_add_epi32(kk,
+                      _mm_load_si128(reinterpret_cast<const __m128i*>(kMaskLanes.lane[in_ring]))));
     _mm_storeu_si128(
         reinterpret_cast<__m128i*>(out->ground_at + out->ground),
-        _mm_add_epi32(kk, _mm_load_si128(reinterpret_cast<const __m128i*>(kLanes.lane[ground]))));
-    out->over += kLanes.count[in_ring], out->ground += kLanes.count[ground];
+        _mm_add_epi32(kk,
+                      _mm_load_si128(reinterpret_cast<const __m128i*>(kMaskLanes.lane[ground]))));
+    out->over += kMaskLanes.count[in_ring], out->ground += kMaskLanes.count[ground];
   }
   const __m128d low2 = _mm_min_pd(_mm256_castpd256_pd128(low), _mm256_extractf128_pd(low, 1));
   const double lane_low = std::min(_mm_cvtsd_f64(low2), _mm_cvtsd_f64(_mm_unpackhi_pd(low2, low2)));

@@ -15,6 +15,8 @@
 
 #if DTIF_AVX2_PATHS
 #include <immintrin.h>
+
+#include <cstdint>
 #endif
 
 namespace dtif {
@@ -27,6 +29,23 @@ bool useAvx2();
 void allowAvx2(bool allow);
 
 #if DTIF_AVX2_PATHS
+/// For each mask of four lanes, its set lanes in order (then zeros) and their count: packs the
+/// lanes a test keeps (a permute by lane[mask], then count[mask] of them stored).
+struct MaskLanes {
+  alignas(16) int32_t lane[16][4];
+  int count[16];
+};
+constexpr MaskLanes maskLanes() {
+  MaskLanes t{};
+  for (int m = 0; m < 16; ++m) {
+    for (int j = 0; j < 4; ++j) {
+      if ((m >> j) & 1) t.lane[m][t.count[m]++] = j;
+    }
+  }
+  return t;
+}
+inline constexpr MaskLanes kMaskLanes = maskLanes();
+
 /// Four (x, y, z) triples, xyz[0..11], as lanes of x, of y and of z (the 48 bytes, no more).
 DTIF_TARGET_AVX2 inline void deinterleave4(const float* xyz, __m128* x, __m128* y, __m128* z) {
   const __m128 m0 = _mm_loadu_ps(xyz), m1 = _mm_loadu_ps(xyz + 4), m2 = _mm_loadu_ps(xyz + 8);
