@@ -410,11 +410,16 @@ const Cloud& keptPoints(const Cloud& cloud, const PointBounds& b, Cloud* kept, s
 // false when a sample is not finite (then they are not those samples).
 bool takeFootprintSamples(const Cloud& cloud, size_t stride, std::vector<float>* sx,
                           std::vector<float>* sy, std::vector<float>* sz) {
-  sx->clear(), sy->clear(), sz->clear();
-  for (size_t i = 0; i < cloud.size(); i += stride) {
-    const pcl::PointXYZ& q = cloud[i];
+  // Sized once and written through raw pointers: push_back on the workspace's vectors had the
+  // compiler look the thread's workspace up again (__tls_get_addr) for every sample.
+  const size_t n = cloud.empty() ? 0 : (cloud.size() - 1) / stride + 1;
+  sx->resize(n), sy->resize(n), sz->resize(n);
+  float *X = sx->data(), *Y = sy->data(), *Z = sz->data();
+  const pcl::PointXYZ* P = cloud.points.data();
+  for (size_t k = 0; k < n; ++k) {
+    const pcl::PointXYZ& q = P[k * stride];
     if (!std::isfinite(q.x) || !std::isfinite(q.y) || !std::isfinite(q.z)) return false;
-    sx->push_back(q.x), sy->push_back(q.y), sz->push_back(q.z);
+    X[k] = q.x, Y[k] = q.y, Z[k] = q.z;
   }
   return true;
 }
