@@ -84,10 +84,58 @@ DTIF_TARGET_AVX2 void subColumnsAvx2(const GroundGrid& grid, uint32_t b, uint32_
   }
 }
 
+// Entries sc of a table of at most 16 (lo: 0..7, hi: 8..15), eight lanes: two in-register
+// permutes and a blend instead of a gather.
+DTIF_TARGET_AVX2 __m256 lookup16(__m256 lo, __m256 hi, __m256i sc) {
+  const __m256 upper = _mm256_castsi256_ps(_mm256_slli_epi32(sc, 28));  // bit 3 -> sign
+  return _mm256_blendv_ps(_mm256_permutevar8x32_ps(lo, sc), _mm256_permutevar8x32_ps(hi, sc),
+                          upper);
+}
+
+// The 32-bit lanes of the 64-bit lane masks m0 (points 0..3) and m1 (4..7).
+DTIF_TARGET_AVX2 __m256i narrowMasks(__m256d m0, __m256d m1) {
+  const __m256i even = _mm256_setr_epi32(0, 2, 4, 6, 0, 2, 4, 6);
+  return _mm256_permute2x128_si256(_mm256_permutevar8x32_epi32(_mm256_castpd_si256(m0), even),
+                                   _mm256_permutevar8x32_epi32(_mm256_castpd_si256(m1), even),
+                                   0x20);
+}
+
+// closedAvx2's points b.. eight at a time for at most 16 sub-columns, the lowest points looked
+// up in registers (lookup16) instead of gathered. Returns the bits closed so far, the first
+// point not taken in *k.
+DTIF_TARGET_AVX2 uint32_t closedEight(const GroundGrid::SortedPoint* P, uint32_t b, uint32_t e,
+                                      const int* sidx, const float* smin, size_t nsub, __m256d vgap,
+                                      __m256d vtop, uint32_t* k_out) {
+  alignas(32) float table[16] = {};
+  std::copy(smin, smin + nsub, table);
+  const __m256 lo = _mm256_load_ps(table), hi = _mm256_load_ps(table + 8);
+  __m256i closed8 = _mm256_setzero_si256();
+  uint32_t k = b;
+  for (; k + 8 <= e; k += 8) {
+    __m128 x, y, z0, z1;
+    deinterleave4(&P[k].x, &x, &y, &z0);
+    deinterleave4(&P[k + 4].x, &x, &y, &z1);
+    const __m256i sc = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(sidx + (k - b)));
+    const __m256 dz = _mm256_sub_ps(_mm256_set_m128(z1, z0), lookup16(lo, hi, sc));
+    const __m256d d0 = _mm256_cvtps_pd(_mm256_castps256_ps128(dz));  // compared in double
+    const __m256d d1 = _mm256_cvtps_pd(_mm256_extractf128_ps(dz, 1));
+    const __m256i in = narrowMasks(
+        _mm256_and_pd(_mm256_cmp_pd(d0, vgap, _CMP_GT_OQ), _mm256_cmp_pd(d0, vtop, _CMP_LE_OQ)),
+        _mm256_and_pd(_mm256_cmp_pd(d1, vgap, _CMP_GT_OQ), _mm256_cmp_pd(d1, vtop, _CMP_LE_OQ)));
+    closed8 =
+        _mm256_or_si256(closed8, _mm256_and_si256(in, _mm256_sllv_epi32(_mm256_set1_epi32(1), sc)));
+  }
+  __m128i c = _mm_or_si128(_mm256_castsi256_si128(closed8), _mm256_extracti128_si256(closed8, 1));
+  c = _mm_or_si128(c, _mm_shuffle_epi32(c, _MM_SHUFFLE(1, 0, 3, 2)));
+  c = _mm_or_si128(c, _mm_shuffle_epi32(c, _MM_SHUFFLE(2, 3, 0, 1)));
+  *k_out = k;
+  return static_cast<uint32_t>(_mm_cvtsi128_si32(c));
+}
+
 // openSubColumns' open tests of the points b..e-1 as bits of the sub-columns closed, four points
-// at a time.
+// at a time (eight with at most 16 sub-columns).
 DTIF_TARGET_AVX2 uint32_t closedAvx2(const GroundGrid& grid, uint32_t b, uint32_t e,
-                                     const int* sidx, const float* smin,
+                                     const int* sidx, const float* smin, size_t nsub,
                                      const TrunkExtractorParams& p) {
   const GroundGrid::SortedPoint* P = grid.sorted.data();
   const double gap = p.ground_open_gap_m, top = p.ground_open_top_m;
@@ -96,6 +144,9 @@ DTIF_TARGET_AVX2 uint32_t closedAvx2(const GroundGrid& grid, uint32_t b, uint32_
   const __m256i even = _mm256_setr_epi32(0, 2, 4, 6, 0, 2, 4, 6);
   __m128i closed4 = _mm_setzero_si128();
   uint32_t k = b;
+  if (nsub <= 16)
+    closed4 =
+        _mm_cvtsi32_si128(static_cast<int>(closedEight(P, b, e, sidx, smin, nsub, vgap, vtop, &k)));
   for (; k + 4 <= e; k += 4) {
     __m128 x, y, z;
     deinterleave4(&P[k].x, &x, &y, &z);
@@ -142,7 +193,7 @@ DTIF_TARGET_AVX2 void openSubColumnsAvx2(const GroundGrid& grid, uint32_t b, uin
     std::fill(smin, smin + nsub, kInf);
     for (uint32_t k = b; k < e; ++k) smin[sidx[k - b]] = std::min(smin[sidx[k - b]], P[k].z);
   }
-  const uint32_t closed = closedAvx2(grid, b, e, sidx, smin, p);
+  const uint32_t closed = closedAvx2(grid, b, e, sidx, smin, nsub, p);
   for (size_t sc = 0; sc < nsub; ++sc) s->sopen[sc] = static_cast<char>(!((closed >> sc) & 1));
 }
 #endif
@@ -184,14 +235,6 @@ void openSubColumns(const GroundGrid& grid, uint32_t b, uint32_t e, double x0, d
 }
 
 #if DTIF_AVX2_PATHS
-// Entries sc of a table of at most 16 (lo: 0..7, hi: 8..15), eight lanes: two in-register
-// permutes and a blend instead of a gather.
-DTIF_TARGET_AVX2 __m256 lookup16(__m256 lo, __m256 hi, __m256i sc) {
-  const __m256 upper = _mm256_castsi256_ps(_mm256_slli_epi32(sc, 28));  // bit 3 -> sign
-  return _mm256_blendv_ps(_mm256_permutevar8x32_ps(lo, sc), _mm256_permutevar8x32_ps(hi, sc),
-                          upper);
-}
-
 // Packs the lanes of v whose bit is set in keep (four bits) to out; returns their count.
 DTIF_TARGET_AVX2 size_t packFour(__m128 v, int keep, float* out) {
   const __m128i lanes = _mm_load_si128(reinterpret_cast<const __m128i*>(kMaskLanes.lane[keep]));
