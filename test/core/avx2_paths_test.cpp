@@ -364,5 +364,43 @@ TEST(Avx2Paths, CircleFitGivesTheBaselineBits) {
   EXPECT_GT(ok, 30u);  // most slices give a circle: the refinement ran on them
 }
 
+// The robust ground plane with and without AVX2 (its reweighting four points at a time): the
+// same plane, bit for bit, with points far above and below it (weight 0), zero and partial
+// weights, residuals exactly at the Tukey constants, and sizes that are no multiple of four.
+TEST(Avx2Paths, GroundPlaneGivesTheBaselineBits) {
+  if (!useAvx2()) GTEST_SKIP() << "no AVX2 on this CPU";
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(-3.0, 3.0), noise(-0.05, 0.05);
+  std::uniform_int_distribution<int> kind(0, 9);
+  size_t fits = 0;
+  for (size_t n : {1, 3, 4, 5, 9, 25, 49, 50, 121, 503}) {
+    std::vector<double> x, y, z, w0;
+    for (size_t i = 0; i < n; ++i) {
+      x.push_back(u(rng)), y.push_back(u(rng));
+      const int k = kind(rng);
+      const double ground = 2.0 + 0.3 * x.back() - 0.1 * y.back();
+      double zi = ground + noise(rng);
+      if (k == 0) zi = ground + 1.5;  // a shrub: beyond c_up
+      if (k == 1) zi = ground - 2.0;  // a pit: beyond c_down
+      if (k == 2) zi = ground + 0.3;  // at c_up from the true plane
+      z.push_back(zi);
+      w0.push_back(k == 3 ? 0.0 : (k == 4 ? 0.3 : 1.0));
+    }
+    for (int iterations : {0, 1, 5}) {
+      GroundPlane pl[2];
+      bothForms([&](bool avx2) {
+        pl[avx2] = fitGroundPlane(x.data(), y.data(), z.data(), w0.data(), n, 0.25, -0.5, 0.3, 1.0,
+                                  iterations);
+      });
+      SCOPED_TRACE(testing::Message() << "n " << n << " iterations " << iterations);
+      EXPECT_EQ(std::memcmp(&pl[0], &pl[1], sizeof(GroundPlane)), 0)
+          << pl[0].a << " " << pl[0].b << " " << pl[0].c << " vs " << pl[1].a << " " << pl[1].b
+          << " " << pl[1].c;
+      fits += pl[1].a != 0.0;
+    }
+  }
+  EXPECT_GT(fits, 20u);
+}
+
 }  // namespace
 }  // namespace dtif

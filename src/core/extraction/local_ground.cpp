@@ -484,6 +484,50 @@ LocalPoints toLocalPoints(const Cloud& cloud) {
   return pts;
 }
 
+namespace {
+
+// fitGroundPlane's weights of the points i..: w0 times the Tukey weight of the residual from plane
+// pl about (x0, y0) (constant c_up above it, c_down below). Returns the first point not taken.
+size_t reweightScalar(const double* x, const double* y, const double* z, const double* w0, size_t i,
+                      size_t n, const GroundPlane& pl, double x0, double y0, double c_up,
+                      double c_down, double* w) {
+  for (; i < n; ++i) {
+    const double r = z[i] - (pl.a + pl.b * (x[i] - x0) + pl.c * (y[i] - y0));
+    w[i] = w0[i] * tukeyWeight(r, r > 0.0 ? c_up : c_down);
+  }
+  return i;
+}
+
+#if DTIF_AVX2_PATHS
+// reweightScalar four points at a time (the caller checks useAvx2()): the same IEEE operations
+// per point, tukeyWeight's test as "not |r| >= c" so that a NaN residual weighs NaN as there.
+DTIF_TARGET_AVX2 size_t reweightAvx2(const double* x, const double* y, const double* z,
+                                     const double* w0, size_t n, const GroundPlane& pl, double x0,
+                                     double y0, double c_up, double c_down, double* w) {
+  const __m256d a = _mm256_set1_pd(pl.a), b = _mm256_set1_pd(pl.b), c = _mm256_set1_pd(pl.c);
+  const __m256d vx0 = _mm256_set1_pd(x0), vy0 = _mm256_set1_pd(y0);
+  const __m256d up = _mm256_set1_pd(c_up), down = _mm256_set1_pd(c_down);
+  const __m256d zero = _mm256_setzero_pd(), one = _mm256_set1_pd(1.0);
+  const __m256d sign = _mm256_set1_pd(-0.0);
+  size_t i = 0;
+  for (; i + 4 <= n; i += 4) {
+    const __m256d dx = _mm256_sub_pd(_mm256_loadu_pd(x + i), vx0);
+    const __m256d dy = _mm256_sub_pd(_mm256_loadu_pd(y + i), vy0);
+    const __m256d at = _mm256_add_pd(_mm256_add_pd(a, _mm256_mul_pd(b, dx)), _mm256_mul_pd(c, dy));
+    const __m256d r = _mm256_sub_pd(_mm256_loadu_pd(z + i), at);
+    const __m256d cc = _mm256_blendv_pd(down, up, _mm256_cmp_pd(r, zero, _CMP_GT_OQ));
+    const __m256d in = _mm256_cmp_pd(_mm256_andnot_pd(sign, r), cc, _CMP_NGE_UQ);
+    const __m256d u = _mm256_div_pd(r, cc);
+    const __m256d t = _mm256_sub_pd(one, _mm256_mul_pd(u, u));
+    const __m256d tw = _mm256_and_pd(in, _mm256_mul_pd(t, t));
+    _mm256_storeu_pd(w + i, _mm256_mul_pd(_mm256_loadu_pd(w0 + i), tw));
+  }
+  return i;
+}
+#endif
+
+}  // namespace
+
 GroundPlane fitGroundPlane(const double* x, const double* y, const double* z, const double* w0,
                            size_t n, double x0, double y0, double c_up, double c_down,
                            int iterations) {
@@ -491,6 +535,7 @@ GroundPlane fitGroundPlane(const double* x, const double* y, const double* z, co
   thread_local std::vector<double> w_of_thread;  // ~3,600 fits per submap: no allocation each
   std::vector<double>& w = w_of_thread;
   w.assign(w0, w0 + n);
+  const bool avx2 = useAvx2();
   for (int it = 0; it <= iterations; ++it) {
     Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
     Eigen::Vector3d rhs = Eigen::Vector3d::Zero();
@@ -514,10 +559,11 @@ GroundPlane fitGroundPlane(const double* x, const double* y, const double* z, co
     if (!s.allFinite()) break;
     p.a = s(0), p.b = s(1), p.c = s(2);
     if (it == iterations) break;
-    for (size_t i = 0; i < n; ++i) {
-      const double r = z[i] - (p.a + p.b * (x[i] - x0) + p.c * (y[i] - y0));
-      w[i] = w0[i] * tukeyWeight(r, r > 0.0 ? c_up : c_down);
-    }
+    size_t i = 0;
+#if DTIF_AVX2_PATHS
+    if (avx2) i = reweightAvx2(x, y, z, w0, n, p, x0, y0, c_up, c_down, w.data());
+#endif
+    reweightScalar(x, y, z, w0, i, n, p, x0, y0, c_up, c_down, w.data());
   }
   return p;
 }
