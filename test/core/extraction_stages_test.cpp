@@ -309,6 +309,18 @@ TEST(ExtractionStages, LazyMt19937GivesStdMt19937sNumbers) {
   for (int i = 0; i < 500; ++i) ASSERT_EQ(a(lazy), b(ref)) << "draw " << i;
 }
 
+TEST(ExtractionStages, LazyMt19937BelowDrawsAsTheDistribution) {
+  // below(n) as std::uniform_int_distribution<size_t>(0, n - 1) on the same numbers: small
+  // ranges, band sizes, and ranges above 2^31 where most draws are rejected and drawn again.
+  for (const uint32_t n : {1u, 2u, 3u, 37u, 400u, 4097u, 0x80000001u, 0xfffffffeu, 0xffffffffu}) {
+    LazyMt19937 ours(n), theirs(n);
+    std::uniform_int_distribution<size_t> d(0, n - 1);
+    for (int i = 0; i < 2000; ++i)
+      ASSERT_EQ(ours.below(n), d(theirs)) << "n " << n << " draw " << i;
+    EXPECT_EQ(ours(), theirs());  // the same count of numbers drawn
+  }
+}
+
 TEST(ExtractionStages, CircleFitParamsComeFromTheExtractorsParams) {
   TrunkExtractorParams p;
   p.ransac_iterations = 77, p.ransac_min_iterations = 9, p.ransac_score_points = 123;

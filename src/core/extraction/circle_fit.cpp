@@ -158,8 +158,8 @@ long ransacCircle(const std::vector<Eigen::Vector2d>& xy, const CircleFitParams&
                   Circle* best) {
   const size_t n = xy.size();
   const size_t stride = std::max<size_t>(1, n / static_cast<size_t>(params.score_points));
-  LazyMt19937 rng(params.seed);  // std::mt19937(params.seed)'s numbers
-  std::uniform_int_distribution<size_t> pick(0, n - 1);
+  LazyMt19937 rng(params.seed);                     // std::mt19937(params.seed)'s numbers
+  const uint32_t range = static_cast<uint32_t>(n);  // a slice's band: far below 2^32 points
   const double tol = params.inlier_m;
   long best_score = -1;
   // The scored points, contiguous: the scoring loop below runs up to `iterations` times over
@@ -170,7 +170,7 @@ long ransacCircle(const std::vector<Eigen::Vector2d>& xy, const CircleFitParams&
   int needed = params.iterations;
   const bool avx2 = useAvx2();
   for (int it = 0; it < std::min(needed, params.iterations); ++it) {
-    const size_t i = pick(rng), j = pick(rng), k = pick(rng);
+    const size_t i = rng.below(range), j = rng.below(range), k = rng.below(range);
     if (i == j || j == k || i == k) continue;
     double cx, cy, r;
     if (!circleFrom3(xy[i], xy[j], xy[k], &cx, &cy, &r)) continue;
