@@ -100,6 +100,25 @@ DTIF_TARGET_AVX2 __m256i narrowMasks(__m256d m0, __m256d m1) {
                                    0x20);
 }
 
+// Points k..k+7 of the cell whose points start at b: their z (in two halves), their sub-columns,
+// and their height above their sub-column's lowest point (lo, hi: the lowest points, lookup16's
+// table), the float difference the one-point loops take.
+struct EightAbove {
+  __m128 z0, z1;
+  __m256i sc;
+  __m256 dz;
+};
+DTIF_TARGET_AVX2 EightAbove eightAbove(const GroundGrid::SortedPoint* P, uint32_t k, uint32_t b,
+                                       const int* sidx, __m256 lo, __m256 hi) {
+  EightAbove a;
+  __m128 x, y;
+  deinterleave4(&P[k].x, &x, &y, &a.z0);
+  deinterleave4(&P[k + 4].x, &x, &y, &a.z1);
+  a.sc = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(sidx + (k - b)));
+  a.dz = _mm256_sub_ps(_mm256_set_m128(a.z1, a.z0), lookup16(lo, hi, a.sc));
+  return a;
+}
+
 // closedAvx2's points b.. eight at a time for at most 16 sub-columns, the lowest points looked
 // up in registers (lookup16) instead of gathered. Returns the bits closed so far, the first
 // point not taken in *k.
@@ -112,18 +131,14 @@ DTIF_TARGET_AVX2 uint32_t closedEight(const GroundGrid::SortedPoint* P, uint32_t
   __m256i closed8 = _mm256_setzero_si256();
   uint32_t k = b;
   for (; k + 8 <= e; k += 8) {
-    __m128 x, y, z0, z1;
-    deinterleave4(&P[k].x, &x, &y, &z0);
-    deinterleave4(&P[k + 4].x, &x, &y, &z1);
-    const __m256i sc = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(sidx + (k - b)));
-    const __m256 dz = _mm256_sub_ps(_mm256_set_m128(z1, z0), lookup16(lo, hi, sc));
-    const __m256d d0 = _mm256_cvtps_pd(_mm256_castps256_ps128(dz));  // compared in double
-    const __m256d d1 = _mm256_cvtps_pd(_mm256_extractf128_ps(dz, 1));
+    const EightAbove a = eightAbove(P, k, b, sidx, lo, hi);
+    const __m256d d0 = _mm256_cvtps_pd(_mm256_castps256_ps128(a.dz));  // compared in double
+    const __m256d d1 = _mm256_cvtps_pd(_mm256_extractf128_ps(a.dz, 1));
     const __m256i in = narrowMasks(
         _mm256_and_pd(_mm256_cmp_pd(d0, vgap, _CMP_GT_OQ), _mm256_cmp_pd(d0, vtop, _CMP_LE_OQ)),
         _mm256_and_pd(_mm256_cmp_pd(d1, vgap, _CMP_GT_OQ), _mm256_cmp_pd(d1, vtop, _CMP_LE_OQ)));
-    closed8 =
-        _mm256_or_si256(closed8, _mm256_and_si256(in, _mm256_sllv_epi32(_mm256_set1_epi32(1), sc)));
+    closed8 = _mm256_or_si256(closed8,
+                              _mm256_and_si256(in, _mm256_sllv_epi32(_mm256_set1_epi32(1), a.sc)));
   }
   __m128i c = _mm_or_si128(_mm256_castsi256_si128(closed8), _mm256_extracti128_si256(closed8, 1));
   c = _mm_or_si128(c, _mm_shuffle_epi32(c, _MM_SHUFFLE(1, 0, 3, 2)));
@@ -256,18 +271,15 @@ DTIF_TARGET_AVX2 size_t groundPointsAvx2(const GroundGrid::SortedPoint* P, uint3
   size_t nz = 0;
   uint32_t k = b;
   for (; k + 8 <= e; k += 8) {
-    __m128 x, y, z0, z1;
-    deinterleave4(&P[k].x, &x, &y, &z0);
-    deinterleave4(&P[k + 4].x, &x, &y, &z1);
-    const __m256i sc = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(sidx + (k - b)));
-    const __m256 d = _mm256_sub_ps(_mm256_set_m128(z1, z0), lookup16(low_lo, low_hi, sc));
-    const int is_open = _mm256_movemask_ps(lookup16(open_lo, open_hi, sc));
+    const EightAbove a = eightAbove(P, k, b, sidx, low_lo, low_hi);
+    const __m256 d = a.dz;
+    const int is_open = _mm256_movemask_ps(lookup16(open_lo, open_hi, a.sc));
     const int near0 = _mm256_movemask_pd(
         _mm256_cmp_pd(_mm256_cvtps_pd(_mm256_castps256_ps128(d)), vband, _CMP_LE_OQ));
     const int near1 = _mm256_movemask_pd(
         _mm256_cmp_pd(_mm256_cvtps_pd(_mm256_extractf128_ps(d, 1)), vband, _CMP_LE_OQ));
-    nz += packFour(z0, near0 & is_open & 15, zs + nz);
-    nz += packFour(z1, near1 & (is_open >> 4), zs + nz);
+    nz += packFour(a.z0, near0 & is_open & 15, zs + nz);
+    nz += packFour(a.z1, near1 & (is_open >> 4), zs + nz);
   }
   *k_out = k;
   return nz;
