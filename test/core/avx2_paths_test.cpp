@@ -96,6 +96,59 @@ TEST(Avx2Paths, HeightsAndSlabGiveTheBaselineBits) {
   }
 }
 
+// n points in runs of one of 8 x 8 map cells of 0.5 m (1..9 points, often a cell just left, so a
+// change may fall in any lane); a run's first z often above zero, then zeros of both signs among
+// a few values, nothing below zero in every other cell, so many cells' lowest point is a zero
+// met with both signs after their first point; with nan, NaN z here and there.
+LocalPoints runsOfCells(size_t n, uint32_t seed, bool nan) {
+  std::mt19937 rng(seed);
+  std::uniform_int_distribution<int> step(0, 3), len(1, 9), pick(0, 7);
+  const float first[] = {0.25f, 1.5f, 0.0f, -0.0f};
+  const float rest[] = {0.0f,  -0.0f, 0.0f,   -0.0f,
+                        0.25f, 1.5f,  -0.25f, nan ? std::numeric_limits<float>::quiet_NaN() : 0.0f};
+  LocalPoints pts;
+  int c = 0;
+  while (pts.size() < n) {
+    c = (c + step(rng)) % 64;
+    const bool low_run = c % 2 == 0;
+    const int size = len(rng);
+    for (int k = 0; k < size && pts.size() < n; ++k) {
+      const int z = pick(rng);
+      pts.x.push_back(0.5f * static_cast<float>(c % 8) + 0.1f * static_cast<float>(k % 4));
+      pts.y.push_back(0.5f * static_cast<float>(c / 8) + 0.125f);
+      pts.z.push_back(k == 0 ? first[z % 4] : low_run && z == 6 ? 0.25f : rest[z]);
+    }
+  }
+  return pts;
+}
+
+// heightsAndSlab's map cells over runsOfCells, both forms: the same lowest points bit for bit
+// (the sign of a zero too) and counts; with part of the points outside the cells (npos).
+TEST(Avx2Paths, MapCellRunsGiveTheBaselineBits) {
+  if (!useAvx2()) GTEST_SKIP() << "no AVX2 on this CPU";
+  TrunkExtractorParams p;
+  p.min_fit_points = 3, p.ground_cell_m = 1.0, p.ground_map_cell_m = 0.5;
+  size_t zeros = 0;
+  for (bool nan : {false, true}) {
+    for (size_t n : {1, 3, 4, 5, 7, 8, 9, 13, 31, 32, 33, 1001, 4099}) {
+      SCOPED_TRACE(testing::Message() << "n " << n << " nan " << nan);
+      LocalPoints pts = runsOfCells(n, static_cast<uint32_t>(n), nan);
+      expectSameHeights(pts, p);
+      pts.has_extent = true;  // the cells of x < 2 alone: the others are npos
+      pts.minx = 0.0f, pts.maxx = 1.9f, pts.miny = 0.0f, pts.maxy = 4.0f;
+      expectSameHeights(pts, p);
+      GroundMapCells mc;
+      std::vector<float> h;
+      std::vector<uint32_t> slab;
+      pts.has_extent = false;
+      ASSERT_TRUE(mc.init(pts, p.ground_map_cell_m, 100.0));
+      heightsAndSlab(pts, estimateLocalGround(pts, p), p, &h, &slab, &mc);
+      for (float low : mc.low) zeros += low == 0.0f && std::signbit(low);
+    }
+  }
+  EXPECT_GT(zeros, 20u);  // runs whose lowest point is -0: the sign was tested
+}
+
 // binGroundGrid with and without AVX2: the same counts and the same points in the same order.
 TEST(Avx2Paths, GroundGridBinsGiveTheBaselineBits) {
   if (!useAvx2()) GTEST_SKIP() << "no AVX2 on this CPU";

@@ -281,22 +281,6 @@ DTIF_TARGET_AVX2 void quadLanes(const GroundGrid::SortedPoint* q, __m256d* x, __
   *x = _mm256_cvtps_pd(fx), *y = _mm256_cvtps_pd(fy), *z = _mm256_cvtps_pd(fz);
 }
 
-// For each mask of four lanes, its set lanes in order (then zeros) and their count.
-struct MaskLanes {
-  alignas(16) int32_t lane[16][4];
-  int count[16];
-};
-constexpr MaskLanes maskLanes() {
-  MaskLanes t{};
-  for (int m = 0; m < 16; ++m) {
-    for (int j = 0; j < 4; ++j) {
-      if ((m >> j) & 1) t.lane[m][t.count[m]++] = j;
-    }
-  }
-  return t;
-}
-constexpr MaskLanes kLanes = maskLanes();
-
 // gatherPairs four points at a time (AVX2; the caller checks useAvx2()): the same IEEE
 // operations per point, the stem's lowest point a minimum per lane as there. Returns the first
 // point not taken.

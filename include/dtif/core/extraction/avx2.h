@@ -5,6 +5,8 @@
 // once, not twice).
 #pragma once
 
+#include <cstdint>
+
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
 #define DTIF_AVX2_PATHS 1
 /// Marks a function compiled for AVX2 (and what it inlines must carry it too).
@@ -25,6 +27,23 @@ bool useAvx2();
 /// Allows (the default) or forbids the AVX2 forms, process-wide: tests compare both forms.
 /// Thread-safe; a pass already running keeps its form.
 void allowAvx2(bool allow);
+
+/// For each mask of four lanes, its set lanes in order (then zeros) and their count: a mask's
+/// lanes packed by one load and one store.
+struct MaskLanes {
+  alignas(16) int32_t lane[16][4];
+  int count[16];
+};
+constexpr MaskLanes maskLanes() {
+  MaskLanes t{};
+  for (int m = 0; m < 16; ++m) {
+    for (int j = 0; j < 4; ++j) {
+      if ((m >> j) & 1) t.lane[m][t.count[m]++] = j;
+    }
+  }
+  return t;
+}
+constexpr MaskLanes kLanes = maskLanes();  // internal: no load of its address from the GOT
 
 #if DTIF_AVX2_PATHS
 /// Four (x, y, z) triples, xyz[0..11], as lanes of x, of y and of z (the 48 bytes, no more).
