@@ -96,6 +96,132 @@ TEST(Avx2Paths, HeightsAndSlabGiveTheBaselineBits) {
   }
 }
 
+// n points in runs of one of 8 x 8 map cells of 0.5 m (1..9 points, often a cell just left, so a
+// change may fall in any lane); a run's first z often above zero, then zeros of both signs among
+// a few values, nothing below zero in every other cell, so many cells' lowest point is a zero
+// met with both signs after their first point; with nan, NaN z here and there.
+LocalPoints runsOfCells(size_t n, uint32_t seed, bool nan) {
+  std::mt19937 rng(seed);
+  std::uniform_int_distribution<int> step(0, 3), len(1, 9), pick(0, 7);
+  const float first[] = {0.25f, 1.5f, 0.0f, -0.0f};
+  const float rest[] = {0.0f,  -0.0f, 0.0f,   -0.0f,
+                        0.25f, 1.5f,  -0.25f, nan ? std::numeric_limits<float>::quiet_NaN() : 0.0f};
+  LocalPoints pts;
+  int c = 0;
+  while (pts.size() < n) {
+    c = (c + step(rng)) % 64;
+    const bool low_run = c % 2 == 0;
+    const int size = len(rng);
+    for (int k = 0; k < size && pts.size() < n; ++k) {
+      const int z = pick(rng);
+      pts.x.push_back(0.5f * static_cast<float>(c % 8) + 0.1f * static_cast<float>(k % 4));
+      pts.y.push_back(0.5f * static_cast<float>(c / 8) + 0.125f);
+      pts.z.push_back(k == 0 ? first[z % 4] : low_run && z == 6 ? 0.25f : rest[z]);
+    }
+  }
+  return pts;
+}
+
+// heightsAndSlab's map cells over runsOfCells, both forms: the same lowest points bit for bit
+// (the sign of a zero too) and counts; with part of the points outside the cells (npos).
+TEST(Avx2Paths, MapCellRunsGiveTheBaselineBits) {
+  if (!useAvx2()) GTEST_SKIP() << "no AVX2 on this CPU";
+  TrunkExtractorParams p;
+  p.min_fit_points = 3, p.ground_cell_m = 1.0, p.ground_map_cell_m = 0.5;
+  size_t zeros = 0;
+  for (bool nan : {false, true}) {
+    for (size_t n : {1, 3, 4, 5, 7, 8, 9, 13, 31, 32, 33, 1001, 4099}) {
+      SCOPED_TRACE(testing::Message() << "n " << n << " nan " << nan);
+      LocalPoints pts = runsOfCells(n, static_cast<uint32_t>(n), nan);
+      expectSameHeights(pts, p);
+      pts.has_extent = true;  // the cells of x < 2 alone: the others are npos
+      pts.minx = 0.0f, pts.maxx = 1.9f, pts.miny = 0.0f, pts.maxy = 4.0f;
+      expectSameHeights(pts, p);
+      GroundMapCells mc;
+      std::vector<float> h;
+      std::vector<uint32_t> slab;
+      pts.has_extent = false;
+      ASSERT_TRUE(mc.init(pts, p.ground_map_cell_m, 100.0));
+      heightsAndSlab(pts, estimateLocalGround(pts, p), p, &h, &slab, &mc);
+      for (float low : mc.low) zeros += low == 0.0f && std::signbit(low);
+    }
+  }
+  EXPECT_GT(zeros, 20u);  // runs whose lowest point is -0: the sign was tested
+}
+
+// n slab points for columnsOfSlab at cells of cs: every other point on a cell's edge (x / cs a
+// whole number or a float's step off it), negative coordinates and -0, runs of one column,
+// heights on the layers' edges (up to 7 layers above the slab: the last layer's), with far
+// (beyond int32 cells of cs) every 37th point; the slab every point but each fifth.
+struct SlabInput {
+  LocalPoints pts;
+  std::vector<float> h;
+  std::vector<uint32_t> slab;
+};
+SlabInput slabInput(size_t n, uint32_t seed, double cs, const TrunkExtractorParams& p, bool far) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-3.0, 3.0), uh(p.slab_min_h_m, p.slab_max_h_m);
+  std::uniform_int_distribution<int> kind(0, 5), cell(-20, 20), layer(0, 20);
+  SlabInput in;
+  float x = 0.0f, y = 0.0f;
+  for (size_t i = 0; i < n; ++i) {
+    const int k = kind(rng);
+    if (k == 0 || k == 1) x = static_cast<float>(u(rng)), y = static_cast<float>(u(rng));
+    if (k == 2 || k == 3) {  // on an edge, or a step either side of it
+      x = static_cast<float>(cell(rng) * cs), y = static_cast<float>(cell(rng) * cs);
+      if (k == 3) x = std::nextafter(x, -1.0f), y = std::nextafter(y, 1.0f);
+    }
+    if (k == 4) x = -0.0f;
+    if (far && i % 37 == 5) x = 4e8f, y = -3e9f;
+    in.pts.x.push_back(x), in.pts.y.push_back(y);
+    const double edge = p.slab_min_h_m + layer(rng) * p.layer_h_m;
+    in.h.push_back(static_cast<float>(k == 5 ? uh(rng) : edge));
+    if (i % 5 != 4) in.slab.push_back(static_cast<uint32_t>(i));
+  }
+  return in;
+}
+
+// Returns the columns that pass (the comparison covered something).
+size_t expectSameColumns(const SlabInput& in, const TrunkExtractorParams& p) {
+  VoxelColumns cols[2];
+  bothForms([&](bool avx2) {
+    cols[avx2].slab = in.slab;
+    columnsOfSlab(in.pts, in.h, p, &cols[avx2]);
+  });
+  EXPECT_EQ(cols[0].slab_col, cols[1].slab_col);
+  EXPECT_EQ(cols[0].ix, cols[1].ix);
+  EXPECT_EQ(cols[0].iy, cols[1].iy);
+  EXPECT_EQ(cols[0].count, cols[1].count);
+  EXPECT_EQ(cols[0].mask, cols[1].mask);
+  EXPECT_EQ(cols[0].pass, cols[1].pass);
+  EXPECT_EQ(cols[0].passing, cols[1].passing);
+  EXPECT_EQ(cols[0].grid, cols[1].grid);
+  EXPECT_EQ(cols[0].gx0, cols[1].gx0);
+  EXPECT_EQ(cols[0].gy0, cols[1].gy0);
+  EXPECT_EQ(cols[0].gw, cols[1].gw);
+  EXPECT_EQ(cols[0].gh, cols[1].gh);
+  return cols[1].passing;
+}
+
+// columnsOfSlab with and without AVX2 (cells and layers four at a time): the same columns, on
+// dense grids and on the hash (far points), at three column sizes.
+TEST(Avx2Paths, SlabColumnsGiveTheBaselineBits) {
+  if (!useAvx2()) GTEST_SKIP() << "no AVX2 on this CPU";
+  TrunkExtractorParams p;
+  p.min_column_points = 3;
+  size_t passing = 0;
+  for (double cs : {0.15, 0.125, 0.07}) {
+    p.column_cell_m = cs;
+    for (bool far : {false, true}) {
+      for (size_t n : {1, 3, 4, 5, 6, 7, 9, 13, 1000, 4099}) {
+        SCOPED_TRACE(testing::Message() << "cs " << cs << " far " << far << " n " << n);
+        passing += expectSameColumns(slabInput(n, static_cast<uint32_t>(n), cs, p, far), p);
+      }
+    }
+  }
+  EXPECT_GT(passing, 100u);
+}
+
 // binGroundGrid with and without AVX2: the same counts and the same points in the same order.
 TEST(Avx2Paths, GroundGridBinsGiveTheBaselineBits) {
   if (!useAvx2()) GTEST_SKIP() << "no AVX2 on this CPU";

@@ -252,9 +252,9 @@ void openSubColumns(const GroundGrid& grid, uint32_t b, uint32_t e, double x0, d
 #if DTIF_AVX2_PATHS
 // Packs the lanes of v whose bit is set in keep (four bits) to out; returns their count.
 DTIF_TARGET_AVX2 size_t packFour(__m128 v, int keep, float* out) {
-  const __m128i lanes = _mm_load_si128(reinterpret_cast<const __m128i*>(kMaskLanes.lane[keep]));
+  const __m128i lanes = _mm_load_si128(reinterpret_cast<const __m128i*>(kLanes.lane[keep]));
   _mm_storeu_ps(out, _mm_permutevar_ps(v, lanes));
-  return static_cast<size_t>(kMaskLanes.count[keep]);
+  return static_cast<size_t>(kLanes.count[keep]);
 }
 
 // groundOfCell's ground points of the cell's points b..e-1, eight at a time, for at most 16
@@ -790,14 +790,16 @@ struct SlabRun {
   void add(uint32_t* S, size_t i, bool in_slab, size_t k, float z, GroundMapCells* map_cells) {
     S[ns] = static_cast<uint32_t>(i);
     ns += static_cast<size_t>(in_slab);
-    if (kMapCells) {
-      if (k != run) {
-        map_cells->addRun(run, run_low, run_hits);
-        run = k, run_low = z, run_hits = 0;
-      }
-      run_low = std::min(run_low, z);
-      ++run_hits;
+    if (kMapCells) addCell(k, z, map_cells);
+  }
+  // A point of map cell k and local z.
+  void addCell(size_t k, float z, GroundMapCells* map_cells) {
+    if (k != run) {
+      map_cells->addRun(run, run_low, run_hits);
+      run = k, run_low = z, run_hits = 0;
     }
+    run_low = std::min(run_low, z);
+    ++run_hits;
   }
 };
 
@@ -831,8 +833,9 @@ struct MapCellLanes {
 static_assert(sizeof(GroundPlane) == 3 * sizeof(double), "planes are read as rows of doubles");
 
 // heightsSlabPass four points at a time: the cells, centres, planes and heights in lanes, the
-// same IEEE operations per point as heightsSlabScalar (no fused multiply-add); the slab and the
-// runs lane by lane.
+// same IEEE operations per point as heightsSlabScalar (no fused multiply-add); the heights by
+// one store, the slab's indices packed from a table of lanes, and the map cells' run in one go
+// where all four points continue it.
 struct HeightsAvx2 {
   DTIF_TARGET_AVX2 HeightsAvx2(const GroundGrid& g, const GroundMapCells& geometry, double lo,
                                double hi)
@@ -855,19 +858,75 @@ struct HeightsAvx2 {
     // pl.at(x - x0, y - y0) = (a + b (x - x0)) + s (y - y0); h rounded to float, as stored.
     const __m256d at = _mm256_add_pd(_mm256_add_pd(a, _mm256_mul_pd(b, _mm256_sub_pd(vx, cx))),
                                      _mm256_mul_pd(s, _mm256_sub_pd(vy, cy)));
-    alignas(16) float hv[4], zv[4];
     const __m128 h = _mm256_cvtpd_ps(_mm256_sub_pd(_mm256_cvtps_pd(zf), at));
-    _mm_store_ps(hv, h), _mm_store_ps(zv, zf);
     const __m256d hd = _mm256_cvtps_pd(h);
     const int slab = _mm256_movemask_pd(
         _mm256_and_pd(_mm256_cmp_pd(hd, lo, _CMP_GE_OQ), _mm256_cmp_pd(hd, hi, _CMP_LT_OQ)));
-    alignas(16) int32_t k[4] = {0, 0, 0, 0};
-    if (kMapCells) _mm_store_si128(reinterpret_cast<__m128i*>(k), map_of(vx, vy));
+    const __m128i k = kMapCells ? map_of(vx, vy) : _mm_setzero_si128();
+    if (count == 4) return four<kMapCells>(h, slab, k, zf, i, H, S, run, mc);
+    alignas(16) float hv[4], zv[4];
+    alignas(16) int32_t kv[4];
+    _mm_store_ps(hv, h), _mm_store_ps(zv, zf);
+    _mm_store_si128(reinterpret_cast<__m128i*>(kv), k);
     for (int j = 0; j < count; ++j) {
       H[i + j] = hv[j];
-      const size_t kj = k[j] < 0 ? GroundMapCells::npos : static_cast<size_t>(k[j]);
-      run->add<kMapCells>(S, i + j, (slab >> j) & 1, kj, zv[j], mc);
+      run->add<kMapCells>(S, i + j, (slab >> j) & 1, cellOfLane(kv[j]), zv[j], mc);
     }
+  }
+  // block's four points i..i+3 of heights h, slab lanes `slab`, map cells k (-1: npos) and
+  // local z. S has room for four more: run->ns <= i.
+  template <bool kMapCells>
+  DTIF_TARGET_AVX2 void four(__m128 h, int slab, __m128i k, __m128 z, size_t i, float* H,
+                             uint32_t* S, SlabRun* run, GroundMapCells* mc) const {
+    _mm_storeu_ps(H + i, h);
+    const __m128i lanes = _mm_load_si128(reinterpret_cast<const __m128i*>(kLanes.lane[slab]));
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(S + run->ns),
+                     _mm_add_epi32(_mm_set1_epi32(static_cast<int32_t>(i)), lanes));
+    run->ns += static_cast<size_t>(kLanes.count[slab]);
+    if (kMapCells) cells4(k, z, run, mc);
+  }
+  // Four points of map cells k (-1: npos) and local z added to the run as add() adds them one by
+  // one: the lanes that continue the run, then from each change of cell (mostly none) on, each
+  // part's lowest z by one reduction (leftMin).
+  DTIF_TARGET_AVX2 static void cells4(__m128i k, __m128 z, SlabRun* run, GroundMapCells* mc) {
+    alignas(16) float zv[4];
+    alignas(16) int32_t kv[4];
+    if (_mm_movemask_ps(_mm_cmpunord_ps(z, z))) {  // a NaN: leftMin would not be the chain's
+      _mm_store_ps(zv, z), _mm_store_si128(reinterpret_cast<__m128i*>(kv), k);
+      for (int j = 0; j < 4; ++j) run->addCell(cellOfLane(kv[j]), zv[j], mc);
+      return;
+    }
+    // npos is -1 as an int32; no real cell is (at most 4e6 cells).
+    const __m128i prev = _mm_alignr_epi8(k, _mm_set1_epi32(static_cast<int32_t>(run->run)), 12);
+    uint32_t change = ~_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(k, prev))) & 15u;
+    int j = 0;
+    while (change) {
+      const int e = __builtin_ctz(change);
+      run->run_low = leftMin(run->run_low, z, j, e), run->run_hits += e - j;
+      mc->addRun(run->run, run->run_low, run->run_hits);
+      _mm_store_ps(zv, z), _mm_store_si128(reinterpret_cast<__m128i*>(kv), k);
+      run->run = cellOfLane(kv[e]), run->run_low = zv[e], run->run_hits = 0;
+      j = e, change &= change - 1;
+    }
+    run->run_low = leftMin(run->run_low, z, j, 4), run->run_hits += 4 - j;
+  }
+  DTIF_TARGET_AVX2 static size_t cellOfLane(int32_t k) {
+    return k < 0 ? GroundMapCells::npos : static_cast<size_t>(k);
+  }
+  // The chain low = std::min(low, z[l]) over lanes l = j..e-1, without NaN. std::min keeps its
+  // first argument unless the second is lower: over values without NaN that is the first lowest
+  // of the sequence however the mins are grouped (a -0/+0 tie keeps the chain's sign), and a +inf
+  // in the lanes left out changes nothing.
+  DTIF_TARGET_AVX2 static float leftMin(float low, __m128 z, int j, int e) {
+    const __m128i lane = _mm_setr_epi32(0, 1, 2, 3);
+    const __m128i in = _mm_andnot_si128(_mm_cmpgt_epi32(_mm_set1_epi32(j), lane),
+                                        _mm_cmpgt_epi32(_mm_set1_epi32(e), lane));
+    const __m128 v =
+        _mm_blendv_ps(_mm_set1_ps(std::numeric_limits<float>::infinity()), z, _mm_castsi128_ps(in));
+    // _mm_min_ps(b, a) is b < a ? b : a, std::min(a, b): lanes 0 and 2 = min(v0, v1), min(v2, v3).
+    const __m128 pairs = _mm_min_ps(_mm_shuffle_ps(v, v, _MM_SHUFFLE(2, 3, 0, 1)), v);
+    const __m128 all = _mm_min_ss(_mm_movehl_ps(pairs, pairs), pairs);
+    return _mm_cvtss_f32(_mm_min_ss(all, _mm_set_ss(low)));
   }
   // The planes (a, b, c) of the four cells at 3 c: four masked loads of a row (nothing read past
   // it) and a transpose, shorter in latency than three gathers.

@@ -3,10 +3,16 @@
 // counting sorts instead of kd-trees: the descriptor is timed (DESIGN.md).
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <numeric>
 
+#include "dtif/core/extraction/avx2.h"
 #include "dtif/core/extraction/extraction_stages.h"
+
+#if DTIF_AVX2_PATHS
+#include <immintrin.h>
+#endif
 
 namespace dtif {
 namespace {
@@ -115,30 +121,107 @@ size_t CellHash::hash(uint64_t k) {
 
 namespace {
 
-// Column cells of the slab points (*cx, *cy) and their extent.
-void slabCells(const LocalPoints& pts, VoxelColumns* cols, double cs, std::vector<int64_t>* cxs,
-               std::vector<int64_t>* cys) {
+// Each slab point's column cell (floor of x, y / cs) and layer (of the slab's nlayers), and the
+// cells' extent.
+struct SlabCells {
+  std::vector<int64_t> cx, cy;
+  std::vector<int32_t> layer;
   int64_t x0 = std::numeric_limits<int64_t>::max(), y0 = x0;
   int64_t x1 = std::numeric_limits<int64_t>::min(), y1 = x1;
-  cxs->resize(cols->slab.size()), cys->resize(cols->slab.size());
+
+  // Slab point k at (x, y) of height hv.
+  void set(size_t k, float x, float y, float hv, double cs, const TrunkExtractorParams& p,
+           int nlayers) {
+    const int64_t ix = floorIndex(x / cs), iy = floorIndex(y / cs);
+    cx[k] = ix, cy[k] = iy;
+    x0 = std::min(x0, ix), x1 = std::max(x1, ix);
+    y0 = std::min(y0, iy), y1 = std::max(y1, iy);
+    layer[k] = std::min(nlayers - 1, static_cast<int>((hv - p.slab_min_h_m) / p.layer_h_m));
+  }
+};
+
+#if DTIF_AVX2_PATHS
+// SlabCells::set of slab points 0.. four at a time where their cells fit in int32 (always for
+// local points, below 1e8 m, at a sane cs): the same division, its floor as floorIndex's (both
+// exact), the extent in lanes. Returns the count of points done (the rest: fewer than four).
+DTIF_TARGET_AVX2 size_t slabCellsAvx2(const LocalPoints& pts, const float* h, const uint32_t* slab,
+                                      size_t ns, double cs, const TrunkExtractorParams& p,
+                                      int nlayers, SlabCells* out) {
+  const __m256d vcs = _mm256_set1_pd(cs), h0 = _mm256_set1_pd(p.slab_min_h_m);
+  const __m256d lh = _mm256_set1_pd(p.layer_h_m), big = _mm256_set1_pd(2147483648.0);
+  const __m128i last = _mm_set1_epi32(nlayers - 1);
+  __m128i x0 = _mm_set1_epi32(INT32_MAX), y0 = x0, x1 = _mm_set1_epi32(INT32_MIN), y1 = x1;
+  size_t k = 0;
+  for (; k + 4 <= ns; k += 4) {
+    prefetchGather(pts.x.data(), slab, k, ns), prefetchGather(pts.y.data(), slab, k, ns);
+    prefetchGather(h, slab, k, ns);
+    const __m128i at = _mm_loadu_si128(reinterpret_cast<const __m128i*>(slab + k));
+    const __m256d fx =
+        _mm256_floor_pd(_mm256_div_pd(_mm256_cvtps_pd(_mm_i32gather_ps(pts.x.data(), at, 4)), vcs));
+    const __m256d fy =
+        _mm256_floor_pd(_mm256_div_pd(_mm256_cvtps_pd(_mm_i32gather_ps(pts.y.data(), at, 4)), vcs));
+    const __m256d hv = _mm256_cvtps_pd(_mm_i32gather_ps(h, at, 4));
+    // In [-2^31, 2^31) (no NaN): else the four one by one.
+    const __m256d in = _mm256_and_pd(
+        _mm256_and_pd(_mm256_cmp_pd(fx, big, _CMP_LT_OQ), _mm256_cmp_pd(fx, -big, _CMP_GE_OQ)),
+        _mm256_and_pd(_mm256_cmp_pd(fy, big, _CMP_LT_OQ), _mm256_cmp_pd(fy, -big, _CMP_GE_OQ)));
+    if (_mm256_movemask_pd(in) != 15) {
+      for (size_t j = k; j < k + 4; ++j) {
+        const uint32_t i = slab[j];
+        out->set(j, pts.x[i], pts.y[i], h[i], cs, p, nlayers);
+      }
+      continue;
+    }
+    const __m128i ix = _mm256_cvttpd_epi32(fx), iy = _mm256_cvttpd_epi32(fy);
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(&out->cx[k]), _mm256_cvtepi32_epi64(ix));
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(&out->cy[k]), _mm256_cvtepi32_epi64(iy));
+    x0 = _mm_min_epi32(x0, ix), x1 = _mm_max_epi32(x1, ix);
+    y0 = _mm_min_epi32(y0, iy), y1 = _mm_max_epi32(y1, iy);
+    const __m128i layer =
+        _mm256_cvttpd_epi32(_mm256_div_pd(_mm256_sub_pd(hv, h0), lh));  // as static_cast<int>
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(&out->layer[k]), _mm_min_epi32(layer, last));
+  }
+  alignas(16) int32_t e[4][4];
+  _mm_store_si128(reinterpret_cast<__m128i*>(e[0]), x0);
+  _mm_store_si128(reinterpret_cast<__m128i*>(e[1]), y0);
+  _mm_store_si128(reinterpret_cast<__m128i*>(e[2]), x1);
+  _mm_store_si128(reinterpret_cast<__m128i*>(e[3]), y1);
+  for (int j = 0; j < 4; ++j) {
+    out->x0 = std::min<int64_t>(out->x0, e[0][j]), out->y0 = std::min<int64_t>(out->y0, e[1][j]);
+    out->x1 = std::max<int64_t>(out->x1, e[2][j]), out->y1 = std::max<int64_t>(out->y1, e[3][j]);
+  }
+  return k;
+}
+#endif
+
+// The slab points' cells and layers (*cells), and the index of their columns made (a dense grid
+// over the cells' extent or a hash).
+void slabCells(const LocalPoints& pts, const std::vector<float>& h, VoxelColumns* cols, double cs,
+               const TrunkExtractorParams& p, int nlayers, SlabCells* cells) {
   const uint32_t* slab = cols->slab.data();
   const size_t ns = cols->slab.size();
-  for (size_t k = 0; k < ns; ++k) {
+  SlabCells& c = *cells;
+  c.cx.resize(ns), c.cy.resize(ns), c.layer.resize(ns);
+  c.x0 = c.y0 = std::numeric_limits<int64_t>::max();
+  c.x1 = c.y1 = std::numeric_limits<int64_t>::min();
+  size_t k = 0;
+#if DTIF_AVX2_PATHS
+  if (useAvx2()) k = slabCellsAvx2(pts, h.data(), slab, ns, cs, p, nlayers, &c);
+#endif
+  for (; k < ns; ++k) {
     prefetchGather(pts.x.data(), slab, k, ns), prefetchGather(pts.y.data(), slab, k, ns);
     const uint32_t i = slab[k];
-    const int64_t cx = floorIndex(pts.x[i] / cs), cy = floorIndex(pts.y[i] / cs);
-    (*cxs)[k] = cx, (*cys)[k] = cy;
-    x0 = std::min(x0, cx), x1 = std::max(x1, cx);
-    y0 = std::min(y0, cy), y1 = std::max(y1, cy);
+    c.set(k, pts.x[i], pts.y[i], h[i], cs, p, nlayers);
   }
   // Dense when the grid is small next to the slab (always for survey data; a few far points
   // would make it huge).
-  const double cells = (static_cast<double>(x1) - x0 + 1.0) * (static_cast<double>(y1) - y0 + 1.0);
-  if (cells <= std::max(65536.0, 8.0 * static_cast<double>(cols->slab.size()))) {
-    cols->gx0 = x0, cols->gy0 = y0, cols->gw = x1 - x0 + 1, cols->gh = y1 - y0 + 1;
+  const double area =
+      (static_cast<double>(c.x1) - c.x0 + 1.0) * (static_cast<double>(c.y1) - c.y0 + 1.0);
+  if (area <= std::max(65536.0, 8.0 * static_cast<double>(ns))) {
+    cols->gx0 = c.x0, cols->gy0 = c.y0, cols->gw = c.x1 - c.x0 + 1, cols->gh = c.y1 - c.y0 + 1;
     cols->grid.assign(static_cast<size_t>(cols->gw * cols->gh), -1);
   } else {
-    cols->index = CellHash(cols->slab.size());
+    cols->index = CellHash(ns);
   }
 }
 
@@ -176,15 +259,14 @@ void columnsOfSlab(const LocalPoints& pts, const std::vector<float>& h,
   const int nlayers =
       std::max(1, static_cast<int>(std::ceil((p.slab_max_h_m - p.slab_min_h_m) / p.layer_h_m)));
   if (cols.slab.empty()) return;
-  thread_local std::vector<int64_t> cxs_of_thread, cys_of_thread;  // kept between submaps
-  std::vector<int64_t>&cxs = cxs_of_thread, &cys = cys_of_thread;  // each slab point's cell
-  slabCells(pts, &cols, cs, &cxs, &cys);
-  const int64_t *CX = cxs.data(), *CY = cys.data();
+  thread_local SlabCells cells_of_thread;  // kept between submaps
+  SlabCells& cells = cells_of_thread;
+  slabCells(pts, h, &cols, cs, p, nlayers, &cells);
+  const int64_t *CX = cells.cx.data(), *CY = cells.cy.data();
+  const int32_t* L = cells.layer.data();
   cols.slab_col.resize(cols.slab.size());
   // Columns are numbered in order of their first slab point, whichever index holds them.
   for (size_t k = 0; k < cols.slab.size(); ++k) {
-    prefetchGather(h.data(), cols.slab.data(), k, cols.slab.size());
-    const uint32_t i = cols.slab[k];
     const int64_t ix = CX[k], iy = CY[k];
     const int next = static_cast<int>(cols.ix.size());
     int id;
@@ -202,9 +284,7 @@ void columnsOfSlab(const LocalPoints& pts, const std::vector<float>& h,
     }
     cols.slab_col[k] = id;
     ++cols.count[id];
-    const int layer =
-        std::min(nlayers - 1, static_cast<int>((h[i] - p.slab_min_h_m) / p.layer_h_m));
-    cols.mask[id] |= uint64_t{1} << layer;
+    cols.mask[id] |= uint64_t{1} << L[k];
   }
   cols.pass.assign(cols.size(), 0);
   for (size_t c = 0; c < cols.size(); ++c) {

@@ -316,13 +316,11 @@ DTIF_TARGET_AVX2 uint32_t gatherQuads(const GroundGrid::SortedPoint* sorted, siz
     const int ground = in_ring & ~high;
     _mm_storeu_si128(
         reinterpret_cast<__m128i*>(out->ring + out->over),
-        _mm_add_epi32(kk,
-                      _mm_load_si128(reinterpret_cast<const __m128i*>(kMaskLanes.lane[in_ring]))));
+        _mm_add_epi32(kk, _mm_load_si128(reinterpret_cast<const __m128i*>(kLanes.lane[in_ring]))));
     _mm_storeu_si128(
         reinterpret_cast<__m128i*>(out->ground_at + out->ground),
-        _mm_add_epi32(kk,
-                      _mm_load_si128(reinterpret_cast<const __m128i*>(kMaskLanes.lane[ground]))));
-    out->over += kMaskLanes.count[in_ring], out->ground += kMaskLanes.count[ground];
+        _mm_add_epi32(kk, _mm_load_si128(reinterpret_cast<const __m128i*>(kLanes.lane[ground]))));
+    out->over += kLanes.count[in_ring], out->ground += kLanes.count[ground];
   }
   const __m128d low2 = _mm_min_pd(_mm256_castpd256_pd128(low), _mm256_extractf128_pd(low, 1));
   const double lane_low = std::min(_mm_cvtsd_f64(low2), _mm_cvtsd_f64(_mm_unpackhi_pd(low2, low2)));

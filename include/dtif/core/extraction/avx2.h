@@ -5,6 +5,8 @@
 // once, not twice).
 #pragma once
 
+#include <cstdint>
+
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
 #define DTIF_AVX2_PATHS 1
 /// Marks a function compiled for AVX2 (and what it inlines must carry it too).
@@ -15,8 +17,6 @@
 
 #if DTIF_AVX2_PATHS
 #include <immintrin.h>
-
-#include <cstdint>
 #endif
 
 namespace dtif {
@@ -44,7 +44,7 @@ constexpr MaskLanes maskLanes() {
   }
   return t;
 }
-inline constexpr MaskLanes kMaskLanes = maskLanes();
+constexpr MaskLanes kLanes = maskLanes();  // internal: no load of its address from the GOT
 
 /// Four (x, y, z) triples, xyz[0..11], as lanes of x, of y and of z (the 48 bytes, no more).
 DTIF_TARGET_AVX2 inline void deinterleave4(const float* xyz, __m128* x, __m128* y, __m128* z) {
