@@ -332,23 +332,29 @@ void groundOfCell(const GroundGrid& grid, size_t c, const TrunkExtractorParams& 
   cells->count[c] = static_cast<uint32_t>(zs.size());
 }
 
-// Ground cells of the (2 h + 1)^2 window around cell (cx, cy), offsets from its centre.
+// Ground cells of the (2 h + 1)^2 window around cell (cx, cy), offsets from its centre: the
+// first n of the arrays (sized for the window, kept between cells). Branch-free within the grid
+// (each cell written, n advanced when it is a ground cell): ~3,600 windows of 49 cells per submap.
 struct GroundWindow {
   std::vector<double> x, y, z, w;  // offset [m], cell value [m], weight
+  size_t n = 0;
   void gather(const GroundCells& cells, const GroundGrid& grid, int cx, int cy, int h) {
-    x.clear(), y.clear(), z.clear(), w.clear();
+    const size_t cap = static_cast<size_t>(2 * h + 1) * static_cast<size_t>(2 * h + 1);
+    if (x.size() < cap) x.resize(cap), y.resize(cap), z.resize(cap), w.resize(cap);
+    double *X = x.data(), *Y = y.data(), *Z = z.data(), *W = w.data();
+    const uint32_t* count = cells.count.data();
+    const float* low = cells.low.data();
     const double g = grid.cell_m;
-    for (int dy = -h; dy <= h; ++dy) {
-      const int yy = cy + dy;
-      if (yy < 0 || yy >= grid.ny) continue;
-      for (int dx = -h; dx <= h; ++dx) {
-        const int xx = cx + dx;
-        if (xx < 0 || xx >= grid.nx) continue;
-        const size_t cc = static_cast<size_t>(yy) * grid.nx + xx;
-        if (cells.count[cc] == 0) continue;
-        x.push_back(dx * g), y.push_back(dy * g), z.push_back(cells.low[cc]);
-        // Sparse cells give a poor percentile; they count less.
-        w.push_back(cells.count[cc] >= 5 ? 1.0 : 0.3);
+    const int dy0 = std::max(-h, -cy), dy1 = std::min(h, grid.ny - 1 - cy);
+    const int dx0 = std::max(-h, -cx), dx1 = std::min(h, grid.nx - 1 - cx);
+    n = 0;
+    for (int dy = dy0; dy <= dy1; ++dy) {
+      const size_t row = static_cast<size_t>(cy + dy) * grid.nx;
+      for (int dx = dx0; dx <= dx1; ++dx) {
+        const size_t cc = row + static_cast<size_t>(cx + dx);
+        X[n] = dx * g, Y[n] = dy * g, Z[n] = low[cc];
+        W[n] = count[cc] >= 5 ? 1.0 : 0.3;  // sparse cells give a poor percentile
+        n += count[cc] != 0;
       }
     }
   }
@@ -701,17 +707,17 @@ void fitLocalGroundPlanes(const GroundCells& cells, const TrunkExtractorParams& 
       const size_t c = static_cast<size_t>(cy) * grid->nx + cx;
       if (!cells.any[c]) continue;
       win.gather(cells, *grid, cx, cy, half);
-      grid->seen[c] = win.x.size() >= min_cells;
+      grid->seen[c] = win.n >= min_cells;
       if (!grid->seen[c]) win.gather(cells, *grid, cx, cy, 3 * half);
-      if (win.x.size() < min_cells) {
+      if (win.n < min_cells) {
         // No ground anywhere near: the lowest point of the cell is the best guess left.
         grid->plane[c].a = cells.min[c];
         continue;
       }
       // Downweight cells above the plane: what is left of vegetation fills cells from above.
       grid->plane[c] =
-          fitGroundPlane(win.x.data(), win.y.data(), win.z.data(), win.w.data(), win.x.size(), 0.0,
-                         0.0, p.ground_plane_c_up_m, p.ground_plane_c_down_m, /*iterations=*/5);
+          fitGroundPlane(win.x.data(), win.y.data(), win.z.data(), win.w.data(), win.n, 0.0, 0.0,
+                         p.ground_plane_c_up_m, p.ground_plane_c_down_m, /*iterations=*/5);
     }
   }
 }
