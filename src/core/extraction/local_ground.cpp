@@ -417,6 +417,16 @@ struct GroundCellLanes {
   __m128i nx1, ny1, nx;
 };
 
+// The lanes j of cells c where the cell changes (c[j] != c[j - 1], lane 0 against run), as bits.
+DTIF_TARGET_AVX2 unsigned cellChanges(__m256i c, uint32_t run) {
+  // c shifted up by one lane, run in lane 0: per 128-bit half, (c : t) >> 12 bytes with t's low
+  // half the run's and its high half c's low half.
+  const __m256i before = _mm256_alignr_epi8(
+      c, _mm256_permute2x128_si256(c, _mm256_set1_epi32(static_cast<int32_t>(run)), 0x02), 12);
+  return static_cast<unsigned>(
+      ~_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(c, before))) & 0xff);
+}
+
 // binGroundGrid's counts per cell (into count) of the points 0.. eight at a time: a run of points
 // in one cell (neighbours on a scan line mostly are) is counted in a register, not by an
 // increment of the cell per point, whose chain through memory bounded the pass. Returns the
@@ -436,12 +446,16 @@ DTIF_TARGET_AVX2 size_t binCountAvx2(const LocalPoints& pts, const GroundGrid& g
       hits += 8;
       continue;
     }
+    // A jump per change of cell instead of a test per point, whose outcome follows no pattern.
     alignas(32) uint32_t k[8];
     _mm256_store_si256(reinterpret_cast<__m256i*>(k), c);
-    for (int j = 0; j < 8; ++j) {
-      if (k[j] != run) count[run] += hits, run = k[j], hits = 0;
-      ++hits;
+    uint32_t from = 0;
+    for (unsigned changes = cellChanges(c, run); changes != 0; changes &= changes - 1) {
+      const uint32_t j = static_cast<uint32_t>(__builtin_ctz(changes));
+      count[run] += hits + (j - from);
+      run = k[j], hits = 0, from = j;
     }
+    hits += 8 - from;
   }
   count[run] += hits;
   return i;
@@ -465,12 +479,23 @@ DTIF_TARGET_AVX2 size_t binFillAvx2(const LocalPoints& pts, const GroundGrid& gr
       for (size_t j = i; j < i + 8; ++j) out[at++] = {X[j], Y[j], Z[j]};
       continue;
     }
-    alignas(32) uint32_t k[8];
+    // Each lane's place: its run's first place less the run's first lane, plus the lane. A jump
+    // per change of cell (lane j against lane j - 1), not a test per point.
+    alignas(32) uint32_t k[8], place[8];
     _mm256_store_si256(reinterpret_cast<__m256i*>(k), c);
-    for (size_t j = 0; j < 8; ++j) {
-      if (k[j] != run) fill[run] = at, run = k[j], at = fill[run];
-      out[at++] = {X[i + j], Y[i + j], Z[i + j]};
+    const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    uint32_t base = at;  // place of lane 0 of the run
+    __m256i bases = _mm256_set1_epi32(static_cast<int32_t>(base));
+    for (unsigned changes = cellChanges(c, run); changes != 0; changes &= changes - 1) {
+      const uint32_t j = static_cast<uint32_t>(__builtin_ctz(changes));
+      fill[run] = base + j, run = k[j], base = fill[run] - j;  // wraps back when fill < j
+      const __m256i from_j =
+          _mm256_cmpgt_epi32(lane, _mm256_set1_epi32(static_cast<int32_t>(j) - 1));
+      bases = _mm256_blendv_epi8(bases, _mm256_set1_epi32(static_cast<int32_t>(base)), from_j);
     }
+    at = base + 8;
+    _mm256_store_si256(reinterpret_cast<__m256i*>(place), _mm256_add_epi32(bases, lane));
+    for (size_t j = 0; j < 8; ++j) out[place[j]] = {X[i + j], Y[i + j], Z[i + j]};
   }
   fill[run] = at;
   return i;
