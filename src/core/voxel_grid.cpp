@@ -72,7 +72,9 @@ namespace {
 
 constexpr int64_t kAxisOffset = int64_t{1} << 20;  // VoxelCentroidGrid::add's
 constexpr int64_t kAxisEnd = int64_t{1} << 21;
-constexpr int kDigitBits = 11;
+// At most 512 buckets per pass: the scatter's write streams (keys and indices) stay in the
+// cache; with 2048 the sort of 3.7 M returns took 1.2x as long despite one pass fewer.
+constexpr int kMaxDigitBits = 9;
 
 int bitsOf(uint64_t v) {
   int b = 0;
@@ -128,18 +130,19 @@ int VoxelCentroidSorter::packedKeys(const Cloud& cloud) {
 
 namespace {
 
-/// key and idx sorted by key, stably: LSD radix passes of kDigitBits over the key's low `bits`,
-/// their histograms counted in one read of the keys.
+/// key and idx sorted by key, stably: LSD radix passes of equal digits of at most kMaxDigitBits
+/// over the key's low `bits`, their histograms counted in one read of the keys.
 template <class Key>
 void radixSort(int bits, std::vector<Key>* key, std::vector<uint32_t>* idx,
                std::vector<Key>* key_tmp, std::vector<uint32_t>* idx_tmp) {
-  constexpr size_t kBuckets = size_t{1} << kDigitBits;
   const size_t m = key->size();
-  const int passes = (bits + kDigitBits - 1) / kDigitBits;
+  const int passes = (bits + kMaxDigitBits - 1) / kMaxDigitBits;
+  if (passes == 0) return;  // one key
+  const int digit = (bits + passes - 1) / passes;
+  const size_t kBuckets = size_t{1} << digit;
   std::vector<uint32_t> start(static_cast<size_t>(passes) * kBuckets, 0);
   for (const Key k : *key) {
-    for (int p = 0; p < passes; ++p)
-      ++start[p * kBuckets + (k >> (p * kDigitBits) & (kBuckets - 1))];
+    for (int p = 0; p < passes; ++p) ++start[p * kBuckets + (k >> (p * digit) & (kBuckets - 1))];
   }
   key_tmp->resize(m), idx_tmp->resize(m);
   for (int p = 0; p < passes; ++p) {
@@ -153,7 +156,7 @@ void radixSort(int bits, std::vector<Key>* key, std::vector<uint32_t>* idx,
     const uint32_t* i = idx->data();
     Key* kt = key_tmp->data();
     uint32_t* it = idx_tmp->data();
-    const int shift = p * kDigitBits;
+    const int shift = p * digit;
     for (size_t e = 0; e < m; ++e) {
       const uint32_t to = at[k[e] >> shift & (kBuckets - 1)]++;
       kt[to] = k[e], it[to] = i[e];
@@ -168,11 +171,15 @@ template <class Key>
 void runCentroids(const std::vector<Key>& key, const std::vector<uint32_t>& idx, const Cloud& cloud,
                   std::vector<Eigen::Vector3f>* centroids) {
   const size_t m = key.size();
+  constexpr size_t kAhead = 16;  // the points come in voxel order, scattered over the cloud
   for (size_t i = 0; i < m;) {
     Eigen::Vector3f sum(0.0f, 0.0f, 0.0f);
     uint32_t count = 0;
     size_t j = i;
-    for (; j < m && key[j] == key[i]; ++j, ++count) sum += cloud.points[idx[j]].getVector3fMap();
+    for (; j < m && key[j] == key[i]; ++j, ++count) {
+      __builtin_prefetch(&cloud.points[idx[std::min(j + kAhead, m - 1)]]);
+      sum += cloud.points[idx[j]].getVector3fMap();
+    }
     centroids->push_back(sum / static_cast<float>(count));
     i = j;
   }
