@@ -4,7 +4,6 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
-#include <random>
 
 #ifdef __SSE2__
 #include <emmintrin.h>

@@ -84,11 +84,29 @@ DTIF_TARGET_AVX2 void subColumnsAvx2(const GroundGrid& grid, uint32_t b, uint32_
   }
 }
 
-// Entries sc of a table of at most 16 (lo: 0..7, hi: 8..15), eight lanes: two in-register
-// permutes and a blend instead of a gather.
-DTIF_TARGET_AVX2 __m256 lookup16(__m256 lo, __m256 hi, __m256i sc) {
+// A table of at most 16 entries per sub-column in two registers (lo: 0..7, hi: 8..15), zeros
+// past its end, for lookup16.
+struct Table16 {
+  __m256 lo, hi;
+};
+// The values v[0..n-1], n <= 16.
+DTIF_TARGET_AVX2 Table16 table16(const float* v, size_t n) {
+  alignas(32) float t[16] = {};
+  std::copy(v, v + n, t);
+  return {_mm256_load_ps(t), _mm256_load_ps(t + 8)};
+}
+// The flags f[0..n-1], n <= 16, as lane masks (all bits set where the flag is).
+DTIF_TARGET_AVX2 Table16 flagTable16(const char* f, size_t n) {
+  alignas(32) int32_t t[16] = {};
+  for (size_t i = 0; i < n; ++i) t[i] = f[i] ? -1 : 0;
+  return {_mm256_castsi256_ps(_mm256_load_si256(reinterpret_cast<const __m256i*>(t))),
+          _mm256_castsi256_ps(_mm256_load_si256(reinterpret_cast<const __m256i*>(t + 8)))};
+}
+
+// Entries sc of a table, eight lanes: two in-register permutes and a blend instead of a gather.
+DTIF_TARGET_AVX2 __m256 lookup16(const Table16& t, __m256i sc) {
   const __m256 upper = _mm256_castsi256_ps(_mm256_slli_epi32(sc, 28));  // bit 3 -> sign
-  return _mm256_blendv_ps(_mm256_permutevar8x32_ps(lo, sc), _mm256_permutevar8x32_ps(hi, sc),
+  return _mm256_blendv_ps(_mm256_permutevar8x32_ps(t.lo, sc), _mm256_permutevar8x32_ps(t.hi, sc),
                           upper);
 }
 
@@ -101,21 +119,21 @@ DTIF_TARGET_AVX2 __m256i narrowMasks(__m256d m0, __m256d m1) {
 }
 
 // Points k..k+7 of the cell whose points start at b: their z (in two halves), their sub-columns,
-// and their height above their sub-column's lowest point (lo, hi: the lowest points, lookup16's
-// table), the float difference the one-point loops take.
+// and their height above their sub-column's lowest point (low: the lowest points), the float
+// difference the one-point loops take.
 struct EightAbove {
   __m128 z0, z1;
   __m256i sc;
   __m256 dz;
 };
 DTIF_TARGET_AVX2 EightAbove eightAbove(const GroundGrid::SortedPoint* P, uint32_t k, uint32_t b,
-                                       const int* sidx, __m256 lo, __m256 hi) {
+                                       const int* sidx, const Table16& low) {
   EightAbove a;
   __m128 x, y;
   deinterleave4(&P[k].x, &x, &y, &a.z0);
   deinterleave4(&P[k + 4].x, &x, &y, &a.z1);
   a.sc = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(sidx + (k - b)));
-  a.dz = _mm256_sub_ps(_mm256_set_m128(a.z1, a.z0), lookup16(lo, hi, a.sc));
+  a.dz = _mm256_sub_ps(_mm256_set_m128(a.z1, a.z0), lookup16(low, a.sc));
   return a;
 }
 
@@ -125,13 +143,11 @@ DTIF_TARGET_AVX2 EightAbove eightAbove(const GroundGrid::SortedPoint* P, uint32_
 DTIF_TARGET_AVX2 uint32_t closedEight(const GroundGrid::SortedPoint* P, uint32_t b, uint32_t e,
                                       const int* sidx, const float* smin, size_t nsub, __m256d vgap,
                                       __m256d vtop, uint32_t* k_out) {
-  alignas(32) float table[16] = {};
-  std::copy(smin, smin + nsub, table);
-  const __m256 lo = _mm256_load_ps(table), hi = _mm256_load_ps(table + 8);
+  const Table16 low = table16(smin, nsub);
   __m256i closed8 = _mm256_setzero_si256();
   uint32_t k = b;
   for (; k + 8 <= e; k += 8) {
-    const EightAbove a = eightAbove(P, k, b, sidx, lo, hi);
+    const EightAbove a = eightAbove(P, k, b, sidx, low);
     const __m256d d0 = _mm256_cvtps_pd(_mm256_castps256_ps128(a.dz));  // compared in double
     const __m256d d1 = _mm256_cvtps_pd(_mm256_extractf128_ps(a.dz, 1));
     const __m256i in = narrowMasks(
@@ -258,22 +274,20 @@ DTIF_TARGET_AVX2 size_t packFour(__m128 v, int keep, float* out) {
 }
 
 // groundOfCell's ground points of the cell's points b..e-1, eight at a time, for at most 16
-// sub-columns (the caller checks useAvx2()): the same float difference and double comparison per
-// point, the kept z packed in order. open[sc]: -1 where sub-column sc is open, else 0 (both
-// tables padded to 16). Returns the count written to zs and the first point not taken in *k.
+// sub-columns (smin, sopen: nsub of them; the caller checks useAvx2()): the same float difference
+// and double comparison per point, the kept z packed in order. Returns the count written to zs
+// and the first point not taken in *k.
 DTIF_TARGET_AVX2 size_t groundPointsAvx2(const GroundGrid::SortedPoint* P, uint32_t b, uint32_t e,
-                                         const int* sidx, const float* smin, const int32_t* open,
-                                         double band, float* zs, uint32_t* k_out) {
+                                         const int* sidx, const float* smin, const char* sopen,
+                                         size_t nsub, double band, float* zs, uint32_t* k_out) {
   const __m256d vband = _mm256_set1_pd(band);
-  const __m256 low_lo = _mm256_loadu_ps(smin), low_hi = _mm256_loadu_ps(smin + 8);
-  const __m256 open_lo = _mm256_loadu_ps(reinterpret_cast<const float*>(open));
-  const __m256 open_hi = _mm256_loadu_ps(reinterpret_cast<const float*>(open + 8));
+  const Table16 low = table16(smin, nsub), open = flagTable16(sopen, nsub);
   size_t nz = 0;
   uint32_t k = b;
   for (; k + 8 <= e; k += 8) {
-    const EightAbove a = eightAbove(P, k, b, sidx, low_lo, low_hi);
+    const EightAbove a = eightAbove(P, k, b, sidx, low);
     const __m256 d = a.dz;
-    const int is_open = _mm256_movemask_ps(lookup16(open_lo, open_hi, a.sc));
+    const int is_open = _mm256_movemask_ps(lookup16(open, a.sc));
     const int near0 = _mm256_movemask_pd(
         _mm256_cmp_pd(_mm256_cvtps_pd(_mm256_castps256_ps128(d)), vband, _CMP_LE_OQ));
     const int near1 = _mm256_movemask_pd(
@@ -305,12 +319,8 @@ void groundOfCell(const GroundGrid& grid, size_t c, const TrunkExtractorParams& 
   size_t nz = 0;
   uint32_t from = b;
 #if DTIF_AVX2_PATHS
-  if (s->avx2 && s->smin.size() <= 16) {
-    float low[16] = {};
-    int32_t open[16] = {};
-    for (size_t sc = 0; sc < s->smin.size(); ++sc) low[sc] = smin[sc], open[sc] = -!!sopen[sc];
-    nz = groundPointsAvx2(P, b, e, sidx, low, open, band, zs_out, &from);
-  }
+  if (s->avx2 && s->smin.size() <= 16)
+    nz = groundPointsAvx2(P, b, e, sidx, smin, sopen, s->smin.size(), band, zs_out, &from);
 #endif
   for (uint32_t k = from; k < e; ++k) {
     const int sc = sidx[k - b];
